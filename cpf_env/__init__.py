@@ -1,0 +1,51 @@
+"""cpf_env: cooperative path following of marine surface vessels as a multi-agent RL benchmark.
+
+Factories (PettingZoo convention)::
+
+    import cpf_env
+    env = cpf_env.parallel_env("wang2014")          # ParallelEnv, one agent per vessel
+    aec = cpf_env.env("lossy_links")                 # AEC form
+    raw = cpf_env.raw_env(scenario, max_steps=500)   # the unwrapped class
+
+Scenarios: ``cpf_env.scenarios.list_scenarios()``.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from pettingzoo.utils import parallel_to_aec, wrappers
+from pettingzoo.utils.env import AECEnv
+
+from cpf_env import scenarios
+from cpf_env.env import CooperativePathFollowingEnv
+from cpf_env.observation import ObsLayout
+from cpf_env.scenarios import Scenario
+from cpf_env.sim import FleetSim
+
+__all__ = [
+    "CooperativePathFollowingEnv",
+    "FleetSim",
+    "ObsLayout",
+    "Scenario",
+    "env",
+    "parallel_env",
+    "raw_env",
+    "scenarios",
+]
+__version__ = "0.1.0"
+
+raw_env = CooperativePathFollowingEnv
+
+
+def parallel_env(
+    scenario: str | Scenario = "wang2014", **kwargs: Any
+) -> CooperativePathFollowingEnv:
+    """The ParallelEnv for ``scenario`` (a registered name or a ``Scenario``); kwargs override fields."""
+    return CooperativePathFollowingEnv(scenario, **kwargs)
+
+
+def env(scenario: str | Scenario = "wang2014", **kwargs: Any) -> AECEnv:
+    """The AEC form of ``parallel_env`` (agents act in turn; the step happens after the last)."""
+    aec = parallel_to_aec(parallel_env(scenario, **kwargs))
+    return wrappers.OrderEnforcingWrapper(wrappers.AssertOutOfBoundsWrapper(aec))

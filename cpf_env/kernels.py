@@ -1,0 +1,451 @@
+"""The compiled fleet step: plant, paths, links, observations and rewards, fused.
+
+One call advances B fleets x n vessels by one control period:
+
+1. saturate the force command per axis and clip the path-variable rate and
+   the message (PAPER.md eq. [6]);
+2. integrate the plant with ``substeps`` RK4 steps, the command and the
+   environmental forces held over the control period (PAPER.md section 8);
+3. advance theta by the commanded rate (exact for a held rate);
+4. advance the Gauss-Markov disturbance states exactly;
+5. send each vessel's packet (theta, message) and deliver, through the active
+   topology, the packets sent ``delay`` steps ago that are not lost;
+6. write observations, rewards, error metrics and termination flags.
+
+Arrays come in two named tuples built by ``cpf_env.sim``: ``FleetArrays``
+(mutable state, leading axis B) and ``KernelConstants`` (scenario constants).
+Everything per vessel is scalar code so numba compiles one fused loop; the
+outer loop over fleets runs in parallel and fleets never interact, so fleet k
+computes the same bits whatever B is.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numba
+import numpy as np
+from numba import prange
+
+from cpf_env import counter_rng
+from cpf_env.disturbances import (
+    D_CURRENT_MEAN,
+    D_CURRENT_STD,
+    D_CURRENT_TC,
+    D_SCALE,
+    D_WAVE_MEAN,
+    D_WAVE_STD,
+    D_WAVE_TC,
+    D_WIND_MEAN,
+    D_WIND_STD,
+    D_WIND_TC,
+    gauss_markov_step,
+    paper_disturbance,
+    paper_unmodeled,
+)
+from cpf_env.observation import (
+    LEADER,
+    NU,
+    SLOT_AGE,
+    SLOT_DTHETA,
+    SLOT_MSG,
+    SLOT_WEIGHT,
+    SLOTS,
+    T1,
+    T2,
+    TAU,
+    THETA,
+    V0,
+    Z1,
+    path_frame,
+)
+from cpf_env.paths import path_point
+from cpf_env.reward import step_reward
+from cpf_env.vessel import hydrodynamic_forces, solve_mass
+
+# Columns of FleetArrays.errors.
+ERR_PATH, ERR_HEADING, ERR_SYNC, ERR_SPEED = 0, 1, 2, 3
+
+
+class FleetArrays(NamedTuple):
+    """Mutable simulator state and per-step outputs; leading axis B (fleets), then n (vessels)."""
+
+    eta: np.ndarray  # (B, n, 3) pose x, y (m), psi (rad), earth frame
+    nu: np.ndarray  # (B, n, 3) velocity u, v (m/s), r (rad/s), body frame
+    theta: np.ndarray  # (B, n) path variables
+    theta_dot: np.ndarray  # (B, n) last commanded (clipped) path-variable rate
+    tau_command: np.ndarray  # (B, n, 3) last force command (N, N, N m)
+    tau_applied: np.ndarray  # (B, n, 3) last saturated force
+    message: np.ndarray  # (B, n, m) last message sent (clipped)
+    waves: np.ndarray  # (B, n, 3) wave force, earth frame (N, N, N m)
+    wind: np.ndarray  # (B, n, 3) wind force, earth frame
+    current: np.ndarray  # (B, 2) ocean current, earth frame (m/s)
+    step: np.ndarray  # (B,) int64 control steps since reset
+    key: np.ndarray  # (B,) uint64 counter-RNG key of the episode
+    params: np.ndarray  # (B, n, PARAM_SIZE) true vessel parameters
+    recv_theta: np.ndarray  # (B, n, K) last theta_j received in slot k
+    recv_message: np.ndarray  # (B, n, K, m) last message received in slot k
+    recv_step: np.ndarray  # (B, n, K) int64 step at which the held value was sent
+    history: np.ndarray  # (B, delay + 1, n, 1 + m) packets sent, ring buffer by step
+    obs: np.ndarray  # (B, n, obs_dim) float32 observations
+    reward: np.ndarray  # (B, n) reward of the last step
+    errors: np.ndarray  # (B, n, 4) path, heading, sync, speed error after the last step
+    terminated: np.ndarray  # (B,) bool: a vessel left its path
+    nonfinite: np.ndarray  # (B,) bool: the state became NaN/inf (a bug)
+
+
+class KernelConstants(NamedTuple):
+    """Scenario constants in kernel form (see ``Scenario`` for meaning and units)."""
+
+    tau_min: np.ndarray  # (n, 3)
+    tau_max: np.ndarray  # (n, 3)
+    tau_scale: np.ndarray  # (n, 3) max(|tau_min|, |tau_max|)
+    theta_dot_max: float
+    message_max: float
+    path_kinds: np.ndarray  # (n,) int64
+    path_params: np.ndarray  # (n, PATH_PARAM_SIZE)
+    disturbances: np.ndarray  # (DIST_PARAM_SIZE,)
+    slots: np.ndarray  # (n, K) int64 neighbour index per slot, -1 if unused
+    slot_weights: np.ndarray  # (T, n, K) a_ij per topology member
+    leaders: np.ndarray  # (T, n) b_i per topology member
+    switch_steps: np.ndarray  # (T,) int64
+    switch_period: int  # 0 = no repetition
+    loss_probability: float
+    delay: int
+    v0_times: np.ndarray  # (S,) s
+    v0_values: np.ndarray  # (S,) m/s
+    dt: float
+    substeps: int
+    reward_weights: np.ndarray  # (5,)
+    team_reward: bool
+    max_path_error: float
+
+
+@numba.njit(cache=True, inline="always")
+def _clip(x: float, low: float, high: float) -> float:
+    return min(max(x, low), high)
+
+
+@numba.njit(cache=True)
+def topology_index(c: KernelConstants, step: int) -> int:
+    """Index of the topology member active at control ``step``."""
+    local = step % c.switch_period if c.switch_period > 0 else step
+    index = 0
+    for t in range(c.switch_steps.shape[0]):
+        if c.switch_steps[t] <= local:
+            index = t
+    return index
+
+
+@numba.njit(cache=True)
+def leader_speed(c: KernelConstants, time: float) -> float:
+    """v0 (m/s) of the piecewise-constant schedule at ``time`` (s)."""
+    value = c.v0_values[0]
+    for k in range(c.v0_times.shape[0]):
+        if c.v0_times[k] <= time:
+            value = c.v0_values[k]
+    return value
+
+
+@numba.njit(cache=True, inline="always")
+def plant_rhs(p, scale, t, psi, u, v, r, tx, ty, tn, fx, fy, fn, cx, cy):
+    """Right-hand side of the plant, eqs. [2]-[3] with current, waves and wind.
+
+    Args:
+        p: True vessel parameters, shape (PARAM_SIZE,).
+        scale: Factor on the paper's unmodeled dynamics and disturbance.
+        t: Time (s).
+        psi, u, v, r: Heading (rad) and body velocity.
+        tx, ty, tn: Applied (saturated) force, body frame (N, N, N m).
+        fx, fy, fn: Environmental force, earth frame (N, N, N m).
+        cx, cy: Current, earth frame (m/s).
+
+    Returns:
+        (x', y', psi', u', v', r').
+    """
+    c, s = math.cos(psi), math.sin(psi)
+    uc, vc = c * cx + s * cy, -s * cx + c * cy  # current in the body frame
+    ur, vr = u - uc, v - vc  # velocity relative to the water
+    h0, h1, h2 = hydrodynamic_forces(p, ur, vr, r)
+    f0 = tx + c * fx + s * fy - h0
+    f1 = ty - s * fx + c * fy - h1
+    f2 = tn + fn - h2
+    if scale != 0.0:
+        d0, d1, d2 = paper_unmodeled(ur, vr, r)
+        w0, w1, w2 = paper_disturbance(t, ur, vr, r)
+        f0 += scale * (w0 - d0)
+        f1 += scale * (w1 - d1)
+        f2 += scale * (w2 - d2)
+    a0, a1, a2 = solve_mass(p, f0, f1, f2)
+    # nu = nu_r + J^T V_c, and d/dt (J^T V_c) = (r vc, -r uc, 0) for a current held constant.
+    return c * u - s * v, s * u + c * v, r, a0 + r * vc, a1 - r * uc, a2
+
+
+@numba.njit(cache=True)
+def _integrate_vessel(a: FleetArrays, c: KernelConstants, b: int, i: int, t0: float) -> None:
+    """RK4 over one control period for vessel i of fleet b, forces held."""
+    p = a.params[b, i]
+    scale = c.disturbances[D_SCALE]
+    tx, ty, tn = a.tau_applied[b, i, 0], a.tau_applied[b, i, 1], a.tau_applied[b, i, 2]
+    fx = a.waves[b, i, 0] + a.wind[b, i, 0]
+    fy = a.waves[b, i, 1] + a.wind[b, i, 1]
+    fn = a.waves[b, i, 2] + a.wind[b, i, 2]
+    cx, cy = a.current[b, 0], a.current[b, 1]
+    x, y, psi = a.eta[b, i, 0], a.eta[b, i, 1], a.eta[b, i, 2]
+    u, v, r = a.nu[b, i, 0], a.nu[b, i, 1], a.nu[b, i, 2]
+    h = c.dt / c.substeps
+    for k in range(c.substeps):
+        t = t0 + k * h
+        k1 = plant_rhs(p, scale, t, psi, u, v, r, tx, ty, tn, fx, fy, fn, cx, cy)
+        k2 = plant_rhs(
+            p,
+            scale,
+            t + 0.5 * h,
+            psi + 0.5 * h * k1[2],
+            u + 0.5 * h * k1[3],
+            v + 0.5 * h * k1[4],
+            r + 0.5 * h * k1[5],
+            tx,
+            ty,
+            tn,
+            fx,
+            fy,
+            fn,
+            cx,
+            cy,
+        )
+        k3 = plant_rhs(
+            p,
+            scale,
+            t + 0.5 * h,
+            psi + 0.5 * h * k2[2],
+            u + 0.5 * h * k2[3],
+            v + 0.5 * h * k2[4],
+            r + 0.5 * h * k2[5],
+            tx,
+            ty,
+            tn,
+            fx,
+            fy,
+            fn,
+            cx,
+            cy,
+        )
+        k4 = plant_rhs(
+            p,
+            scale,
+            t + h,
+            psi + h * k3[2],
+            u + h * k3[3],
+            v + h * k3[4],
+            r + h * k3[5],
+            tx,
+            ty,
+            tn,
+            fx,
+            fy,
+            fn,
+            cx,
+            cy,
+        )
+        w = h / 6.0
+        x += w * (k1[0] + 2.0 * k2[0] + 2.0 * k3[0] + k4[0])
+        y += w * (k1[1] + 2.0 * k2[1] + 2.0 * k3[1] + k4[1])
+        psi += w * (k1[2] + 2.0 * k2[2] + 2.0 * k3[2] + k4[2])
+        u += w * (k1[3] + 2.0 * k2[3] + 2.0 * k3[3] + k4[3])
+        v += w * (k1[4] + 2.0 * k2[4] + 2.0 * k3[4] + k4[4])
+        r += w * (k1[5] + 2.0 * k2[5] + 2.0 * k3[5] + k4[5])
+    a.eta[b, i, 0], a.eta[b, i, 1], a.eta[b, i, 2] = x, y, psi
+    a.nu[b, i, 0], a.nu[b, i, 1], a.nu[b, i, 2] = u, v, r
+
+
+@numba.njit(cache=True)
+def _apply_action(a: FleetArrays, c: KernelConstants, actions: np.ndarray, b: int, i: int) -> None:
+    """Store the command, saturate it (eq. [6]) and clip rate and message."""
+    for k in range(3):
+        command = actions[b, i, k]
+        a.tau_command[b, i, k] = command
+        a.tau_applied[b, i, k] = _clip(command, c.tau_min[i, k], c.tau_max[i, k])
+    a.theta_dot[b, i] = _clip(actions[b, i, 3], -c.theta_dot_max, c.theta_dot_max)
+    for q in range(a.message.shape[2]):
+        a.message[b, i, q] = _clip(actions[b, i, 4 + q], -c.message_max, c.message_max)
+
+
+@numba.njit(cache=True)
+def _advance_disturbances(a: FleetArrays, c: KernelConstants, b: int, step: int) -> None:
+    """Advance wave, wind and current Gauss-Markov states by one control period."""
+    d, key, dt = c.disturbances, a.key[b], c.dt
+    for i in range(a.eta.shape[1]):
+        for k in range(3):
+            index = 3 * i + k
+            a.waves[b, i, k] = gauss_markov_step(
+                a.waves[b, i, k],
+                d[D_WAVE_MEAN + k],
+                d[D_WAVE_STD + k],
+                d[D_WAVE_TC],
+                dt,
+                counter_rng.normal(key, step, counter_rng.STREAM_WAVES, index),
+            )
+            a.wind[b, i, k] = gauss_markov_step(
+                a.wind[b, i, k],
+                d[D_WIND_MEAN + k],
+                d[D_WIND_STD + k],
+                d[D_WIND_TC],
+                dt,
+                counter_rng.normal(key, step, counter_rng.STREAM_WIND, index),
+            )
+    for k in range(2):
+        a.current[b, k] = gauss_markov_step(
+            a.current[b, k],
+            d[D_CURRENT_MEAN + k],
+            d[D_CURRENT_STD],
+            d[D_CURRENT_TC],
+            dt,
+            counter_rng.normal(key, step, counter_rng.STREAM_CURRENT, k),
+        )
+
+
+@numba.njit(cache=True)
+def _exchange_messages(a: FleetArrays, c: KernelConstants, b: int, step: int) -> None:
+    """Send this step's packets and deliver those sent ``delay`` steps ago.
+
+    ``step`` is the index of the step being completed; packets carry theta
+    after it and are stamped ``step + 1`` (the observation time).
+    """
+    n, depth = a.eta.shape[1], a.history.shape[1]
+    m = a.message.shape[2]
+    write = step % depth
+    for i in range(n):
+        a.history[b, write, i, 0] = a.theta[b, i]
+        for q in range(m):
+            a.history[b, write, i, 1 + q] = a.message[b, i, q]
+    sent = step - c.delay
+    if sent < 0:
+        return
+    read = sent % depth
+    member = topology_index(c, step + 1)
+    for i in range(n):
+        for k in range(c.slots.shape[1]):
+            j = c.slots[i, k]
+            if j < 0 or c.slot_weights[member, i, k] == 0.0:
+                continue
+            if c.loss_probability > 0.0:
+                draw = counter_rng.uniform(
+                    a.key[b], step, counter_rng.STREAM_LOSS, i * c.slots.shape[1] + k
+                )
+                if draw < c.loss_probability:
+                    continue
+            a.recv_theta[b, i, k] = a.history[b, read, j, 0]
+            for q in range(m):
+                a.recv_message[b, i, k, q] = a.history[b, read, j, 1 + q]
+            a.recv_step[b, i, k] = sent + 1
+
+
+@numba.njit(cache=True)
+def observe_fleet(a: FleetArrays, c: KernelConstants, b: int, speed_reference: float) -> None:
+    """Write observations, errors, rewards and flags of fleet b at its current step.
+
+    Args:
+        a: Fleet arrays.
+        c: Constants.
+        b: Fleet index.
+        speed_reference: v0 (m/s) the last step's rate is scored against.
+    """
+    n, n_slots = a.eta.shape[1], c.slots.shape[1]
+    m = a.message.shape[2]
+    step = a.step[b]
+    member = topology_index(c, step)
+    v0 = leader_speed(c, step * c.dt)
+    point = np.empty((3, 3))
+    frame = np.empty((3, 3))
+    terminated = False
+    finite = True
+    total = 0.0
+    for i in range(n):
+        obs = a.obs[b, i]
+        path_point(c.path_kinds[i], c.path_params[i], a.theta[b, i], point)
+        path_frame(a.eta[b, i], point, frame)
+        for k in range(3):
+            obs[NU + k] = a.nu[b, i, k]
+            obs[Z1 + k] = frame[0, k]
+            obs[T1 + k] = frame[1, k]
+            obs[T2 + k] = frame[2, k]
+            obs[TAU + k] = a.tau_applied[b, i, k]
+            finite = finite and math.isfinite(a.eta[b, i, k]) and math.isfinite(a.nu[b, i, k])
+        obs[THETA] = a.theta[b, i]
+        heard = c.leaders[member, i]
+        obs[LEADER] = heard
+        obs[V0] = v0 if heard > 0.0 else 0.0
+        sync = 0.0
+        for k in range(n_slots):
+            base = SLOTS + k * (SLOT_MSG + m)
+            weight = c.slot_weights[member, i, k]
+            j = c.slots[i, k]
+            if weight == 0.0:
+                for q in range(SLOT_MSG + m):
+                    obs[base + q] = 0.0
+                continue
+            sync += weight * (a.theta[b, i] - a.theta[b, j])
+            obs[base + SLOT_WEIGHT] = weight
+            obs[base + SLOT_DTHETA] = a.recv_theta[b, i, k] - a.theta[b, i]
+            obs[base + SLOT_AGE] = step - a.recv_step[b, i, k]
+            for q in range(m):
+                obs[base + SLOT_MSG + q] = a.recv_message[b, i, k, q]
+        path_error = math.sqrt(frame[0, 0] ** 2 + frame[0, 1] ** 2)
+        speed_error = a.theta_dot[b, i] - speed_reference
+        a.errors[b, i, ERR_PATH] = path_error
+        a.errors[b, i, ERR_HEADING] = frame[0, 2]
+        a.errors[b, i, ERR_SYNC] = sync
+        a.errors[b, i, ERR_SPEED] = speed_error
+        reward = step_reward(
+            c.reward_weights, c.dt, frame[0], sync, speed_error, a.tau_applied[b, i], c.tau_scale[i]
+        )
+        a.reward[b, i] = reward
+        total += reward
+        terminated = terminated or path_error > c.max_path_error
+    if c.team_reward:
+        for i in range(n):
+            a.reward[b, i] = total / n
+    a.terminated[b] = terminated
+    a.nonfinite[b] = not finite
+
+
+@numba.njit(cache=True)
+def step_fleet(a: FleetArrays, c: KernelConstants, actions: np.ndarray, b: int) -> None:
+    """Advance fleet b by one control period (see module docstring)."""
+    step = a.step[b]
+    t0 = step * c.dt
+    v0 = leader_speed(c, t0)
+    for i in range(a.eta.shape[1]):
+        _apply_action(a, c, actions, b, i)
+        _integrate_vessel(a, c, b, i, t0)
+        a.theta[b, i] += c.dt * a.theta_dot[b, i]
+    _advance_disturbances(a, c, b, step)
+    _exchange_messages(a, c, b, step)
+    a.step[b] = step + 1
+    observe_fleet(a, c, b, v0)
+
+
+@numba.njit(cache=True)
+def reset_observation(a: FleetArrays, c: KernelConstants, b: int) -> None:
+    """Observe fleet b right after a reset; its reward is zero."""
+    observe_fleet(a, c, b, leader_speed(c, a.step[b] * c.dt))
+    for i in range(a.eta.shape[1]):
+        a.reward[b, i] = 0.0
+
+
+# The parallel loops only dispatch: numba's parfor pass can drop writes made to
+# named-tuple fields directly in a prange body, so every write lives in a callee.
+@numba.njit(cache=True, parallel=True)
+def step_fleets(a: FleetArrays, c: KernelConstants, actions: np.ndarray) -> None:
+    """Advance every fleet by one control period, fleets in parallel."""
+    for b in prange(a.eta.shape[0]):
+        step_fleet(a, c, actions, b)
+
+
+@numba.njit(cache=True, parallel=True)
+def observe_fleets(a: FleetArrays, c: KernelConstants, fleets: np.ndarray) -> None:
+    """Observe the listed fleets after a reset, in parallel."""
+    for index in prange(fleets.shape[0]):
+        reset_observation(a, c, fleets[index])

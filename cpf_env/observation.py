@@ -1,0 +1,130 @@
+"""Local observation of one vessel: layout and the compiled builder.
+
+Vessel i observes only what is on board or arrives over its links
+(ARCHITECTURE.md, "Observation of vessel i"):
+
+======  ===========  ===========================================================
+index   name         meaning (units)
+======  ===========  ===========================================================
+0-2     nu           body velocity u, v, r (m/s, m/s, rad/s)
+3-5     z1           J(psi)^T (eta - eta_d(theta)), heading part wrapped (m, m, rad)
+6-8     t1           J(psi)^T d eta_d / d theta (m, m, rad per unit theta)
+9-11    t2           J(psi)^T d2 eta_d / d theta2
+12      theta        own path variable
+13-15   tau          last applied (saturated) force (N, N, N m)
+16      b            1 if the vessel hears the virtual leader, else 0
+17      v0           leader speed as heard (m/s; 0 when b = 0)
+18..    K slots      each [a_ij, theta_j - theta_i, age (steps), msg_j (m floats)]
+======  ===========  ===========================================================
+
+The slot of neighbour j holds the last packet received from j; ``a_ij = 0``
+marks an empty slot (no link in the active topology, or a vessel with fewer
+than K neighbours), and then the whole slot is zero.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numba
+from numpy.typing import NDArray
+
+__all__ = ["ObsLayout", "wrap_angle"]
+
+# Offsets, shared by ObsLayout and the compiled builder (numba freezes globals).
+NU, Z1, T1, T2, THETA, TAU, LEADER, V0, SLOTS = 0, 3, 6, 9, 12, 13, 16, 17, 18
+SLOT_WEIGHT, SLOT_DTHETA, SLOT_AGE, SLOT_MSG = 0, 1, 2, 3
+
+
+@dataclass(frozen=True)
+class ObsLayout:
+    """Named slices into a vessel's observation vector.
+
+    Attributes:
+        n_slots: Number of neighbour slots K (largest degree of the topology).
+        msg_size: Message length m.
+
+    Example:
+        >>> layout = ObsLayout(n_slots=2, msg_size=1)
+        >>> layout.size, layout.z1, layout.slot(1)
+        (26, slice(3, 6, None), slice(22, 26, None))
+    """
+
+    n_slots: int
+    msg_size: int = 1
+
+    nu = slice(NU, NU + 3)
+    z1 = slice(Z1, Z1 + 3)
+    t1 = slice(T1, T1 + 3)
+    t2 = slice(T2, T2 + 3)
+    theta = slice(THETA, THETA + 1)
+    tau = slice(TAU, TAU + 3)
+    leader = slice(LEADER, LEADER + 1)
+    v0 = slice(V0, V0 + 1)
+
+    def __post_init__(self) -> None:
+        if self.n_slots < 0 or self.msg_size < 0:
+            raise ValueError(f"n_slots and msg_size must be >= 0, got {self}.")
+
+    @property
+    def slot_size(self) -> int:
+        """Floats per neighbour slot: weight, theta difference, age, message."""
+        return SLOT_MSG + self.msg_size
+
+    @property
+    def neighbours(self) -> slice:
+        """All K neighbour slots, flattened."""
+        return slice(SLOTS, self.size)
+
+    @property
+    def size(self) -> int:
+        """Length of the observation vector, 18 + K (3 + m)."""
+        return SLOTS + self.n_slots * self.slot_size
+
+    def slot(self, k: int) -> slice:
+        """Slice of neighbour slot k (0 <= k < K)."""
+        if not 0 <= k < self.n_slots:
+            raise IndexError(f"slot {k} out of range for K = {self.n_slots}.")
+        start = SLOTS + k * self.slot_size
+        return slice(start, start + self.slot_size)
+
+    def slots(self, obs: NDArray) -> NDArray:
+        """View the neighbour slots of ``obs`` (..., size) as (..., K, 3 + m)."""
+        return obs[..., SLOTS:].reshape((*obs.shape[:-1], self.n_slots, self.slot_size))
+
+    def names(self) -> list[str]:
+        """A name for every index, e.g. ``"z1_x"`` or ``"slot1_age"``."""
+        names = ["u", "v", "r"]
+        for group in ("z1", "t1", "t2"):
+            names += [f"{group}_x", f"{group}_y", f"{group}_psi"]
+        names += ["theta", "tau_u", "tau_v", "tau_r", "b", "v0"]
+        for k in range(self.n_slots):
+            names += [f"slot{k}_a", f"slot{k}_dtheta", f"slot{k}_age"]
+            names += [f"slot{k}_msg{q}" for q in range(self.msg_size)]
+        return names
+
+
+@numba.njit(cache=True, inline="always")
+def wrap_angle(angle: float) -> float:
+    """Map an angle (rad) to (-pi, pi]."""
+    return angle - 2.0 * math.pi * math.ceil((angle - math.pi) / (2.0 * math.pi))
+
+
+@numba.njit(cache=True, inline="always")
+def path_frame(eta: NDArray, point: NDArray, out: NDArray) -> None:
+    """Express the path error and the path derivatives in the body frame.
+
+    Args:
+        eta: Pose [x, y, psi], shape (3,).
+        point: ``paths.path_point`` output, shape (3, 3): eta_d, eta_d', eta_d''.
+        out: Written with z1, t1, t2 as rows, shape (3, 3).
+    """
+    c, s = math.cos(eta[2]), math.sin(eta[2])
+    dx, dy = eta[0] - point[0, 0], eta[1] - point[0, 1]
+    out[0, 0], out[0, 1] = c * dx + s * dy, -s * dx + c * dy
+    out[0, 2] = wrap_angle(eta[2] - point[0, 2])
+    for row in (1, 2):
+        out[row, 0] = c * point[row, 0] + s * point[row, 1]
+        out[row, 1] = -s * point[row, 0] + c * point[row, 1]
+        out[row, 2] = point[row, 2]

@@ -1,0 +1,387 @@
+"""Scenarios: everything that defines a cooperative path-following task.
+
+A ``Scenario`` is a frozen dataclass composed of parts users can recombine:
+vessel models, paths, a communication topology with leader links, link
+impairments, a leader-speed schedule, saturation limits, disturbances, the
+initial-state distribution, timing and reward weights. Named scenarios live in
+a registry::
+
+    >>> from cpf_env import scenarios
+    >>> scenarios.get("wang2014").n
+    5
+    >>> fast = scenarios.get("wang2014").replace(v0=0.2, max_steps=1000)
+
+Unknown override keys and inconsistent parts raise ``ValueError`` at
+construction, with a message that says what to fix.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from cpf_env.disturbances import Disturbances, GaussMarkov, OceanCurrent
+from cpf_env.graph import Graph, LinkImpairments, SwitchingTopology, as_switching
+from cpf_env.paths import Path, Sinusoid
+from cpf_env.reward import RewardWeights
+from cpf_env.vessel import CYBERSHIP2, VesselModel
+
+__all__ = [
+    "InitialState",
+    "Scenario",
+    "SpeedSchedule",
+    "get",
+    "list_scenarios",
+    "register",
+]
+
+Vector3 = tuple[float, float, float]
+
+
+def _as_rows(name: str, value: object, n: int, width: int) -> tuple[tuple[float, ...], ...]:
+    """Broadcast ``value`` to n rows of ``width`` floats, or raise a ValueError saying why not."""
+    array = np.asarray(value, dtype=np.float64)
+    if array.shape == (width,):
+        array = np.broadcast_to(array, (n, width))
+    if array.shape != (n, width):
+        raise ValueError(
+            f"{name} must have shape ({width},) or ({n}, {width}) for {n} vessels, got {array.shape}."
+        )
+    if not np.all(np.isfinite(array)):
+        raise ValueError(f"{name} has non-finite entries: {array.tolist()}.")
+    return tuple(tuple(float(x) for x in row) for row in array)
+
+
+@dataclass(frozen=True)
+class SpeedSchedule:
+    """Piecewise-constant leader speed v0(t).
+
+    Attributes:
+        times: Switch times (s), first 0, strictly increasing.
+        values: v0 (m/s) from each switch time on.
+    """
+
+    times: tuple[float, ...] = (0.0,)
+    values: tuple[float, ...] = (0.1,)
+
+    def __post_init__(self) -> None:
+        times = tuple(float(t) for t in self.times)
+        values = tuple(float(v) for v in self.values)
+        object.__setattr__(self, "times", times)
+        object.__setattr__(self, "values", values)
+        if len(times) != len(values) or not times:
+            raise ValueError("SpeedSchedule needs as many values as times, at least one.")
+        if times[0] != 0.0 or any(b <= a for a, b in itertools.pairwise(times)):
+            raise ValueError(f"SpeedSchedule.times must start at 0 and increase, got {times}.")
+        if not all(math.isfinite(v) for v in values):
+            raise ValueError(f"SpeedSchedule.values must be finite, got {values}.")
+
+    def at(self, time: float) -> float:
+        """v0 (m/s) at ``time`` (s)."""
+        index = int(np.searchsorted(self.times, time, side="right")) - 1
+        return self.values[max(index, 0)]
+
+
+@dataclass(frozen=True)
+class InitialState:
+    """Initial-state distribution: a nominal state plus Gaussian spread.
+
+    Attributes:
+        eta: Nominal poses, n rows of (x (m), y (m), psi (rad)).
+        nu: Nominal velocities, n rows of (u, v, r), or None for rest.
+        theta: Nominal path variables (n,), or None for zeros.
+        position_std: Std of x and y (m).
+        heading_std: Std of psi (rad).
+        theta_std: Std of theta.
+    """
+
+    eta: tuple[Vector3, ...]
+    nu: tuple[Vector3, ...] | None = None
+    theta: tuple[float, ...] | None = None
+    position_std: float = 0.0
+    heading_std: float = 0.0
+    theta_std: float = 0.0
+
+    def __post_init__(self) -> None:
+        n = len(self.eta)
+        object.__setattr__(self, "eta", _as_rows("InitialState.eta", self.eta, n, 3))
+        nu = np.zeros((n, 3)) if self.nu is None else self.nu
+        object.__setattr__(self, "nu", _as_rows("InitialState.nu", nu, n, 3))
+        theta = np.zeros(n) if self.theta is None else self.theta
+        rows = _as_rows("InitialState.theta", np.reshape(theta, (-1, 1)), n, 1)
+        object.__setattr__(self, "theta", tuple(row[0] for row in rows))
+        for name in ("position_std", "heading_std", "theta_std"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0.0):
+                raise ValueError(f"InitialState.{name} must be >= 0, got {value}.")
+
+    @property
+    def n(self) -> int:
+        """Number of vessels."""
+        return len(self.eta)
+
+    def sample(self, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Draw (eta (n, 3), nu (n, 3), theta (n,)) from this distribution with ``rng``."""
+        eta = np.array(self.eta)
+        nu = np.array(self.nu)
+        theta = np.array(self.theta)
+        noise = rng.standard_normal((self.n, 4))
+        eta[:, :2] += self.position_std * noise[:, :2]
+        eta[:, 2] += self.heading_std * noise[:, 2]
+        theta += self.theta_std * noise[:, 3]
+        return eta, nu, theta
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """A cooperative path-following task for n vessels.
+
+    Attributes:
+        name: Registry name or a user label.
+        paths: One desired path per vessel.
+        topology: Communication graph with leader links, or a switching schedule of graphs.
+        initial: Initial-state distribution.
+        vessels: Nominal vessel model, one for all or one per vessel.
+        model_spread: Relative spread of the true model around the nominal one,
+            drawn per vessel at every reset (0 = the true plant is the nominal model).
+        v0: Leader speed (m/s), constant or a ``SpeedSchedule``.
+        tau_max: Upper force limits (N, N, N m), (3,) or (n, 3).
+        tau_min: Lower force limits, same shape; None means -tau_max.
+        disturbances: Unmodeled dynamics, current, waves, wind.
+        links: Packet loss and delay on every link.
+        dt: Control period (s).
+        substeps: RK4 plant steps per control period.
+        max_steps: Episode length (control steps) before truncation.
+        theta_dot_max: Bound on the commanded path-variable rate (1/s).
+        message_size: Floats per broadcast message m.
+        message_max: Bound on each message float.
+        max_path_error: Path error (m) past which the episode terminates.
+        reward: Reward weights.
+        description: One line for listings.
+    """
+
+    name: str
+    paths: tuple[Path, ...]
+    topology: Graph | SwitchingTopology
+    initial: InitialState
+    vessels: VesselModel | tuple[VesselModel, ...] = CYBERSHIP2
+    model_spread: float = 0.0
+    v0: float | SpeedSchedule = 0.1
+    tau_max: Vector3 | tuple[Vector3, ...] = (9.2, 4.5, 3.0)
+    tau_min: Vector3 | tuple[Vector3, ...] | None = None
+    disturbances: Disturbances = field(default_factory=Disturbances)
+    links: LinkImpairments = field(default_factory=LinkImpairments)
+    dt: float = 0.05
+    substeps: int = 5
+    max_steps: int = 3000
+    theta_dot_max: float = 1.0
+    message_size: int = 1
+    message_max: float = 10.0
+    max_path_error: float = 10.0
+    reward: RewardWeights = field(default_factory=RewardWeights)
+    description: str = ""
+
+    def __post_init__(self) -> None:
+        paths = tuple(self.paths)
+        n = len(paths)
+        object.__setattr__(self, "paths", paths)
+        topology = as_switching(self.topology)
+        if topology.n != n:
+            raise ValueError(f"topology has {topology.n} vessels but {n} paths are given.")
+        if self.initial.n != n:
+            raise ValueError(f"initial state has {self.initial.n} vessels but {n} paths are given.")
+        vessels = self.vessels
+        vessels = (vessels,) * n if isinstance(vessels, VesselModel) else tuple(vessels)
+        if len(vessels) != n or not all(isinstance(v, VesselModel) for v in vessels):
+            raise ValueError(f"vessels must be one VesselModel or {n} of them, got {len(vessels)}.")
+        object.__setattr__(self, "vessels", vessels)
+        if not isinstance(self.v0, SpeedSchedule):
+            object.__setattr__(self, "v0", SpeedSchedule((0.0,), (float(self.v0),)))
+        tau_max = _as_rows("tau_max", self.tau_max, n, 3)
+        tau_min = _as_rows(
+            "tau_min", -np.array(tau_max) if self.tau_min is None else self.tau_min, n, 3
+        )
+        if not (np.all(np.array(tau_max) > 0.0) and np.all(np.array(tau_min) < 0.0)):
+            raise ValueError(
+                "saturation limits must satisfy tau_min < 0 < tau_max on every axis "
+                f"(got tau_min={tau_min}, tau_max={tau_max}); give magnitudes in N, N, N m."
+            )
+        object.__setattr__(self, "tau_max", tau_max)
+        object.__setattr__(self, "tau_min", tau_min)
+        checks = {
+            "dt": self.dt > 0.0,
+            "substeps": isinstance(self.substeps, int) and self.substeps >= 1,
+            "max_steps": isinstance(self.max_steps, int) and self.max_steps >= 1,
+            "theta_dot_max": self.theta_dot_max > 0.0,
+            "message_size": isinstance(self.message_size, int) and self.message_size >= 0,
+            "message_max": self.message_max > 0.0,
+            "max_path_error": self.max_path_error > 0.0,
+            "model_spread": 0.0 <= self.model_spread < 1.0,
+        }
+        for name, ok in checks.items():
+            if not ok:
+                raise ValueError(
+                    f"Scenario.{name} = {getattr(self, name)!r} is invalid: dt, theta_dot_max, "
+                    "message_max and max_path_error must be > 0, substeps and max_steps integers "
+                    ">= 1, message_size an integer >= 0, model_spread in [0, 1)."
+                )
+
+    @property
+    def n(self) -> int:
+        """Number of vessels."""
+        return len(self.paths)
+
+    @property
+    def switching(self) -> SwitchingTopology:
+        """The topology as a (possibly one-member) switching schedule."""
+        return as_switching(self.topology)
+
+    def replace(self, **changes: object) -> Scenario:
+        """Return a copy with fields replaced; unknown names raise ``ValueError``."""
+        names = {f.name for f in dataclasses.fields(self)}
+        unknown = sorted(set(changes) - names)
+        if unknown:
+            raise ValueError(
+                f"unknown Scenario field(s) {unknown}; valid fields are {sorted(names)}."
+            )
+        return dataclasses.replace(self, **changes)  # type: ignore[arg-type]
+
+
+_REGISTRY: dict[str, Callable[[], Scenario]] = {}
+
+
+def register(name: str, factory: Callable[[], Scenario]) -> None:
+    """Register a scenario factory under ``name`` (overwriting is an error)."""
+    if name in _REGISTRY:
+        raise ValueError(f"a scenario named {name!r} is already registered.")
+    _REGISTRY[name] = factory
+
+
+def get(name: str) -> Scenario:
+    """Build the named scenario; see ``list_scenarios()`` for names."""
+    if name not in _REGISTRY:
+        raise ValueError(f"unknown scenario {name!r}; choose one of {list_scenarios()}.")
+    return _REGISTRY[name]()
+
+
+def list_scenarios() -> list[str]:
+    """Names of the registered scenarios, in registration order."""
+    return list(_REGISTRY)
+
+
+#: Lateral offsets y_i (m) of the paper's five sinusoids (PAPER.md section 6).
+_WANG2014_OFFSETS = (-8.0, -4.0, 0.0, 4.0, 8.0)
+
+
+def _parallel_sinusoids(offsets: Sequence[float]) -> tuple[Path, ...]:
+    """The paper's paths: x_d = theta, y_d = y_i + 2 sin(0.2 theta)."""
+    return tuple(Sinusoid(y0=y, amplitude=2.0, wavenumber=0.2) for y in offsets)
+
+
+def wang2014() -> Scenario:
+    """The paper's section 4 (PAPER.md section 6): five Cybership II, chain graph, v0 = 0.1."""
+    offsets = _WANG2014_OFFSETS
+    x0 = [-1.0, 1.0, -0.5, 0.5, 0.0]
+    dy = [1.0, -1.0, 0.5, -0.5, 1.0]
+    return Scenario(
+        name="wang2014",
+        paths=_parallel_sinusoids(offsets),
+        topology=Graph.path(5, leaders=(0, 3)),
+        initial=InitialState(
+            eta=tuple((x, y + d, 0.0) for x, y, d in zip(x0, offsets, dy, strict=True))
+        ),
+        description="The paper's simulation: 5 vessels, sinusoids, chain graph, b = [1,0,0,1,0].",
+    )
+
+
+def saturation_heavy() -> Scenario:
+    """Fast run with large initial errors and halved force limits: sustained saturation."""
+    offsets = _WANG2014_OFFSETS
+    return wang2014().replace(
+        name="saturation_heavy",
+        v0=0.5,
+        tau_max=(4.6, 2.25, 1.5),
+        initial=InitialState(
+            eta=tuple((-2.0, y + 3.0 * (-1) ** k, 0.6) for k, y in enumerate(offsets))
+        ),
+        max_steps=1200,
+        description="v0 = 0.5 m/s, 3 m initial offsets, force limits halved.",
+    )
+
+
+def current_and_waves() -> Scenario:
+    """The paper's task in a slowly varying current with wave and wind forces."""
+    return wang2014().replace(
+        name="current_and_waves",
+        disturbances=Disturbances(
+            current=OceanCurrent(velocity=(0.05, 0.03), std=0.01, time_constant=60.0),
+            waves=GaussMarkov(std=(0.5, 0.5, 0.1), time_constant=2.0),
+            wind=GaussMarkov(mean=(0.3, 0.2, 0.0), std=(0.2, 0.2, 0.05), time_constant=30.0),
+        ),
+        description="Current 0.06 m/s (varying), Gauss-Markov waves and wind.",
+    )
+
+
+def lossy_links() -> Scenario:
+    """The paper's task over links that lose 30 % of packets and delay them 0.25 s."""
+    return wang2014().replace(
+        name="lossy_links",
+        links=LinkImpairments(loss_probability=0.3, delay_steps=5),
+        description="30 % packet loss and 5-step delay on every link.",
+    )
+
+
+def switching_topology() -> Scenario:
+    """The paper's task over a topology that cycles chain -> ring -> star every 10 s."""
+    graphs = (
+        Graph.path(5, leaders=(0, 3)),
+        Graph.ring(5, leaders=(2,)),
+        Graph.star(5, center=2, leaders=(4,)),
+    )
+    return wang2014().replace(
+        name="switching_topology",
+        topology=SwitchingTopology(graphs=graphs, switch_steps=(0, 200, 400), period=600),
+        description="Chain, ring, star in turn, 10 s each; leader links change too.",
+    )
+
+
+def heterogeneous() -> Scenario:
+    """Every vessel's true model drawn +-30 % around Cybership II, random initial poses."""
+    base = wang2014()
+    return base.replace(
+        name="heterogeneous",
+        model_spread=0.3,
+        initial=dataclasses.replace(base.initial, position_std=0.5, heading_std=0.2),
+        description="True models +-30 % around Cybership II per reset, noisy initial poses.",
+    )
+
+
+def large_fleet() -> Scenario:
+    """Ten vessels on parallel sinusoids, ring graph, two leader links, noisy start."""
+    offsets = [4.0 * (k - 4.5) for k in range(10)]
+    return Scenario(
+        name="large_fleet",
+        paths=_parallel_sinusoids(offsets),
+        topology=Graph.ring(10, leaders=(0, 5)),
+        initial=InitialState(
+            eta=tuple((0.0, y + 1.0, 0.0) for y in offsets), position_std=0.5, heading_std=0.1
+        ),
+        description="n = 10, ring graph, leaders 0 and 5.",
+    )
+
+
+for _factory in (
+    wang2014,
+    saturation_heavy,
+    current_and_waves,
+    lossy_links,
+    switching_topology,
+    heterogeneous,
+    large_fleet,
+):
+    register(_factory.__name__, _factory)

@@ -1,0 +1,250 @@
+"""``FleetSim``: B independent fleets of n vessels, stepped together.
+
+The simulator owns the state arrays (leading axis B) and calls the fused
+kernel of ``cpf_env.kernels`` once per control step. It knows nothing about
+Gym: the PettingZoo env is ``FleetSim`` with B = 1, and the vector envs use
+B > 1. Fleet k of a batched simulator and a single simulator reset with the
+same seed produce bit-identical trajectories.
+
+Example:
+    >>> import numpy as np
+    >>> from cpf_env import scenarios
+    >>> sim = FleetSim(scenarios.get("wang2014"), num_fleets=4)
+    >>> obs = sim.reset(seeds=[0, 1, 2, 3])
+    >>> obs.shape
+    (4, 5, 22)
+    >>> obs = sim.step(np.zeros((4, 5, sim.act_dim)))
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from cpf_env import graph, kernels
+from cpf_env.observation import ObsLayout
+from cpf_env.paths import encode_paths
+from cpf_env.scenarios import Scenario
+from cpf_env.vessel import PARAM_SIZE
+
+__all__ = ["FleetSim"]
+
+
+def _constants(scenario: Scenario) -> kernels.KernelConstants:
+    topology = scenario.switching
+    slots = graph.neighbour_slots(topology)
+    switch_steps, period = graph.switch_table(topology)
+    kinds, path_params = encode_paths(scenario.paths)
+    tau_min, tau_max = np.array(scenario.tau_min), np.array(scenario.tau_max)
+    return kernels.KernelConstants(
+        tau_min=tau_min,
+        tau_max=tau_max,
+        tau_scale=np.maximum(np.abs(tau_min), np.abs(tau_max)),
+        theta_dot_max=float(scenario.theta_dot_max),
+        message_max=float(scenario.message_max),
+        path_kinds=kinds,
+        path_params=path_params,
+        disturbances=scenario.disturbances.encode(),
+        slots=slots,
+        slot_weights=graph.slot_weights(topology, slots),
+        leaders=graph.leader_schedule(topology),
+        switch_steps=switch_steps,
+        switch_period=int(period),
+        loss_probability=float(scenario.links.loss_probability),
+        delay=int(scenario.links.delay_steps),
+        v0_times=np.array(scenario.v0.times),
+        v0_values=np.array(scenario.v0.values),
+        dt=float(scenario.dt),
+        substeps=int(scenario.substeps),
+        reward_weights=scenario.reward.encode(),
+        team_reward=bool(scenario.reward.team),
+        max_path_error=float(scenario.max_path_error),
+    )
+
+
+class FleetSim:
+    """Batched simulator of B fleets x n vessels (no Gym code).
+
+    Args:
+        scenario: The task.
+        num_fleets: Number of independent fleets B.
+
+    Attributes:
+        scenario: The task.
+        num_fleets: B.
+        n: Vessels per fleet.
+        layout: Observation layout (``ObsLayout``).
+        obs_dim: Observation length per vessel.
+        act_dim: Action length per vessel, 4 + m: (tau0 (3), theta_dot, message (m)).
+        arrays: The state and outputs (``kernels.FleetArrays``); read, do not write.
+        constants: The scenario in kernel form.
+    """
+
+    def __init__(self, scenario: Scenario, num_fleets: int = 1) -> None:
+        if not isinstance(scenario, Scenario):
+            raise TypeError(f"scenario must be a Scenario, got {type(scenario).__name__}.")
+        if int(num_fleets) < 1:
+            raise ValueError(f"num_fleets must be >= 1, got {num_fleets}.")
+        self.scenario = scenario
+        self.num_fleets = B = int(num_fleets)
+        self.n = n = scenario.n
+        self.constants = _constants(scenario)
+        m = scenario.message_size
+        self.layout = ObsLayout(n_slots=self.constants.slots.shape[1], msg_size=m)
+        self.obs_dim = self.layout.size
+        self.act_dim = 4 + m
+        K = self.layout.n_slots
+        self._nominal_params = np.stack([v.to_params() for v in scenario.vessels])
+        self.arrays = kernels.FleetArrays(
+            eta=np.zeros((B, n, 3)),
+            nu=np.zeros((B, n, 3)),
+            theta=np.zeros((B, n)),
+            theta_dot=np.zeros((B, n)),
+            tau_command=np.zeros((B, n, 3)),
+            tau_applied=np.zeros((B, n, 3)),
+            message=np.zeros((B, n, m)),
+            waves=np.zeros((B, n, 3)),
+            wind=np.zeros((B, n, 3)),
+            current=np.zeros((B, 2)),
+            step=np.zeros(B, dtype=np.int64),
+            key=np.zeros(B, dtype=np.uint64),
+            params=np.broadcast_to(self._nominal_params, (B, n, PARAM_SIZE)).copy(),
+            recv_theta=np.zeros((B, n, K)),
+            recv_message=np.zeros((B, n, K, m)),
+            recv_step=np.zeros((B, n, K), dtype=np.int64),
+            history=np.zeros((B, scenario.links.delay_steps + 1, n, 1 + m)),
+            obs=np.zeros((B, n, self.obs_dim), dtype=np.float32),
+            reward=np.zeros((B, n)),
+            errors=np.zeros((B, n, 4)),
+            terminated=np.zeros(B, dtype=bool),
+            nonfinite=np.zeros(B, dtype=bool),
+        )
+        self._rngs = [np.random.default_rng() for _ in range(B)]
+        self._needs_reset = True
+
+    @property
+    def rngs(self) -> list[np.random.Generator]:
+        """Per-fleet generators used at reset (initial states, models, RNG keys)."""
+        return self._rngs
+
+    @property
+    def time(self) -> NDArray[np.float64]:
+        """Simulated time of each fleet (s), shape (B,)."""
+        return self.arrays.step * self.scenario.dt
+
+    def v0_at(self, time: float) -> float:
+        """Leader speed (m/s) at ``time`` (s)."""
+        return self.scenario.v0.at(time)
+
+    def reset(
+        self,
+        seeds: Sequence[int | None] | None = None,
+        fleets: ArrayLike | None = None,
+    ) -> NDArray[np.float32]:
+        """Reset some or all fleets and return all observations.
+
+        Args:
+            seeds: One seed per reset fleet; None (or a None entry) keeps that
+                fleet's generator running, as Gymnasium does on reset without seed.
+            fleets: Indices of the fleets to reset (default: all).
+
+        Returns:
+            Observations of every fleet, shape (B, n, obs_dim), float32 (a view;
+            copy it if you keep it across steps).
+        """
+        index = np.arange(self.num_fleets) if fleets is None else np.asarray(fleets, np.int64)
+        if index.ndim != 1 or np.any((index < 0) | (index >= self.num_fleets)):
+            raise ValueError(f"fleets must be indices in [0, {self.num_fleets}), got {fleets}.")
+        seeds = [None] * len(index) if seeds is None else list(seeds)
+        if len(seeds) != len(index):
+            raise ValueError(f"got {len(seeds)} seeds for {len(index)} fleets; give one per fleet.")
+        for b, seed in zip(index, seeds, strict=True):
+            if seed is not None:
+                self._rngs[b] = np.random.default_rng(seed)
+            self._reset_fleet(int(b), self._rngs[b])
+        kernels.observe_fleets(self.arrays, self.constants, index)
+        self._needs_reset = False
+        return self.arrays.obs
+
+    def _reset_fleet(self, b: int, rng: np.random.Generator) -> None:
+        """Draw fleet b's episode: RNG key, true models, initial state, disturbance states."""
+        a, s = self.arrays, self.scenario
+        a.key[b] = rng.integers(0, 2**63, dtype=np.uint64)
+        if s.model_spread > 0.0:
+            a.params[b] = [v.perturbed(rng, s.model_spread).to_params() for v in s.vessels]
+        eta, nu, theta = s.initial.sample(rng)
+        a.eta[b], a.nu[b], a.theta[b] = eta, nu, theta
+        d = s.disturbances
+        for state, process in ((a.waves, d.waves), (a.wind, d.wind)):
+            state[b] = np.array(process.mean) + np.array(process.std) * rng.standard_normal(
+                (self.n, 3)
+            )
+        a.current[b] = np.array(d.current.velocity) + d.current.std * rng.standard_normal(2)
+        a.theta_dot[b] = 0.0
+        a.tau_command[b] = 0.0
+        a.tau_applied[b] = 0.0
+        a.message[b] = 0.0
+        a.step[b] = 0
+        slots = self.constants.slots
+        a.recv_theta[b] = np.where(slots >= 0, theta[np.maximum(slots, 0)], 0.0)
+        a.recv_message[b] = 0.0
+        a.recv_step[b] = 0
+        a.history[b] = 0.0
+        a.terminated[b] = False
+        a.nonfinite[b] = False
+
+    def validate_actions(self, actions: ArrayLike) -> NDArray[np.float64]:
+        """Check an action batch and return it as float64 (B, n, act_dim).
+
+        Raises:
+            ValueError: Wrong shape or a non-finite entry (naming fleet, vessel, component).
+        """
+        array = np.asarray(actions, dtype=np.float64)
+        expected = (self.num_fleets, self.n, self.act_dim)
+        if array.shape != expected:
+            raise ValueError(
+                f"actions must have shape (B, n, 4 + m) = {expected}, got {array.shape}."
+            )
+        bad = np.argwhere(~np.isfinite(array))
+        if bad.size:
+            b, i, k = bad[0]
+            raise ValueError(
+                f"action of fleet {b}, vessel_{i}, component {k} is {array[b, i, k]}: "
+                "actions must be finite."
+            )
+        return np.ascontiguousarray(array)
+
+    def step(self, actions: ArrayLike) -> NDArray[np.float32]:
+        """Advance every fleet one control period and return the observations.
+
+        Args:
+            actions: Shape (B, n, 4 + m): force command (N, N, N m), path-variable
+                rate (1/s) and message per vessel. Commands beyond the limits are
+                saturated by the plant; rate and message are clipped.
+
+        Returns:
+            Observations (B, n, obs_dim) float32, a view of ``arrays.obs``. Rewards,
+            errors and flags are in ``arrays``.
+
+        Raises:
+            ValueError: Bad actions (state untouched).
+            RuntimeError: Stepping before reset, or a non-finite state (a bug).
+        """
+        if self._needs_reset:
+            raise RuntimeError("call reset() before step().")
+        validated = self.validate_actions(actions)
+        kernels.step_fleets(self.arrays, self.constants, validated)
+        if self.arrays.nonfinite.any():
+            fleets = np.flatnonzero(self.arrays.nonfinite).tolist()
+            raise RuntimeError(
+                f"non-finite vessel state in fleet(s) {fleets} at step "
+                f"{self.arrays.step[fleets[0]]}: the plant diverged; this is a bug, please report it."
+            )
+        return self.arrays.obs
+
+    @property
+    def truncated(self) -> NDArray[np.bool_]:
+        """Fleets that reached ``max_steps``, shape (B,)."""
+        return self.arrays.step >= self.scenario.max_steps
