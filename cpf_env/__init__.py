@@ -41,7 +41,7 @@ raw_env = CooperativePathFollowingEnv
 def parallel_env(
     scenario: str | Scenario = "wang2014", **kwargs: Any
 ) -> CooperativePathFollowingEnv:
-    """The ParallelEnv for ``scenario`` (a registered name or a ``Scenario``); kwargs override fields."""
+    """The ParallelEnv for ``scenario`` (a name or a ``Scenario``); kwargs override its fields."""
     return CooperativePathFollowingEnv(scenario, **kwargs)
 
 
@@ -49,3 +49,8 @@ def env(scenario: str | Scenario = "wang2014", **kwargs: Any) -> AECEnv:
     """The AEC form of ``parallel_env`` (agents act in turn; the step happens after the last)."""
     aec = parallel_to_aec(parallel_env(scenario, **kwargs))
     return wrappers.OrderEnforcingWrapper(wrappers.AssertOutOfBoundsWrapper(aec))
+
+
+from cpf_env.gym_envs import register_envs  # noqa: E402
+
+register_envs()

@@ -96,7 +96,8 @@ class Disturbances:
     """Everything the controller does not know about the plant.
 
     Attributes:
-        unmodeled_scale: Factor on the paper's Delta(nu) and tau_w(t, nu); 1 is the paper, 0 removes them.
+        unmodeled_scale: Factor on the paper's Delta(nu) and tau_w(t, nu): 1 is the
+            paper, 0 removes them.
         current: Ocean current.
         waves: Wave force process (fast: T of a few seconds).
         wind: Wind force process (slow gusts around a mean).
@@ -114,10 +115,12 @@ class Disturbances:
             )
 
     def encode(self) -> NDArray[np.float64]:
-        """Flatten for the simulator kernel, shape (DIST_PARAM_SIZE,), layout of the ``D_*`` indices."""
+        """Flatten for the kernel, shape (DIST_PARAM_SIZE,), layout of the ``D_*`` indices."""
         c, w, g = self.current, self.waves, self.wind
         return np.array(
-            [self.unmodeled_scale, *c.velocity, c.std, c.time_constant, *w.mean, *w.std, w.time_constant, *g.mean, *g.std, g.time_constant],
+            [self.unmodeled_scale, *c.velocity, c.std, c.time_constant]
+            + [*w.mean, *w.std, w.time_constant]
+            + [*g.mean, *g.std, g.time_constant],
             dtype=np.float64,
         )
 

@@ -60,9 +60,11 @@ class CooperativePathFollowingEnv(ParallelEnv):
 
     | idx | name | unit | bounds |
     |---|---|---|---|
-    | 0-2 | tau0 (surge, sway force; yaw moment) | N, N, N m | saturation limits; the plant saturates anything beyond |
+    | 0-2 | tau0: surge, sway force; yaw moment | N, N, N m | the saturation limits (*) |
     | 3 | theta_dot, rate of the path variable | 1/s | +-theta_dot_max (clipped) |
     | 4.. | message broadcast to neighbours | - | +-message_max (clipped) |
+
+    (*) Commands beyond the limits are allowed: the plant saturates them (PAPER.md eq. [6]).
 
     ## Observation Space
 
@@ -104,7 +106,7 @@ class CooperativePathFollowingEnv(ParallelEnv):
     * v0: initial release.
     """
 
-    metadata = {
+    metadata: dict[str, Any] = {  # noqa: RUF012 - PettingZoo's class-level convention
         "name": "cooperative_path_following_v0",
         "render_modes": ["human", "rgb_array"],
         "render_fps": 20,
@@ -144,8 +146,9 @@ class CooperativePathFollowingEnv(ParallelEnv):
         i = self._check_agent(agent)
         s = self.scenario
         m = s.message_size
-        low = np.concatenate([s.tau_min[i], [-s.theta_dot_max], np.full(m, -s.message_max)])
-        high = np.concatenate([s.tau_max[i], [s.theta_dot_max], np.full(m, s.message_max)])
+        tau_min, tau_max = s.tau_limits
+        low = np.concatenate([tau_min[i], [-s.theta_dot_max], np.full(m, -s.message_max)])
+        high = np.concatenate([tau_max[i], [s.theta_dot_max], np.full(m, s.message_max)])
         return spaces.Box(low.astype(np.float32), high.astype(np.float32), dtype=np.float32)
 
     @functools.cached_property

@@ -156,10 +156,18 @@ def plant_rhs(p, scale, t, psi, u, v, r, tx, ty, tn, fx, fy, fn, cx, cy):
         p: True vessel parameters, shape (PARAM_SIZE,).
         scale: Factor on the paper's unmodeled dynamics and disturbance.
         t: Time (s).
-        psi, u, v, r: Heading (rad) and body velocity.
-        tx, ty, tn: Applied (saturated) force, body frame (N, N, N m).
-        fx, fy, fn: Environmental force, earth frame (N, N, N m).
-        cx, cy: Current, earth frame (m/s).
+        psi: Heading (rad).
+        u: Surge velocity (m/s).
+        v: Sway velocity (m/s).
+        r: Yaw rate (rad/s).
+        tx: Applied (saturated) surge force (N).
+        ty: Applied sway force (N).
+        tn: Applied yaw moment (N m).
+        fx: Environmental force along earth x (N).
+        fy: Environmental force along earth y (N).
+        fn: Environmental yaw moment (N m).
+        cx: Current along earth x (m/s).
+        cy: Current along earth y (m/s).
 
     Returns:
         (x', y', psi', u', v', r').
@@ -258,6 +266,40 @@ def _integrate_vessel(a: FleetArrays, c: KernelConstants, b: int, i: int, t0: fl
         r += w * (k1[5] + 2.0 * k2[5] + 2.0 * k3[5] + k4[5])
     a.eta[b, i, 0], a.eta[b, i, 1], a.eta[b, i, 2] = x, y, psi
     a.nu[b, i, 0], a.nu[b, i, 1], a.nu[b, i, 2] = u, v, r
+
+
+@numba.njit(cache=True)
+def plant_accelerations(
+    a: FleetArrays, c: KernelConstants, tau: np.ndarray, out: np.ndarray
+) -> None:
+    """True body accelerations nu' (B, n, 3) at the current state under force ``tau`` (B, n, 3).
+
+    Uses the same right-hand side as the integrator, with the environmental
+    forces and current of the current step; for diagnostics (e.g. the true
+    lumped uncertainty the paper's NN learns), not used by the step itself.
+    """
+    scale = c.disturbances[D_SCALE]
+    for b in range(a.eta.shape[0]):
+        t = a.step[b] * c.dt
+        for i in range(a.eta.shape[1]):
+            rhs = plant_rhs(
+                a.params[b, i],
+                scale,
+                t,
+                a.eta[b, i, 2],
+                a.nu[b, i, 0],
+                a.nu[b, i, 1],
+                a.nu[b, i, 2],
+                tau[b, i, 0],
+                tau[b, i, 1],
+                tau[b, i, 2],
+                a.waves[b, i, 0] + a.wind[b, i, 0],
+                a.waves[b, i, 1] + a.wind[b, i, 1],
+                a.waves[b, i, 2] + a.wind[b, i, 2],
+                a.current[b, 0],
+                a.current[b, 1],
+            )
+            out[b, i, 0], out[b, i, 1], out[b, i, 2] = rhs[3], rhs[4], rhs[5]
 
 
 @numba.njit(cache=True)

@@ -50,7 +50,8 @@ def _as_rows(name: str, value: object, n: int, width: int) -> tuple[tuple[float,
         array = np.broadcast_to(array, (n, width))
     if array.shape != (n, width):
         raise ValueError(
-            f"{name} must have shape ({width},) or ({n}, {width}) for {n} vessels, got {array.shape}."
+            f"{name} must have shape ({width},) or ({n}, {width}) for {n} vessels, "
+            f"got {array.shape}."
         )
     if not np.all(np.isfinite(array)):
         raise ValueError(f"{name} has non-finite entries: {array.tolist()}.")
@@ -237,18 +238,40 @@ class Scenario:
         return len(self.paths)
 
     @property
+    def vessel_models(self) -> tuple[VesselModel, ...]:
+        """Nominal model of every vessel, length n."""
+        return self.vessels  # type: ignore[return-value]  # normalized in __post_init__
+
+    @property
+    def v0_schedule(self) -> SpeedSchedule:
+        """The leader speed as a schedule (a constant v0 is a one-entry schedule)."""
+        return self.v0  # type: ignore[return-value]  # normalized in __post_init__
+
+    @property
+    def tau_limits(self) -> tuple[np.ndarray, np.ndarray]:
+        """(tau_min, tau_max) as arrays of shape (n, 3) in N, N, N m."""
+        return np.array(self.tau_min), np.array(self.tau_max)
+
+    @property
     def switching(self) -> SwitchingTopology:
         """The topology as a (possibly one-member) switching schedule."""
         return as_switching(self.topology)
 
     def replace(self, **changes: object) -> Scenario:
-        """Return a copy with fields replaced; unknown names raise ``ValueError``."""
+        """Return a copy with fields replaced; unknown names raise ``ValueError``.
+
+        A tau_min that mirrored tau_max (the default, -tau_max) keeps mirroring a
+        replaced tau_max, as if the scenario had been built with the new value.
+        """
         names = {f.name for f in dataclasses.fields(self)}
         unknown = sorted(set(changes) - names)
         if unknown:
             raise ValueError(
                 f"unknown Scenario field(s) {unknown}; valid fields are {sorted(names)}."
             )
+        if "tau_max" in changes and "tau_min" not in changes:
+            if np.array_equal(np.array(self.tau_min), -np.array(self.tau_max)):
+                changes["tau_min"] = None
         return dataclasses.replace(self, **changes)  # type: ignore[arg-type]
 
 

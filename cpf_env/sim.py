@@ -23,13 +23,19 @@ from collections.abc import Sequence
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from cpf_env import graph, kernels
+from cpf_env import graph, kernels, vessel
 from cpf_env.observation import ObsLayout
 from cpf_env.paths import encode_paths
 from cpf_env.scenarios import Scenario
 from cpf_env.vessel import PARAM_SIZE
 
-__all__ = ["FleetSim"]
+__all__ = ["FleetSim", "observation_layout"]
+
+
+def observation_layout(scenario: Scenario) -> ObsLayout:
+    """The ``ObsLayout`` of a scenario's vessels (K = largest degree of its topology)."""
+    slots = graph.neighbour_slots(scenario.switching)
+    return ObsLayout(n_slots=slots.shape[1], msg_size=scenario.message_size)
 
 
 def _constants(scenario: Scenario) -> kernels.KernelConstants:
@@ -37,7 +43,7 @@ def _constants(scenario: Scenario) -> kernels.KernelConstants:
     slots = graph.neighbour_slots(topology)
     switch_steps, period = graph.switch_table(topology)
     kinds, path_params = encode_paths(scenario.paths)
-    tau_min, tau_max = np.array(scenario.tau_min), np.array(scenario.tau_max)
+    tau_min, tau_max = scenario.tau_limits
     return kernels.KernelConstants(
         tau_min=tau_min,
         tau_max=tau_max,
@@ -54,8 +60,8 @@ def _constants(scenario: Scenario) -> kernels.KernelConstants:
         switch_period=int(period),
         loss_probability=float(scenario.links.loss_probability),
         delay=int(scenario.links.delay_steps),
-        v0_times=np.array(scenario.v0.times),
-        v0_values=np.array(scenario.v0.values),
+        v0_times=np.array(scenario.v0_schedule.times),
+        v0_values=np.array(scenario.v0_schedule.values),
         dt=float(scenario.dt),
         substeps=int(scenario.substeps),
         reward_weights=scenario.reward.encode(),
@@ -92,11 +98,11 @@ class FleetSim:
         self.n = n = scenario.n
         self.constants = _constants(scenario)
         m = scenario.message_size
-        self.layout = ObsLayout(n_slots=self.constants.slots.shape[1], msg_size=m)
+        self.layout = observation_layout(scenario)
         self.obs_dim = self.layout.size
         self.act_dim = 4 + m
         K = self.layout.n_slots
-        self._nominal_params = np.stack([v.to_params() for v in scenario.vessels])
+        self._nominal_params = np.stack([v.to_params() for v in scenario.vessel_models])
         self.arrays = kernels.FleetArrays(
             eta=np.zeros((B, n, 3)),
             nu=np.zeros((B, n, 3)),
@@ -136,7 +142,7 @@ class FleetSim:
 
     def v0_at(self, time: float) -> float:
         """Leader speed (m/s) at ``time`` (s)."""
-        return self.scenario.v0.at(time)
+        return self.scenario.v0_schedule.at(time)
 
     def reset(
         self,
@@ -156,7 +162,7 @@ class FleetSim:
         """
         index = np.arange(self.num_fleets) if fleets is None else np.asarray(fleets, np.int64)
         if index.ndim != 1 or np.any((index < 0) | (index >= self.num_fleets)):
-            raise ValueError(f"fleets must be indices in [0, {self.num_fleets}), got {fleets}.")
+            raise ValueError(f"fleets must be indices in [0, {self.num_fleets}), got {fleets!r}.")
         seeds = [None] * len(index) if seeds is None else list(seeds)
         if len(seeds) != len(index):
             raise ValueError(f"got {len(seeds)} seeds for {len(index)} fleets; give one per fleet.")
@@ -173,7 +179,7 @@ class FleetSim:
         a, s = self.arrays, self.scenario
         a.key[b] = rng.integers(0, 2**63, dtype=np.uint64)
         if s.model_spread > 0.0:
-            a.params[b] = [v.perturbed(rng, s.model_spread).to_params() for v in s.vessels]
+            a.params[b] = [v.perturbed(rng, s.model_spread).to_params() for v in s.vessel_models]
         eta, nu, theta = s.initial.sample(rng)
         a.eta[b], a.nu[b], a.theta[b] = eta, nu, theta
         d = s.disturbances
@@ -240,9 +246,30 @@ class FleetSim:
             fleets = np.flatnonzero(self.arrays.nonfinite).tolist()
             raise RuntimeError(
                 f"non-finite vessel state in fleet(s) {fleets} at step "
-                f"{self.arrays.step[fleets[0]]}: the plant diverged; this is a bug, please report it."
+                f"{self.arrays.step[fleets[0]]}: the plant diverged; this is a bug, "
+                "please report it."
             )
         return self.arrays.obs
+
+    def accelerations(self, tau: ArrayLike | None = None) -> NDArray[np.float64]:
+        """True accelerations nu' (B, n, 3) at the current state (m/s^2, m/s^2, rad/s^2).
+
+        Args:
+            tau: Applied force (B, n, 3) in N, N, N m; default the last applied force.
+        """
+        force = self.arrays.tau_applied if tau is None else np.asarray(tau, dtype=np.float64)
+        out = np.empty_like(self.arrays.nu)
+        kernels.plant_accelerations(self.arrays, self.constants, np.ascontiguousarray(force), out)
+        return out
+
+    def mass_matrices(self) -> NDArray[np.float64]:
+        """True mass matrices M (B, n, 3, 3) of this episode's vessels (kg, kg m, kg m^2)."""
+        p = self.arrays.params
+        out = np.zeros(p.shape[:2] + (3, 3))
+        out[..., 0, 0] = p[..., vessel.M11]
+        out[..., 1, 1], out[..., 1, 2] = p[..., vessel.M22], p[..., vessel.M23]
+        out[..., 2, 1], out[..., 2, 2] = p[..., vessel.M32], p[..., vessel.M33]
+        return out
 
     @property
     def truncated(self) -> NDArray[np.bool_]:

@@ -128,15 +128,17 @@ class VesselModel:
         inverse = np.linalg.inv(mass)
         damping = [getattr(self, name) for name in PARAM_NAMES[10:]]
         return np.array(
-            [mass[0, 0], mass[1, 1], mass[1, 2], mass[2, 1], mass[2, 2], inverse[0, 0], inverse[1, 1], inverse[1, 2], inverse[2, 1], inverse[2, 2], *damping],
+            [mass[0, 0], mass[1, 1], mass[1, 2], mass[2, 1], mass[2, 2]]
+            + [inverse[0, 0], inverse[1, 1], inverse[1, 2], inverse[2, 1], inverse[2, 2]]
+            + damping,
             dtype=np.float64,
         )
 
     def perturbed(self, rng: np.random.Generator, spread: float) -> VesselModel:
-        """Draw a model with every damping and added-mass derivative scaled by U(1 - spread, 1 + spread).
+        """Draw a model with every parameter scaled by its own factor U(1 - spread, 1 + spread).
 
-        Used by heterogeneous-fleet scenarios. Rigid-body mass, inertia and
-        x_g scale by the same kind of factor; the result is re-validated.
+        Used by heterogeneous-fleet scenarios (rigid-body, added-mass and
+        damping parameters alike); the result is re-validated.
 
         Args:
             rng: Generator to draw from (the env's, for reproducibility).
@@ -157,13 +159,13 @@ CYBERSHIP2 = VesselModel()
 
 @numba.njit(cache=True, inline="always")
 def coriolis_coefficients(p: NDArray[np.float64], u: float, v: float, r: float) -> tuple:
-    """Return (c13, c23) of C(nu) = [[0, 0, c13], [0, 0, c23], [-c13, -c23, 0]] (PAPER.md section 1)."""
+    """Return (c13, c23) of C(nu) = [[0, 0, c13], [0, 0, c23], [-c13, -c23, 0]] (PAPER.md s. 1)."""
     return -p[M22] * v - p[M23] * r, p[M11] * u
 
 
 @numba.njit(cache=True, inline="always")
 def damping_coefficients(p: NDArray[np.float64], u: float, v: float, r: float) -> tuple:
-    """Return (d11, d22, d23, d32, d33) of the nonlinear damping matrix D(nu) (PAPER.md section 1)."""
+    """Return (d11, d22, d23, d32, d33) of the nonlinear damping D(nu) (PAPER.md section 1)."""
     au, av, ar = abs(u), abs(v), abs(r)
     d11 = -p[X_U] - p[X_U + 1] * au - p[X_U + 2] * u * u
     d22 = -p[X_U + 3] - p[X_U + 4] * av - p[X_U + 5] * ar

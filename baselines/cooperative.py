@@ -1,0 +1,238 @@
+"""The cooperative layer shared by every analytic policy, and its numerical helpers.
+
+Vessel i reads from its local observation its own path variable, the
+neighbours' path-variable differences and messages (their speed estimates),
+and v0 if it hears the leader. From these it computes, per PAPER.md section 5:
+
+- the synchronization error s_i = sum_j a_ij (theta_i - theta_j), with
+  theta_j - theta_i taken from the neighbour slots as received;
+- the gradient term mu_i = z_i1^T t_i1, t_i1 = J^T eta_di^theta;
+- the path-variable correction omega_is = -k3 (s_i - mu_i) - gamma_i and the
+  auxiliary state gamma_i' = -k4 gamma_i + (s_i - mu_i)               [34];
+- the speed estimate vhat_i' = -k5 sum_j a_ij (vhat_i - vhat_j) - k6 b_i (vhat_i - v0)  [35],
+  vhat_j being neighbour j's message;
+- the commanded rate theta_i' = vhat_i + omega_is                         [12].
+
+Discrete time (one update per control step dt, the inputs held over the
+step): gamma and vhat are linear in themselves, so they are advanced by the
+exact exponential-Euler map x+ = e^{-a dt} x + (1 - e^{-a dt}) / a * u
+(PAPER.md section 8). For vhat, a = k5 sum_j a_ij + k6 b_i and
+u = k5 sum_j a_ij vhat_j + k6 b_i v0: the update is a convex combination of
+the vessel's own estimate and its neighbours' and the leader's, stable for
+any dt. The estimate a vessel broadcasts at step k is vhat_i(k + 1), so that
+at step k + 1 every vessel combines values of the same instant.
+
+Sums are written as explicit left-to-right loops (``contract``) so that a
+fleet's numbers do not depend on how many fleets are in the batch.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from baselines.gains import CooperativeGains
+from cpf_env.observation import SLOT_DTHETA, SLOT_MSG, SLOT_WEIGHT, ObsLayout
+from cpf_env.scenarios import SpeedSchedule
+
+__all__ = [
+    "CooperativeLayer",
+    "CooperativeStep",
+    "LocalObservation",
+    "contract",
+    "exponential_euler",
+]
+
+Array = NDArray[np.float64]
+
+
+def contract(a: ArrayLike, b: ArrayLike) -> Array:
+    """Sum of a * b over the last axis, accumulated left to right.
+
+    Unlike ``np.sum``/``matmul``, the summation order never depends on the
+    batch shape, so batched and single-fleet runs agree bit for bit.
+
+    Args:
+        a: Shape (..., L).
+        b: Shape broadcastable with a, (..., L).
+
+    Returns:
+        The broadcast shape without its last axis.
+    """
+    a, b = np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64)
+    total = a[..., 0] * b[..., 0]
+    for q in range(1, max(a.shape[-1], b.shape[-1])):
+        total = total + a[..., q] * b[..., q]
+    return total
+
+
+def exponential_euler(rate: ArrayLike, dt: float) -> tuple[Array, Array]:
+    """Coefficients of the exact step of x' = -a x + u with u held over dt (PAPER.md s. 8).
+
+    Args:
+        rate: Decay rate a >= 0 (1/s), any shape.
+        dt: Step (s).
+
+    Returns:
+        (e^{-a dt}, (1 - e^{-a dt}) / a), both of the shape of ``rate``; the
+        second is dt where a = 0. Then x(t + dt) = first * x + second * u.
+    """
+    a = np.asarray(rate, dtype=np.float64)
+    positive = a > 0.0
+    gain = np.where(positive, -np.expm1(-a * dt) / np.where(positive, a, 1.0), dt)
+    return np.exp(-a * dt), gain
+
+
+@dataclass(frozen=True)
+class LocalObservation:
+    """A batch of local observations as named float64 arrays (shapes for B fleets, n vessels).
+
+    Attributes:
+        nu: (B, n, 3) body velocity u, v, r (m/s, m/s, rad/s).
+        z1: (B, n, 3) path error in the body frame, eq. [10] (m, m, rad).
+        t1: (B, n, 3) J^T eta_d^theta.
+        t2: (B, n, 3) J^T eta_d^theta2.
+        theta: (B, n) own path variable.
+        tau_applied: (B, n, 3) force applied over the last step (N, N, N m).
+        leader: (B, n) b_i.
+        v0: (B, n) leader speed as heard (m/s; 0 when b_i = 0).
+        weight: (B, n, K) a_ij per neighbour slot (0 = empty slot).
+        dtheta: (B, n, K) theta_j - theta_i as received.
+        message: (B, n, K) first float of neighbour j's last message (zeros if m = 0).
+    """
+
+    nu: Array
+    z1: Array
+    t1: Array
+    t2: Array
+    theta: Array
+    tau_applied: Array
+    leader: Array
+    v0: Array
+    weight: Array
+    dtheta: Array
+    message: Array
+
+    @classmethod
+    def parse(cls, layout: ObsLayout, obs: Array) -> LocalObservation:
+        """Split observations (B, n, layout.size) by the layout's named slices."""
+        slots = layout.slots(obs)
+        message = slots[..., SLOT_MSG] if layout.msg_size > 0 else np.zeros(slots.shape[:-1])
+        return cls(
+            nu=obs[..., layout.nu],
+            z1=obs[..., layout.z1],
+            t1=obs[..., layout.t1],
+            t2=obs[..., layout.t2],
+            theta=obs[..., layout.theta][..., 0],
+            tau_applied=obs[..., layout.tau],
+            leader=obs[..., layout.leader][..., 0],
+            v0=obs[..., layout.v0][..., 0],
+            weight=slots[..., SLOT_WEIGHT],
+            dtheta=slots[..., SLOT_DTHETA],
+            message=message,
+        )
+
+
+@dataclass(frozen=True)
+class CooperativeStep:
+    """The cooperative layer's output at one control step, all of shape (B, n).
+
+    Attributes:
+        vhat: Speed estimate vhat_i used at this step (m/s).
+        vhat_dot: Its rate, the right-hand side of eq. [35] (m/s^2); 0 with a global v0.
+        vhat_next: Estimate at the next step, the vessel's message (m/s).
+        sync: s_i = sum_j a_ij (theta_i - theta_j).
+        mu: mu_i = z_i1^T t_i1.
+        omega_s: omega_is, eq. [34] (1/s).
+        gamma: Auxiliary state gamma_i used at this step (1/s).
+        gamma_next: gamma_i at the next step.
+        theta_dot: Commanded path-variable rate vhat_i + omega_is, eq. [12] (1/s).
+    """
+
+    vhat: Array
+    vhat_dot: Array
+    vhat_next: Array
+    sync: Array
+    mu: Array
+    omega_s: Array
+    gamma: Array
+    gamma_next: Array
+    theta_dot: Array
+
+
+class CooperativeLayer:
+    """Path-variable synchronization [34] and distributed speed estimation [35].
+
+    Args:
+        gains: k3, k4, k5, k6.
+        dt: Control period (s).
+        leader_speed: None to estimate v0 with eq. [35] (the paper). A schedule
+            makes every vessel use v0(t) directly, t = steps * dt on the
+            policy's own clock: knowledge outside the local observation, for
+            the ``nn_dsc_global_v0`` ablation only.
+    """
+
+    def __init__(
+        self, gains: CooperativeGains, dt: float, leader_speed: SpeedSchedule | None = None
+    ) -> None:
+        self.gains = gains
+        self.dt = float(dt)
+        self.leader_speed = leader_speed
+        schedule = leader_speed or SpeedSchedule()
+        self._v0_times, self._v0_values = np.array(schedule.times), np.array(schedule.values)
+        self._gamma_decay, self._gamma_gain = exponential_euler(gains.k4, self.dt)
+
+    def step(
+        self, obs: LocalObservation, vhat: Array, gamma: Array, steps: NDArray[np.int64]
+    ) -> CooperativeStep:
+        """Compute the commands of this step and the states of the next.
+
+        Args:
+            obs: Local observations at step k.
+            vhat: (B, n) speed estimates at step k (ignored with a global v0).
+            gamma: (B, n) auxiliary states at step k.
+            steps: (B,) control steps since each fleet's reset (the policy's clock).
+
+        Returns:
+            The step's commands and next states; inputs are not modified.
+        """
+        g = self.gains
+        sync = -contract(obs.weight, obs.dtheta)  # s_i, with theta_j - theta_i as received
+        mu = contract(obs.z1, obs.t1)
+        error = sync - mu
+        omega_s = -g.k3 * error - gamma  # [34]
+        gamma_next = self._gamma_decay * gamma + self._gamma_gain * error  # [34], exact
+        if self.leader_speed is None:
+            vhat, vhat_dot, vhat_next = self._estimate(obs, vhat)
+        else:
+            vhat, vhat_next = (self._schedule(steps + k, obs.theta.shape) for k in (0, 1))
+            vhat_dot = np.zeros_like(vhat)
+        return CooperativeStep(
+            vhat=vhat,
+            vhat_dot=vhat_dot,
+            vhat_next=vhat_next,
+            sync=sync,
+            mu=mu,
+            omega_s=omega_s,
+            gamma=gamma,
+            gamma_next=gamma_next,
+            theta_dot=vhat + omega_s,  # [12]
+        )
+
+    def _estimate(self, obs: LocalObservation, vhat: Array) -> tuple[Array, Array, Array]:
+        """Distributed estimator [35]: (vhat, vhat', vhat at the next step)."""
+        g = self.gains
+        degree = contract(obs.weight, np.ones_like(obs.weight))
+        neighbours = contract(obs.weight, obs.message)  # sum_j a_ij vhat_j
+        leader = g.k6 * obs.leader
+        vhat_dot = -g.k5 * (degree * vhat - neighbours) - leader * (vhat - obs.v0)  # [35]
+        decay, gain = exponential_euler(g.k5 * degree + leader, self.dt)
+        vhat_next = decay * vhat + gain * (g.k5 * neighbours + leader * obs.v0)  # [35], exact
+        return vhat, vhat_dot, vhat_next
+
+    def _schedule(self, steps: NDArray[np.int64], shape: tuple[int, ...]) -> Array:
+        """v0 of the schedule at steps * dt, broadcast to ``shape`` (B, n)."""
+        index = np.searchsorted(self._v0_times, steps * self.dt, side="right") - 1
+        return np.broadcast_to(self._v0_values[np.maximum(index, 0)][:, None], shape).copy()

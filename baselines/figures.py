@@ -1,0 +1,179 @@
+"""Figures equivalent to Figs. 3-7 of Wang, Wang & Peng (2014), from a ``Trajectory``.
+
+Each function draws one figure on a fresh matplotlib ``Figure`` (Agg, no
+window) and returns it; ``write_figures`` saves all five as PNG. Vessels are
+numbered 1..n in labels, as in the paper.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+from matplotlib.figure import Figure
+
+from cpf_env.metrics import Trajectory
+
+__all__ = [
+    "coordination_figure",
+    "forces_figure",
+    "nn_figure",
+    "paths_figure",
+    "speed_figure",
+    "write_figures",
+]
+
+_AXES = ("surge (N)", "sway (N)", "yaw (N m)")
+
+
+def paths_figure(trajectory: Trajectory) -> Figure:
+    """Fig. 3: desired paths (dashed) and the vessels' trajectories (solid)."""
+    fig = Figure(figsize=(8, 6), layout="constrained")
+    ax = fig.add_subplot()
+    for i in range(trajectory.eta.shape[1]):
+        (line,) = ax.plot(
+            trajectory.eta[:, i, 0], trajectory.eta[:, i, 1], lw=1.6, label=f"vessel {i + 1}"
+        )
+        ax.plot(
+            trajectory.eta_desired[:, i, 0],
+            trajectory.eta_desired[:, i, 1],
+            "--",
+            color=line.get_color(),
+            lw=1.0,
+            alpha=0.7,
+        )
+        ax.plot(*trajectory.eta[0, i, :2], "o", color=line.get_color(), ms=5)
+    ax.plot([], [], "k--", lw=1.0, label="desired path")
+    ax.plot([], [], "ko", ms=5, label="start")
+    ax.set(xlabel="x (m)", ylabel="y (m)", title="Paths and trajectories")
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.grid(alpha=0.3)
+    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8)
+    return fig
+
+
+def nn_figure(trajectory: Trajectory, vessel: int = 1, zoom_from: float = 0.1) -> Figure:
+    """Fig. 4: NN output What^T sigma(xi) vs the true lumped uncertainty f_i of one vessel.
+
+    Left column: the whole run. Right column: from ``zoom_from`` of the run on,
+    with its own scale, where the transient no longer hides what the NN does.
+    """
+    fig = Figure(figsize=(11, 7), layout="constrained")
+    axes = fig.subplots(3, 2, sharex="col")
+    nn = trajectory.extras.get("nn_output")
+    true = trajectory.extras.get("lumped_true")
+    start = int(zoom_from * len(trajectory.time))
+    for column, window in enumerate((slice(None), slice(start, None))):
+        time = trajectory.time[window]
+        for k, ax in enumerate(axes[:, column]):
+            if true is not None:
+                ax.plot(time, true[window, vessel, k], lw=1.4, label=f"true $f_{vessel + 1}$")
+            if nn is not None:
+                ax.plot(
+                    time,
+                    nn[window, vessel, k],
+                    "--",
+                    lw=1.2,
+                    label=r"NN output $\hat W^T \sigma(\xi)$",
+                )
+            ax.grid(alpha=0.3)
+        axes[-1, column].set_xlabel("time (s)")
+    for k in range(3):
+        axes[k, 0].set_ylabel(_AXES[k])
+    axes[0, 0].legend(fontsize=8)
+    axes[0, 0].set_title("whole run")
+    axes[0, 1].set_title(f"from t = {trajectory.time[start]:.0f} s (own scale)")
+    fig.suptitle(f"Lumped uncertainty of vessel {vessel + 1} and its NN approximation")
+    return fig
+
+
+def coordination_figure(trajectory: Trajectory) -> Figure:
+    """Fig. 5: path-variable coordination errors theta_1 - theta_j, linear and log scale."""
+    fig = Figure(figsize=(8, 6), layout="constrained")
+    linear, log = fig.subplots(2, 1, sharex=True)
+    theta = trajectory.theta
+    for j in range(1, theta.shape[1]):
+        difference = theta[:, 0] - theta[:, j]
+        (line,) = linear.plot(
+            trajectory.time, difference, lw=1.2, label=rf"$\theta_1 - \theta_{{{j + 1}}}$"
+        )
+        log.semilogy(trajectory.time, np.abs(difference) + 1e-16, lw=1.0, color=line.get_color())
+    linear.set(ylabel="coordination error", title="Path-variable coordination errors")
+    log.set(xlabel="time (s)", ylabel="|coordination error|")
+    for ax in (linear, log):
+        ax.grid(alpha=0.3)
+    linear.legend(fontsize=8, ncol=2)
+    return fig
+
+
+def forces_figure(trajectory: Trajectory, vessel: int = 2) -> Figure:
+    """Fig. 6: applied (saturated) forces of one vessel, its commands, and the limits."""
+    fig = Figure(figsize=(8, 7), layout="constrained")
+    axes = fig.subplots(3, 1, sharex=True)
+    for k, ax in enumerate(axes):
+        ax.plot(
+            trajectory.time,
+            trajectory.tau_command[:, vessel, k],
+            color="0.6",
+            lw=0.8,
+            label="command $\\tau_0$",
+        )
+        ax.plot(
+            trajectory.time, trajectory.tau_applied[:, vessel, k], lw=1.4, label="applied $\\tau$"
+        )
+        for limit in (trajectory.tau_min[vessel, k], trajectory.tau_max[vessel, k]):
+            ax.axhline(limit, color="r", ls="--", lw=1.0)
+        low, high = trajectory.tau_min[vessel, k], trajectory.tau_max[vessel, k]
+        ax.set_ylim(1.3 * low, 1.3 * high)
+        ax.set_ylabel(_AXES[k])
+        ax.grid(alpha=0.3)
+    axes[0].plot([], [], "r--", lw=1.0, label="limits")
+    axes[0].legend(fontsize=8, ncol=3)
+    axes[0].set_title(f"Control forces of vessel {vessel + 1} (commands clipped to view)")
+    axes[-1].set_xlabel("time (s)")
+    return fig
+
+
+def speed_figure(trajectory: Trajectory) -> Figure:
+    """Fig. 7: distributed speed estimates vhat_i vs v0, and their errors on a log scale."""
+    fig = Figure(figsize=(8, 6), layout="constrained")
+    value, error = fig.subplots(2, 1, sharex=True)
+    estimate = trajectory.extras.get("speed_estimate")
+    if estimate is not None:
+        for i in range(estimate.shape[1]):
+            (line,) = value.plot(
+                trajectory.time, estimate[:, i], lw=1.2, label=rf"$\hat v_{{{i + 1}}}$"
+            )
+            error.semilogy(
+                trajectory.time,
+                np.abs(estimate[:, i] - trajectory.v0) + 1e-18,
+                lw=1.0,
+                color=line.get_color(),
+            )
+    value.plot(trajectory.time, trajectory.v0, "k--", lw=1.0, label="$v_0$")
+    value.set(ylabel="speed (m/s)", title="Distributed estimates of the leader speed")
+    error.set(xlabel="time (s)", ylabel=r"$|\hat v_i - v_0|$ (m/s)")
+    for ax in (value, error):
+        ax.grid(alpha=0.3)
+    value.legend(fontsize=8, ncol=3)
+    return fig
+
+
+def write_figures(trajectory: Trajectory, directory: str | Path) -> list[Path]:
+    """Save Figs. 3-7 as PNG files in ``directory`` and return their paths."""
+    directory = Path(directory)
+    directory.mkdir(parents=True, exist_ok=True)
+    n = trajectory.eta.shape[1]
+    figures = {
+        "fig3_paths.png": paths_figure(trajectory),
+        "fig4_nn_vs_f.png": nn_figure(trajectory, vessel=min(1, n - 1)),
+        "fig5_coordination.png": coordination_figure(trajectory),
+        "fig6_forces.png": forces_figure(trajectory, vessel=min(2, n - 1)),
+        "fig7_speed_estimates.png": speed_figure(trajectory),
+    }
+    written = []
+    for name, figure in figures.items():
+        path = directory / name
+        figure.savefig(path, dpi=120)
+        written.append(path)
+    return written

@@ -1,0 +1,189 @@
+"""The paper's controller: NN-based adaptive dynamic surface control, and its ablations.
+
+Wang, Wang & Peng (2014), PAPER.md section 4, per vessel i:
+
+    alpha_i = -K1 z_i1 + t_i1 vhat_i                                        [15]
+    rho nubar_id' + nubar_id = alpha_i,   nubar_id(0) = alpha_i(0)           [18]
+    z_i2 = nu_i - nubar_id
+    pi_i' = -K_pi pi_i + tau_tilde_i,   tau_tilde_i = tau_i - tau_i0        [21]
+    e_i2 = z_i2 - pi_i
+    xi_i = [1, nu_i, nubar_id'],   sigma_l(xi) = tanh(v_l^T xi)             [28]
+    tau_i0 = -K2 e_i2 - z_i1 + What_i^T sigma(xi_i)                         [29]
+    What_i' = -Gamma_W (sigma(xi_i) e_i2^T + k_W What_i),   What_i(0) = 0   [30]
+
+with the cooperative layer of ``baselines.cooperative`` (eqs. [34]-[35]).
+
+Discrete time, one update per control step k (obs_k is the observation after
+step k - 1; every input is held over the step, as the plant holds tau):
+
+1. the auxiliary state is advanced over the step that just ended with the
+   tau_tilde it saw, tau applied (from obs_k) minus the vessel's own command
+   of step k - 1: pi_k (tau applied arrives in float32, so an unsaturated step
+   leaves a rounding residue of ~1e-7 |tau| in tau_tilde);
+2. alpha_k, nubar_dot_k = (alpha_k - nubar_k) / rho, z2, e2, sigma, tau0_k are
+   computed from obs_k and the states at k;
+3. nubar, What (and gamma, vhat in the cooperative layer) are advanced to
+   k + 1 with the inputs of step k.
+
+The stiff linear parts are integrated exactly (exponential Euler, PAPER.md
+section 8): the DSC filter (rate 1/rho), the auxiliary system (K_pi) and the
+sigma-modification leakage of What (Gamma_W k_W), each with its input held
+over the step; so are gamma and vhat. Nothing is integrated by forward Euler.
+
+The NN's fixed input weights v_l (``NNDSCGains.input_weights``) are the same
+for every vessel; each vessel adapts its own What_i.
+
+Ablations (thin subclasses): ``dsc`` (no NN term), ``nn_dsc_no_aux``
+(no auxiliary system, e2 = z2) and ``nn_dsc_global_v0`` (v0 from the
+scenario's schedule instead of the estimator: knowledge outside the local
+observation, deliberately).
+"""
+
+from __future__ import annotations
+
+from typing import Any, ClassVar, cast
+
+import numpy as np
+from numpy.typing import NDArray
+
+from baselines.cooperative import (
+    CooperativeStep,
+    LocalObservation,
+    contract,
+    exponential_euler,
+)
+from baselines.gains import NNDSCGains
+from baselines.policy import Array, Policy, virtual_control
+
+__all__ = ["DSCPolicy", "GlobalSpeedPolicy", "NNDSCPolicy", "NoAuxPolicy"]
+
+
+class NNDSCPolicy(Policy):
+    """NN-based adaptive DSC with saturation auxiliary system (the paper's controller).
+
+    Args:
+        env: A ParallelEnv, FleetSim, Scenario or scenario name.
+        **options: Any field of ``NNDSCGains`` (e.g. ``K2=(30, 30, 5)``, ``hidden=40``).
+
+    Example:
+        >>> import numpy as np
+        >>> from cpf_env import FleetSim, scenarios
+        >>> sim = FleetSim(scenarios.get("wang2014"))
+        >>> policy = NNDSCPolicy(sim)
+        >>> obs = sim.reset(seeds=[0])
+        >>> for _ in range(10):
+        ...     obs = sim.step(policy.act_batch(obs))
+        >>> policy.diagnostics["nn_output"].shape
+        (1, 5, 3)
+    """
+
+    name = "nn_dsc"
+    gains_type = NNDSCGains
+    #: Include the NN term What^T sigma(xi) in tau0 and adapt What.
+    use_nn: ClassVar[bool] = True
+    #: Include the saturation auxiliary system (otherwise e2 = z2).
+    use_aux: ClassVar[bool] = True
+
+    def __init__(self, env: object, **options: Any) -> None:
+        super().__init__(env, **options)
+        g = cast(NNDSCGains, self.gains)
+        self._k1, self._k2 = np.array(g.K1), np.array(g.K2)
+        self._rho = g.rho
+        self._input_weights = g.input_weights()
+        self._filter_decay, _ = exponential_euler(1.0 / g.rho, self.dt)
+        self._aux_decay, self._aux_gain = exponential_euler(np.array(g.K_pi), self.dt)
+        self._leak_decay, leak_gain = exponential_euler(g.Gamma_W * g.k_W, self.dt)
+        self._adapt_gain = g.Gamma_W * leak_gain
+
+    def _kinetic_states(self) -> dict[str, tuple[int, ...]]:
+        """DSC filter, auxiliary state, NN weights, last command."""
+        return {
+            "nubar": (3,),
+            "pi": (3,),
+            "weights": (self._input_weights.shape[0], 3),
+            "tau0": (3,),
+        }
+
+    def _kinetics(
+        self,
+        obs: LocalObservation,
+        cooperation: CooperativeStep,
+        states: dict[str, Array],
+        started: NDArray[np.bool_],
+    ) -> tuple[Array, dict[str, Array]]:
+        """Command [29] of step k; advances nubar, pi, What to step k + 1."""
+        first = ~started[:, None, None]
+        alpha = virtual_control(self._k1, obs.z1, obs.t1, cooperation.vhat)  # [15]
+        nubar = np.where(first, alpha, states["nubar"])  # [18], nubar(0) = alpha(0)
+        nubar_dot = (alpha - nubar) / self._rho  # [18]
+        z2 = obs.nu - nubar
+        if self.use_aux:
+            tau_tilde = np.where(first, 0.0, obs.tau_applied - states["tau0"])
+            pi = self._aux_decay * states["pi"] + self._aux_gain * tau_tilde  # [21], exact
+        else:
+            pi = np.zeros_like(z2)
+        e2 = z2 - pi
+        if self.use_nn:
+            nn_output, weights_next = self._network(obs.nu, nubar_dot, e2, states["weights"])
+        else:
+            nn_output, weights_next = np.zeros_like(z2), states["weights"]
+        tau0 = -self._k2 * e2 - obs.z1 + nn_output  # [29]
+        states["nubar"] = self._filter_decay * nubar + (1.0 - self._filter_decay) * alpha  # exact
+        states["pi"] = pi
+        states["weights"] = weights_next
+        states["tau0"] = tau0
+        return tau0, {
+            "nn_output": nn_output,
+            "nubar_dot": nubar_dot,
+            "alpha": alpha,
+            "aux_state": pi,
+        }
+
+    def _network(
+        self, nu: Array, nubar_dot: Array, e2: Array, weights: Array
+    ) -> tuple[Array, Array]:
+        """NN output What^T sigma(xi) [28] and the weights at the next step [30].
+
+        Args:
+            nu: (B, n, 3) velocities.
+            nubar_dot: (B, n, 3) DSC filter derivative.
+            e2: (B, n, 3) compensated velocity error.
+            weights: (B, n, l, 3) What at step k.
+
+        Returns:
+            ((B, n, 3) output in N, N, N m; (B, n, l, 3) What at step k + 1).
+        """
+        xi = np.concatenate([np.ones((*nu.shape[:-1], 1)), nu, nubar_dot], axis=-1)
+        sigma = np.tanh(contract(xi[..., None, :], self._input_weights))  # (B, n, l)
+        output = contract(np.swapaxes(weights, -1, -2), sigma[..., None, :])  # What^T sigma
+        # [30], exact for sigma e2^T held over the step (leakage rate Gamma_W k_W).
+        weights_next = self._leak_decay * weights - self._adapt_gain * (
+            sigma[..., :, None] * e2[..., None, :]
+        )
+        return output, weights_next
+
+
+class DSCPolicy(NNDSCPolicy):
+    """Ablation ``dsc``: the paper's controller without the NN term (What = 0)."""
+
+    name = "dsc"
+    use_nn = False
+
+
+class NoAuxPolicy(NNDSCPolicy):
+    """Ablation ``nn_dsc_no_aux``: without the saturation auxiliary system (e2 = z2)."""
+
+    name = "nn_dsc_no_aux"
+    use_aux = False
+
+
+class GlobalSpeedPolicy(NNDSCPolicy):
+    """Ablation ``nn_dsc_global_v0``: every vessel knows v0, no speed estimator.
+
+    Each vessel uses vhat_i = v0(t) from the scenario's schedule, t = steps * dt
+    on the policy's own clock (counted since its reset). This deliberately uses
+    knowledge outside the local observation (vessels with b_i = 0 do not hear v0).
+    """
+
+    name = "nn_dsc_global_v0"
+    global_speed = True
