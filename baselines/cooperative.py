@@ -34,7 +34,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from baselines.gains import CooperativeGains
-from cpf_env.observation import SLOT_DTHETA, SLOT_MSG, SLOT_WEIGHT, ObsLayout
+from cpf_env.observation import ObsLayout
 from cpf_env.scenarios import SpeedSchedule
 
 __all__ = [
@@ -118,8 +118,9 @@ class LocalObservation:
     @classmethod
     def parse(cls, layout: ObsLayout, obs: Array) -> LocalObservation:
         """Split observations (B, n, layout.size) by the layout's named slices."""
-        slots = layout.slots(obs)
-        message = slots[..., SLOT_MSG] if layout.msg_size > 0 else np.zeros(slots.shape[:-1])
+        weight = layout.slot_weights(obs)
+        messages = layout.slot_messages(obs)
+        message = messages[..., 0] if layout.msg_size > 0 else np.zeros(weight.shape)
         return cls(
             nu=obs[..., layout.nu],
             z1=obs[..., layout.z1],
@@ -129,8 +130,8 @@ class LocalObservation:
             tau_applied=obs[..., layout.tau],
             leader=obs[..., layout.leader][..., 0],
             v0=obs[..., layout.v0][..., 0],
-            weight=slots[..., SLOT_WEIGHT],
-            dtheta=slots[..., SLOT_DTHETA],
+            weight=weight,
+            dtheta=layout.slot_theta_differences(obs),
             message=message,
         )
 

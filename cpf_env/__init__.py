@@ -19,6 +19,7 @@ from pettingzoo.utils.env import AECEnv
 
 from cpf_env import scenarios
 from cpf_env.env import CooperativePathFollowingEnv
+from cpf_env.gym_envs import register_envs
 from cpf_env.observation import ObsLayout
 from cpf_env.scenarios import Scenario
 from cpf_env.sim import FleetSim
@@ -48,9 +49,8 @@ def parallel_env(
 def env(scenario: str | Scenario = "wang2014", **kwargs: Any) -> AECEnv:
     """The AEC form of ``parallel_env`` (agents act in turn; the step happens after the last)."""
     aec = parallel_to_aec(parallel_env(scenario, **kwargs))
-    return wrappers.OrderEnforcingWrapper(wrappers.AssertOutOfBoundsWrapper(aec))
+    # No AssertOutOfBoundsWrapper: force commands beyond the limits are legal (the plant saturates).
+    return wrappers.OrderEnforcingWrapper(aec)
 
-
-from cpf_env.gym_envs import register_envs  # noqa: E402
 
 register_envs()

@@ -477,17 +477,33 @@ def reset_observation(a: FleetArrays, c: KernelConstants, b: int) -> None:
         a.reward[b, i] = 0.0
 
 
-# The parallel loops only dispatch: numba's parfor pass can drop writes made to
-# named-tuple fields directly in a prange body, so every write lives in a callee.
-@numba.njit(cache=True, parallel=True)
-def step_fleets(a: FleetArrays, c: KernelConstants, actions: np.ndarray) -> None:
-    """Advance every fleet by one control period, fleets in parallel."""
-    for b in prange(a.eta.shape[0]):
+# The loops over fleets only dispatch: numba's parfor pass can drop writes made
+# to named-tuple fields directly in a prange body, so every write lives in a
+# callee. Each comes serial (small B: no thread start-up, no waiting for a busy
+# core) and parallel; a fleet computes the same bits in either.
+@numba.njit(cache=True)
+def step_fleets_serial(a: FleetArrays, c: KernelConstants, actions: np.ndarray) -> None:
+    """Advance every fleet by one control period, one after the other."""
+    for b in range(a.eta.shape[0]):
         step_fleet(a, c, actions, b)
 
 
 @numba.njit(cache=True, parallel=True)
-def observe_fleets(a: FleetArrays, c: KernelConstants, fleets: np.ndarray) -> None:
-    """Observe the listed fleets after a reset, in parallel."""
+def step_fleets_parallel(a: FleetArrays, c: KernelConstants, actions: np.ndarray) -> None:
+    """Advance every fleet by one control period, fleets in parallel threads."""
+    for b in prange(a.eta.shape[0]):
+        step_fleet(a, c, actions, b)
+
+
+@numba.njit(cache=True)
+def observe_fleets_serial(a: FleetArrays, c: KernelConstants, fleets: np.ndarray) -> None:
+    """Observe the listed fleets after a reset, one after the other."""
+    for index in range(fleets.shape[0]):
+        reset_observation(a, c, fleets[index])
+
+
+@numba.njit(cache=True, parallel=True)
+def observe_fleets_parallel(a: FleetArrays, c: KernelConstants, fleets: np.ndarray) -> None:
+    """Observe the listed fleets after a reset, in parallel threads."""
     for index in prange(fleets.shape[0]):
         reset_observation(a, c, fleets[index])

@@ -93,6 +93,22 @@ class ObsLayout:
         """View the neighbour slots of ``obs`` (..., size) as (..., K, 3 + m)."""
         return obs[..., SLOTS:].reshape((*obs.shape[:-1], self.n_slots, self.slot_size))
 
+    def slot_weights(self, obs: NDArray) -> NDArray:
+        """Link weights a_ij of the K slots, shape (..., K); 0 marks an empty slot."""
+        return self.slots(obs)[..., SLOT_WEIGHT]
+
+    def slot_theta_differences(self, obs: NDArray) -> NDArray:
+        """Received theta_j - theta_i of the K slots, shape (..., K)."""
+        return self.slots(obs)[..., SLOT_DTHETA]
+
+    def slot_ages(self, obs: NDArray) -> NDArray:
+        """Steps since each slot's value was sent, shape (..., K)."""
+        return self.slots(obs)[..., SLOT_AGE]
+
+    def slot_messages(self, obs: NDArray) -> NDArray:
+        """Received messages of the K slots, shape (..., K, m)."""
+        return self.slots(obs)[..., SLOT_MSG:]
+
     def names(self) -> list[str]:
         """A name for every index, e.g. ``"z1_x"`` or ``"slot1_age"``."""
         names = ["u", "v", "r"]

@@ -260,8 +260,12 @@ class Scenario:
     def replace(self, **changes: object) -> Scenario:
         """Return a copy with fields replaced; unknown names raise ``ValueError``.
 
-        A tau_min that mirrored tau_max (the default, -tau_max) keeps mirroring a
-        replaced tau_max, as if the scenario had been built with the new value.
+        Replaced values are taken as if the scenario had been built with them:
+        a tau_min that mirrored tau_max (the default, -tau_max) keeps mirroring
+        a replaced tau_max, and when the number of paths changes, per-vessel
+        fields that are the same for every vessel (vessels, tau_max, tau_min)
+        follow the new fleet size. Per-vessel fields that differ between
+        vessels must then be given anew.
         """
         names = {f.name for f in dataclasses.fields(self)}
         unknown = sorted(set(changes) - names)
@@ -272,6 +276,17 @@ class Scenario:
         if "tau_max" in changes and "tau_min" not in changes:
             if np.array_equal(np.array(self.tau_min), -np.array(self.tau_max)):
                 changes["tau_min"] = None
+        if "paths" in changes and len(tuple(changes["paths"])) != self.n:  # type: ignore[arg-type]
+            for name in ("vessels", "tau_max", "tau_min"):
+                rows = getattr(self, name)
+                if name in changes:
+                    continue
+                if any(row != rows[0] for row in rows):
+                    raise ValueError(
+                        f"{name} differs between this scenario's vessels, so it cannot follow "
+                        f"the new fleet size: pass {name}=... for the new paths too."
+                    )
+                changes[name] = rows[0]
         return dataclasses.replace(self, **changes)  # type: ignore[arg-type]
 
 

@@ -70,6 +70,10 @@ def _constants(scenario: Scenario) -> kernels.KernelConstants:
     )
 
 
+#: Below this many fleets the serial kernels run (threads cost more than they give).
+PARALLEL_MIN_FLEETS = 16
+
+
 class FleetSim:
     """Batched simulator of B fleets x n vessels (no Gym code).
 
@@ -127,6 +131,11 @@ class FleetSim:
             terminated=np.zeros(B, dtype=bool),
             nonfinite=np.zeros(B, dtype=bool),
         )
+        parallel = B >= PARALLEL_MIN_FLEETS
+        self._step_kernel = kernels.step_fleets_parallel if parallel else kernels.step_fleets_serial
+        self._observe_kernel = (
+            kernels.observe_fleets_parallel if parallel else kernels.observe_fleets_serial
+        )
         self._rngs = [np.random.default_rng() for _ in range(B)]
         self._needs_reset = True
 
@@ -170,7 +179,7 @@ class FleetSim:
             if seed is not None:
                 self._rngs[b] = np.random.default_rng(seed)
             self._reset_fleet(int(b), self._rngs[b])
-        kernels.observe_fleets(self.arrays, self.constants, index)
+        self._observe_kernel(self.arrays, self.constants, index)
         self._needs_reset = False
         return self.arrays.obs
 
@@ -241,7 +250,7 @@ class FleetSim:
         if self._needs_reset:
             raise RuntimeError("call reset() before step().")
         validated = self.validate_actions(actions)
-        kernels.step_fleets(self.arrays, self.constants, validated)
+        self._step_kernel(self.arrays, self.constants, validated)
         if self.arrays.nonfinite.any():
             fleets = np.flatnonzero(self.arrays.nonfinite).tolist()
             raise RuntimeError(

@@ -7,22 +7,20 @@ independent transcription of the equations.
 
 from __future__ import annotations
 
-import sys
 from collections.abc import Sequence
 from pathlib import Path as FilePath
 
 import numpy as np
 
-ROOT = FilePath(__file__).resolve().parents[1]
-if str(ROOT) not in sys.path:  # run from a checkout without `pip install -e .`
-    sys.path.insert(0, str(ROOT))
+from cpf_env import scenarios
+from cpf_env.disturbances import Disturbances
+from cpf_env.graph import Graph, SwitchingTopology
+from cpf_env.paths import StraightLine
+from cpf_env.scenarios import InitialState, Scenario
+from cpf_env.sim import FleetSim
+from cpf_env.vessel import CYBERSHIP2, VesselModel
 
-from cpf_env.disturbances import Disturbances  # noqa: E402
-from cpf_env.graph import Graph  # noqa: E402
-from cpf_env.paths import StraightLine  # noqa: E402
-from cpf_env.scenarios import InitialState, Scenario  # noqa: E402
-from cpf_env.sim import FleetSim  # noqa: E402
-from cpf_env.vessel import CYBERSHIP2, VesselModel  # noqa: E402
+ROOT = FilePath(__file__).resolve().parents[1]
 
 NO_DISTURBANCES = Disturbances(unmodeled_scale=0.0)
 
@@ -96,6 +94,19 @@ def free_scenario(
         max_path_error=1e9,
     )
     return scenario.replace(**overrides) if overrides else scenario
+
+
+def fast_switching(**changes: object) -> Scenario:
+    """The switching_topology scenario with its chain, ring and star switching every
+    20 steps (period 60) instead of 200, so short runs see several switches."""
+    base = scenarios.get("switching_topology")
+    topology = SwitchingTopology(base.switching.graphs, (0, 20, 40), period=60)
+    return base.replace(topology=topology, **changes)
+
+
+def fast_member(step: int) -> int:
+    """Index of the graph of ``fast_switching()`` active at control step ``step``."""
+    return (step % 60) // 20
 
 
 def snapshot(sim: FleetSim) -> dict[str, np.ndarray]:

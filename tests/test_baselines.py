@@ -81,7 +81,7 @@ def test_batched_fleets_equal_single_fleets_bit_for_bit(name):
     obs = batched_sim.reset(seeds=seeds)
     singles = [(FleetSim(s), baselines.make_policy(name, s)) for _ in seeds]
     single_obs = [sim.reset(seeds=[seed]) for (sim, _), seed in zip(singles, seeds, strict=True)]
-    for _ in range(150):
+    for _ in range(100):
         actions = batched.act_batch(obs)
         for b, (sim, policy) in enumerate(singles):
             single = policy.act_batch(single_obs[b])

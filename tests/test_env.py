@@ -10,6 +10,7 @@ from conftest import (
     TAU_MAX,
     TAU_MIN,
     assert_unchanged,
+    fast_switching,
     random_actions,
     rotation_matrix,
     snapshot,
@@ -286,7 +287,7 @@ def reward_scenarios() -> dict[str, Scenario]:
         "lossy_links": scenarios.get("lossy_links").replace(
             reward=WEIGHTS, links=LinkImpairments(0.5, 3)
         ),
-        "switching_topology": scenarios.get("switching_topology").replace(reward=WEIGHTS),
+        "switching_topology": fast_switching(reward=WEIGHTS),
         "heterogeneous": scenarios.get("heterogeneous"),
     }
 

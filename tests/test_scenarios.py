@@ -7,7 +7,7 @@ import importlib.util
 
 import numpy as np
 import pytest
-from conftest import ROOT
+from conftest import ROOT, TAU_MAX
 
 import cpf_env
 from cpf_env import scenarios
@@ -174,6 +174,26 @@ def test_replace_overrides_and_revalidates() -> None:
     explicit = scenarios.get("wang2014").replace(tau_min=(-1.0, -2.0, -3.0))
     assert explicit.replace(tau_max=(2.0, 2.0, 2.0)).tau_min == ((-1.0, -2.0, -3.0),) * 5
     assert scenarios.get("wang2014").max_steps == 3000  # the registry copy is untouched
+
+
+def test_replace_can_change_the_fleet_size() -> None:
+    three = scenarios.get("wang2014").replace(
+        paths=five_lines()[:3],
+        topology=Graph.path(3, leaders=(0,)),
+        initial=InitialState(eta=((0.0, 0.0, 0.0), (0.0, 4.0, 0.0), (0.0, 8.0, 0.0))),
+    )
+    assert three.n == 3 and three.tau_max == ((9.2, 4.5, 3.0),) * 3
+    assert three.tau_min == ((-9.2, -4.5, -3.0),) * 3 and len(three.vessel_models) == 3
+
+
+def test_replace_to_a_new_fleet_size_needs_per_vessel_fields_that_differ() -> None:
+    mixed = scenarios.get("wang2014").replace(tau_max=TAU_MAX)
+    with pytest.raises(ValueError, match=r"pass tau_max=\.\.\. for the new paths too"):
+        mixed.replace(
+            paths=five_lines()[:3],
+            topology=Graph.path(3, leaders=(0,)),
+            initial=InitialState(eta=((0.0, 0.0, 0.0), (0.0, 4.0, 0.0), (0.0, 8.0, 0.0))),
+        )
 
 
 def five_lines() -> tuple[StraightLine, ...]:

@@ -4,9 +4,13 @@ Finding documented here (test_cybership2_damping_is_not_dissipative): the
 identified Cybership II damping is not dissipative. The symmetric part of the
 linear damping block [[-Y_v, -Y_r], [-N_v, -N_r]] = [[0.89, 7.25], [-0.031, 1.9]]
 is [[0.89, 3.61], [3.61, 1.9]], eigenvalues -2.25 and 5.04, so for small sway
-and yaw rates of opposite sign nu^T D nu < 0 and the unforced vessel gains
-kinetic energy for a while. PAPER.md's "energy never increases" property holds
-only for a dissipative damping; here we test the exact power balance instead.
+and yaw rates of opposite sign nu^T D(nu) nu < 0 (down to -0.0223 W at
+|(v, r)| = 0.2; the quadratic terms restore dissipation beyond |(v, r)| ~ 0.38
+or at surge speeds of 0.2 m/s), and an unforced vessel started at
+nu = (0, -0.1, 0.2) gains 5.6 % kinetic energy over 0.8 s. PAPER.md's "energy
+never increases" property holds only for a dissipative damping: it is tested
+for such a variant and for pure surge; for Cybership II we test the exact power
+balance dE/dt = -nu^T D nu + nu^T tau instead.
 """
 
 from __future__ import annotations
@@ -196,7 +200,7 @@ def energy_trajectory(
 def test_kinetic_energy_never_increases_without_forcing(
     name: str, model: VesselModel, nu0: np.ndarray
 ) -> None:
-    energy, nu, _, _ = energy_trajectory(np.asarray(nu0, dtype=float), model, steps=600)
+    energy, nu, _, _ = energy_trajectory(np.asarray(nu0, dtype=float), model, 300, dt=0.02)
     increase = np.diff(energy, axis=0)
     assert np.all(increase <= 1e-15 * energy[:-1]), f"{name}: energy rose by {increase.max()}"
     assert np.all(energy[-1] < 0.8 * energy[0])  # and it really dissipates
@@ -207,7 +211,7 @@ def test_kinetic_energy_never_increases_without_forcing(
 def test_cybership2_unforced_vessel_gains_energy_when_sway_and_yaw_oppose() -> None:
     """The finding in motion: from nu = (0, -0.1, 0.2) energy rises by 5.6 % for 0.8 s."""
     nu0 = np.array([[0.0, -0.1, 0.2]])
-    energy, _, _, _ = energy_trajectory(nu0, CYBERSHIP2, steps=400, dt=0.05)
+    energy, _, _, _ = energy_trajectory(nu0, CYBERSHIP2, steps=200, dt=0.1)
     assert energy[1, 0] > energy[0, 0]
     assert energy.max() > 1.05 * energy[0, 0]
     assert energy[-1, 0] < 0.1 * energy[0, 0]  # damping wins in the end
@@ -220,7 +224,7 @@ def test_cybership2_unforced_vessel_gains_energy_when_sway_and_yaw_oppose() -> N
 def test_power_balance_along_rk4_trajectories(model: VesselModel, tau: np.ndarray) -> None:
     """E(t) - E(0) = integral of (-nu^T D(nu) nu + nu^T tau) dt: C does no work, M is right."""
     nu0 = np.array([[0.0, -0.1, 0.2], [0.3, 0.1, 0.1], [-0.2, 0.15, -0.4], [0.8, -0.2, 0.3]])
-    energy, nu, params, dt = energy_trajectory(nu0, model, steps=400, tau=tau)
+    energy, nu, params, dt = energy_trajectory(nu0, model, steps=200, tau=tau)
     damping = damping_matrix(params, nu)  # (T, n, 3, 3)
     power = -np.einsum("tni,tnij,tnj->tn", nu, damping, nu) + nu @ tau
     # Composite Simpson over pairs of control steps, cumulated.
