@@ -25,7 +25,7 @@ from cpf_env.disturbances import Disturbances, OceanCurrent
 from cpf_env.graph import LinkImpairments
 from cpf_env.observation import ObsLayout
 from cpf_env.scenarios import Scenario, SpeedSchedule
-from cpf_env.sim import FleetSim
+from cpf_env.sim import PARALLEL_MIN_FLEETS, FleetSim
 from cpf_env.vessel import CYBERSHIP2
 
 LAYOUT_FIELDS = ("nu", "z1", "t1", "t2", "theta", "tau", "leader", "v0")
@@ -284,12 +284,16 @@ def test_same_seed_same_bits_different_seed_differs(name: str) -> None:
         assert np.array_equal(x["obs"][1], y["obs"][1])
 
 
+@pytest.mark.parametrize("num_fleets", [4, PARALLEL_MIN_FLEETS + 4], ids=["serial", "parallel"])
 @pytest.mark.parametrize("name", SCENARIO_NAMES)
-def test_fleet_k_of_a_batch_equals_a_single_sim(name: str) -> None:
-    """Every array of fleet 2 of a batch of 4 equals a single simulator's, bit for bit."""
+def test_fleet_k_of_a_batch_equals_a_single_sim(name: str, num_fleets: int) -> None:
+    """Every array of fleet 2 of a batch equals a single simulator's, bit for bit.
+
+    The single simulator runs the serial kernel; the larger batch the parallel one.
+    """
     scenario = scenarios.get(name).replace(max_path_error=1e6)
-    batch, single = FleetSim(scenario, num_fleets=4), FleetSim(scenario)
-    batch.reset(seeds=[10, 11, 12, 13])
+    batch, single = FleetSim(scenario, num_fleets=num_fleets), FleetSim(scenario)
+    batch.reset(seeds=list(range(10, 10 + num_fleets)))
     single.reset(seeds=[12])
     rng = np.random.default_rng(123)
     for step in range(150):
