@@ -4,8 +4,9 @@ One call advances B fleets x n vessels by one control period:
 
 1. saturate the force command per axis and clip the path-variable rate and
    the message (PAPER.md eq. [6]);
-2. integrate the plant with ``substeps`` RK4 steps, the command and the
-   environmental forces held over the control period (PAPER.md section 8);
+2. integrate the plant (``cpf_env.plant``) with ``substeps`` RK4 steps, the
+   command and the environmental forces held over the control period
+   (PAPER.md section 8);
 3. advance theta by the commanded rate (exact for a held rate);
 4. advance the Gauss-Markov disturbance states exactly;
 5. send each vessel's packet (theta, message) and deliver, through the active
@@ -41,8 +42,6 @@ from cpf_env.disturbances import (
     D_WIND_STD,
     D_WIND_TC,
     gauss_markov_step,
-    paper_disturbance,
-    paper_unmodeled,
 )
 from cpf_env.observation import (
     LEADER,
@@ -61,8 +60,8 @@ from cpf_env.observation import (
     path_frame,
 )
 from cpf_env.paths import path_point
+from cpf_env.plant import plant_rhs, rk4_period
 from cpf_env.reward import step_reward
-from cpf_env.vessel import hydrodynamic_forces, solve_mass
 
 # Columns of FleetArrays.errors.
 ERR_PATH, ERR_HEADING, ERR_SYNC, ERR_SPEED = 0, 1, 2, 3
@@ -148,122 +147,27 @@ def leader_speed(c: KernelConstants, time: float) -> float:
     return value
 
 
-@numba.njit(cache=True, inline="always")
-def plant_rhs(p, scale, t, psi, u, v, r, tx, ty, tn, fx, fy, fn, cx, cy):
-    """Right-hand side of the plant, eqs. [2]-[3] with current, waves and wind.
-
-    Args:
-        p: True vessel parameters, shape (PARAM_SIZE,).
-        scale: Factor on the paper's unmodeled dynamics and disturbance.
-        t: Time (s).
-        psi: Heading (rad).
-        u: Surge velocity (m/s).
-        v: Sway velocity (m/s).
-        r: Yaw rate (rad/s).
-        tx: Applied (saturated) surge force (N).
-        ty: Applied sway force (N).
-        tn: Applied yaw moment (N m).
-        fx: Environmental force along earth x (N).
-        fy: Environmental force along earth y (N).
-        fn: Environmental yaw moment (N m).
-        cx: Current along earth x (m/s).
-        cy: Current along earth y (m/s).
-
-    Returns:
-        (x', y', psi', u', v', r').
-    """
-    c, s = math.cos(psi), math.sin(psi)
-    uc, vc = c * cx + s * cy, -s * cx + c * cy  # current in the body frame
-    ur, vr = u - uc, v - vc  # velocity relative to the water
-    h0, h1, h2 = hydrodynamic_forces(p, ur, vr, r)
-    f0 = tx + c * fx + s * fy - h0
-    f1 = ty - s * fx + c * fy - h1
-    f2 = tn + fn - h2
-    if scale != 0.0:
-        d0, d1, d2 = paper_unmodeled(ur, vr, r)
-        w0, w1, w2 = paper_disturbance(t, ur, vr, r)
-        f0 += scale * (w0 - d0)
-        f1 += scale * (w1 - d1)
-        f2 += scale * (w2 - d2)
-    a0, a1, a2 = solve_mass(p, f0, f1, f2)
-    # nu = nu_r + J^T V_c, and d/dt (J^T V_c) = (r vc, -r uc, 0) for a current held constant.
-    return c * u - s * v, s * u + c * v, r, a0 + r * vc, a1 - r * uc, a2
+@numba.njit(cache=True)
+def _load(a: FleetArrays, b: int, i: int, tau: np.ndarray) -> tuple:
+    """The plant's held inputs for vessel i of fleet b under applied force ``tau`` (3,)."""
+    return (
+        tau[0], tau[1], tau[2],
+        a.waves[b, i, 0] + a.wind[b, i, 0],
+        a.waves[b, i, 1] + a.wind[b, i, 1],
+        a.waves[b, i, 2] + a.wind[b, i, 2],
+        a.current[b, 0], a.current[b, 1],
+    )  # fmt: skip
 
 
 @numba.njit(cache=True)
 def _integrate_vessel(a: FleetArrays, c: KernelConstants, b: int, i: int, t0: float) -> None:
     """RK4 over one control period for vessel i of fleet b, forces held."""
-    p = a.params[b, i]
-    scale = c.disturbances[D_SCALE]
-    tx, ty, tn = a.tau_applied[b, i, 0], a.tau_applied[b, i, 1], a.tau_applied[b, i, 2]
-    fx = a.waves[b, i, 0] + a.wind[b, i, 0]
-    fy = a.waves[b, i, 1] + a.wind[b, i, 1]
-    fn = a.waves[b, i, 2] + a.wind[b, i, 2]
-    cx, cy = a.current[b, 0], a.current[b, 1]
-    x, y, psi = a.eta[b, i, 0], a.eta[b, i, 1], a.eta[b, i, 2]
-    u, v, r = a.nu[b, i, 0], a.nu[b, i, 1], a.nu[b, i, 2]
-    h = c.dt / c.substeps
-    for k in range(c.substeps):
-        t = t0 + k * h
-        k1 = plant_rhs(p, scale, t, psi, u, v, r, tx, ty, tn, fx, fy, fn, cx, cy)
-        k2 = plant_rhs(
-            p,
-            scale,
-            t + 0.5 * h,
-            psi + 0.5 * h * k1[2],
-            u + 0.5 * h * k1[3],
-            v + 0.5 * h * k1[4],
-            r + 0.5 * h * k1[5],
-            tx,
-            ty,
-            tn,
-            fx,
-            fy,
-            fn,
-            cx,
-            cy,
-        )
-        k3 = plant_rhs(
-            p,
-            scale,
-            t + 0.5 * h,
-            psi + 0.5 * h * k2[2],
-            u + 0.5 * h * k2[3],
-            v + 0.5 * h * k2[4],
-            r + 0.5 * h * k2[5],
-            tx,
-            ty,
-            tn,
-            fx,
-            fy,
-            fn,
-            cx,
-            cy,
-        )
-        k4 = plant_rhs(
-            p,
-            scale,
-            t + h,
-            psi + h * k3[2],
-            u + h * k3[3],
-            v + h * k3[4],
-            r + h * k3[5],
-            tx,
-            ty,
-            tn,
-            fx,
-            fy,
-            fn,
-            cx,
-            cy,
-        )
-        w = h / 6.0
-        x += w * (k1[0] + 2.0 * k2[0] + 2.0 * k3[0] + k4[0])
-        y += w * (k1[1] + 2.0 * k2[1] + 2.0 * k3[1] + k4[1])
-        psi += w * (k1[2] + 2.0 * k2[2] + 2.0 * k3[2] + k4[2])
-        u += w * (k1[3] + 2.0 * k2[3] + 2.0 * k3[3] + k4[3])
-        v += w * (k1[4] + 2.0 * k2[4] + 2.0 * k3[4] + k4[4])
-        r += w * (k1[5] + 2.0 * k2[5] + 2.0 * k3[5] + k4[5])
+    state = (a.eta[b, i, 0], a.eta[b, i, 1], a.eta[b, i, 2],
+             a.nu[b, i, 0], a.nu[b, i, 1], a.nu[b, i, 2])  # fmt: skip
+    x, y, psi, u, v, r = rk4_period(
+        a.params[b, i], c.disturbances[D_SCALE], t0, c.dt, c.substeps, state,
+        _load(a, b, i, a.tau_applied[b, i]),
+    )  # fmt: skip
     a.eta[b, i, 0], a.eta[b, i, 1], a.eta[b, i, 2] = x, y, psi
     a.nu[b, i, 0], a.nu[b, i, 1], a.nu[b, i, 2] = u, v, r
 
@@ -282,23 +186,8 @@ def plant_accelerations(
     for b in range(a.eta.shape[0]):
         t = a.step[b] * c.dt
         for i in range(a.eta.shape[1]):
-            rhs = plant_rhs(
-                a.params[b, i],
-                scale,
-                t,
-                a.eta[b, i, 2],
-                a.nu[b, i, 0],
-                a.nu[b, i, 1],
-                a.nu[b, i, 2],
-                tau[b, i, 0],
-                tau[b, i, 1],
-                tau[b, i, 2],
-                a.waves[b, i, 0] + a.wind[b, i, 0],
-                a.waves[b, i, 1] + a.wind[b, i, 1],
-                a.waves[b, i, 2] + a.wind[b, i, 2],
-                a.current[b, 0],
-                a.current[b, 1],
-            )
+            rhs = plant_rhs(a.params[b, i], scale, t, a.eta[b, i, 2], a.nu[b, i, 0],
+                            a.nu[b, i, 1], a.nu[b, i, 2], _load(a, b, i, tau[b, i]))  # fmt: skip
             out[b, i, 0], out[b, i, 1], out[b, i, 2] = rhs[3], rhs[4], rhs[5]
 
 

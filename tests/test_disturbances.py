@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from conftest import NO_DISTURBANCES, free_scenario, reference_matrices, rotation_matrix
 
-from cpf_env import kernels, scenarios
+from cpf_env import scenarios
 from cpf_env.disturbances import (
     D_CURRENT_MEAN,
     D_CURRENT_STD,
@@ -27,6 +27,7 @@ from cpf_env.disturbances import (
     paper_disturbance,
     paper_unmodeled,
 )
+from cpf_env.plant import plant_rhs
 from cpf_env.sim import FleetSim
 from cpf_env.vessel import CYBERSHIP2, VesselModel
 
@@ -93,7 +94,7 @@ def test_plant_rhs_matches_paper(
         eta = rng.uniform(-5, 5, 3)
         nu = rng.uniform(-1, 1, 3)
         tau, force = rng.uniform(-5, 5, 3), rng.uniform(-2, 2, 3)
-        got = kernels.plant_rhs(params, scale, t, eta[2], *nu, *tau, *force, *current)
+        got = plant_rhs(params, scale, t, eta[2], *nu, (*tau, *force, *current))
         expected = reference_rhs(model, scale, t, eta, nu, tau, force, np.array(current))
         np.testing.assert_allclose(got, expected, rtol=1e-12, atol=1e-13)
 
