@@ -99,7 +99,7 @@ def coordination_figure(trajectory: Trajectory) -> Figure:
         )
         log.semilogy(trajectory.time, np.abs(difference) + 1e-16, lw=1.0, color=line.get_color())
     linear.set(ylabel="coordination error", title="Path-variable coordination errors")
-    log.set(xlabel="time (s)", ylabel="|coordination error|")
+    log.set(xlabel="time (s)", ylabel="|coordination error|", ylim=(1e-12, None))
     for ax in (linear, log):
         ax.grid(alpha=0.3)
     linear.legend(fontsize=8, ncol=2)
@@ -152,7 +152,7 @@ def speed_figure(trajectory: Trajectory) -> Figure:
             )
     value.plot(trajectory.time, trajectory.v0, "k--", lw=1.0, label="$v_0$")
     value.set(ylabel="speed (m/s)", title="Distributed estimates of the leader speed")
-    error.set(xlabel="time (s)", ylabel=r"$|\hat v_i - v_0|$ (m/s)")
+    error.set(xlabel="time (s)", ylabel=r"$|\hat v_i - v_0|$ (m/s)", ylim=(1e-12, None))
     for ax in (value, error):
         ax.grid(alpha=0.3)
     value.legend(fontsize=8, ncol=3)

@@ -14,7 +14,6 @@ from __future__ import annotations
 import functools
 from typing import Any
 
-import gymnasium
 import numpy as np
 from gymnasium import spaces
 from gymnasium.utils import seeding
@@ -25,6 +24,7 @@ from cpf_env import kernels, scenarios
 from cpf_env.observation import ObsLayout
 from cpf_env.scenarios import Scenario
 from cpf_env.sim import FleetSim
+from cpf_env.views import FleetViews, check_render_mode
 
 __all__ = ["CooperativePathFollowingEnv", "make_scenario"]
 
@@ -119,11 +119,7 @@ class CooperativePathFollowingEnv(ParallelEnv):
         render_mode: str | None = None,
         **overrides: Any,
     ) -> None:
-        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ValueError(
-                f"render_mode must be one of {self.metadata['render_modes']} or None, "
-                f"got {render_mode!r}."
-            )
+        check_render_mode(render_mode, self.metadata["render_modes"])
         self.scenario = make_scenario(scenario, **overrides)
         self.render_mode = render_mode
         self.sim = FleetSim(self.scenario, num_fleets=1)
@@ -131,7 +127,7 @@ class CooperativePathFollowingEnv(ParallelEnv):
         self.possible_agents = [f"vessel_{i}" for i in range(self.scenario.n)]
         self.agents: list[str] = []
         self._index = {agent: i for i, agent in enumerate(self.possible_agents)}
-        self._renderer: Any = None
+        self._views = FleetViews(self.scenario, render_mode)
         self.np_random, _ = seeding.np_random()
 
     @functools.cache  # noqa: B019 - one space object per agent, by design
@@ -259,17 +255,8 @@ class CooperativePathFollowingEnv(ParallelEnv):
 
     def render(self) -> NDArray[np.uint8] | None:
         """Top-down view: paths, vessels, virtual targets; see ``cpf_env.render``."""
-        if self.render_mode is None:
-            gymnasium.logger.warn("render() called without render_mode; pass render_mode=...")
-            return None
-        if self._renderer is None:
-            from cpf_env.render import FleetRenderer
-
-            self._renderer = FleetRenderer(self.scenario, mode=self.render_mode)
-        return self._renderer.draw(self.sim, fleet=0)
+        return self._views.draw(self.sim, fleet=0)
 
     def close(self) -> None:
-        """Close the render window, if any."""
-        if self._renderer is not None:
-            self._renderer.close()
-            self._renderer = None
+        """Close the render window, if any (idempotent)."""
+        self._views.close()

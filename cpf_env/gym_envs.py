@@ -11,7 +11,7 @@ PettingZoo    ``cpf_env/cooperative_path_following-v0`` ("parallel" and "aec")
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from typing import Any, cast
 
 import gymnasium
 import numpy as np
@@ -25,9 +25,7 @@ from cpf_env import kernels
 from cpf_env.env import make_scenario
 from cpf_env.scenarios import Scenario, list_scenarios
 from cpf_env.sim import FleetSim
-
-if TYPE_CHECKING:
-    from cpf_env.render import FleetRenderer
+from cpf_env.views import FleetViews, check_render_mode
 
 __all__ = [
     "GYM_ID",
@@ -81,11 +79,6 @@ def _as_actions(sim: FleetSim, actions: ArrayLike, batched: bool) -> NDArray[np.
 def _check_options(options: dict[str, Any] | None) -> None:
     if options:
         raise ValueError(f"reset takes no options, got {sorted(options)}.")
-
-
-def _check_render_mode(render_mode: str | None, modes: list[str]) -> None:
-    if render_mode is not None and render_mode not in modes:
-        raise ValueError(f"render_mode must be one of {modes} or None, got {render_mode!r}.")
 
 
 class CentralizedFleetEnv(gymnasium.Env[NDArray[np.float32], NDArray[np.float32]]):
@@ -187,13 +180,13 @@ class CentralizedFleetEnv(gymnasium.Env[NDArray[np.float32], NDArray[np.float32]
         render_mode: str | None = None,
         **overrides: Any,
     ) -> None:
-        _check_render_mode(render_mode, self.metadata["render_modes"])
+        check_render_mode(render_mode, self.metadata["render_modes"])
         self.scenario = make_scenario(scenario, **overrides)
         self.render_mode = render_mode
         self.metadata = {**self.metadata, "render_fps": 1.0 / self.scenario.dt}
         self.sim = FleetSim(self.scenario, num_fleets=1)
         self.observation_space, self.action_space = _fleet_spaces(self.scenario, self.sim.obs_dim)
-        self._renderer: FleetRenderer | None = None
+        self._views = FleetViews(self.scenario, render_mode)
         self._done = True
 
     def reset(
@@ -237,20 +230,11 @@ class CentralizedFleetEnv(gymnasium.Env[NDArray[np.float32], NDArray[np.float32]
 
     def render(self) -> NDArray[np.uint8] | None:
         """Top-down view of the fleet (see ``cpf_env.render``); None in human mode."""
-        if self.render_mode is None:
-            gymnasium.logger.warn("render() called without render_mode; pass render_mode=...")
-            return None
-        if self._renderer is None:
-            from cpf_env.render import FleetRenderer
-
-            self._renderer = FleetRenderer(self.scenario, mode=self.render_mode)
-        return self._renderer.draw(self.sim, fleet=0)
+        return self._views.draw(self.sim, fleet=0)
 
     def close(self) -> None:
         """Close the render window, if any (idempotent)."""
-        if self._renderer is not None:
-            self._renderer.close()
-            self._renderer = None
+        self._views.close()
 
 
 class CentralizedFleetVectorEnv(VectorEnv[NDArray[np.float32], NDArray[np.float32], NDArray[Any]]):
@@ -294,7 +278,7 @@ class CentralizedFleetVectorEnv(VectorEnv[NDArray[np.float32], NDArray[np.float3
         render_mode: str | None = None,
         **overrides: Any,
     ) -> None:
-        _check_render_mode(render_mode, self.metadata["render_modes"])
+        check_render_mode(render_mode, self.metadata["render_modes"])
         self.scenario = make_scenario(scenario, **overrides)
         self.render_mode = render_mode
         self.metadata = {**self.metadata, "render_fps": 1.0 / self.scenario.dt}
@@ -305,7 +289,7 @@ class CentralizedFleetVectorEnv(VectorEnv[NDArray[np.float32], NDArray[np.float3
         self.observation_space = batch_space(single_obs, self.num_envs)
         self.action_space = batch_space(single_act, self.num_envs)
         self._autoreset = np.zeros(self.num_envs, dtype=bool)
-        self._renderers: dict[int, FleetRenderer] = {}
+        self._views = FleetViews(self.scenario, render_mode)
 
     def reset(
         self,
@@ -365,24 +349,13 @@ class CentralizedFleetVectorEnv(VectorEnv[NDArray[np.float32], NDArray[np.float3
     def render(self) -> tuple[NDArray[np.uint8], ...] | None:
         """One top-down frame per sub-environment (``render_mode="rgb_array"``)."""
         if self.render_mode is None:
-            gymnasium.logger.warn("render() called without render_mode; pass render_mode=...")
-            return None
-        from cpf_env.render import FleetRenderer
-
-        frames = []
-        for k in range(self.num_envs):
-            if k not in self._renderers:
-                self._renderers[k] = FleetRenderer(self.scenario, mode=self.render_mode)
-            frame = self._renderers[k].draw(self.sim, fleet=k)
-            assert frame is not None
-            frames.append(frame)
-        return tuple(frames)
+            return self._views.draw(self.sim)  # warns once, returns None
+        frames = (self._views.draw(self.sim, fleet=k) for k in range(self.num_envs))
+        return tuple(cast(NDArray[np.uint8], frame) for frame in frames)
 
     def close_extras(self, **kwargs: Any) -> None:
         """Close the renderers."""
-        for renderer in self._renderers.values():
-            renderer.close()
-        self._renderers.clear()
+        self._views.close()
 
 
 def scenario_id(scenario: str) -> str:

@@ -19,7 +19,10 @@ index   name         meaning (units)
 
 The slot of neighbour j holds the last packet received from j; ``a_ij = 0``
 marks an empty slot (no link in the active topology, or a vessel with fewer
-than K neighbours), and then the whole slot is zero.
+than K neighbours), and then the whole slot is zero. At reset every vessel
+holds its neighbours' initial theta and a zero message, with age 0 (a
+hand-shake before the start, even on delayed links); after that only what the
+links deliver arrives.
 """
 
 from __future__ import annotations
