@@ -349,7 +349,8 @@ class CentralizedFleetVectorEnv(VectorEnv[NDArray[np.float32], NDArray[np.float3
     def render(self) -> tuple[NDArray[np.uint8], ...] | None:
         """One top-down frame per sub-environment (``render_mode="rgb_array"``)."""
         if self.render_mode is None:
-            return self._views.draw(self.sim)  # warns once, returns None
+            self._views.draw(self.sim)  # warns once
+            return None
         frames = (self._views.draw(self.sim, fleet=k) for k in range(self.num_envs))
         return tuple(cast(NDArray[np.uint8], frame) for frame in frames)
 
