@@ -1,0 +1,66 @@
+from __future__ import annotations
+
+import importlib.util
+import json
+from pathlib import Path
+
+import pytest
+
+from baselines import POLICIES
+from baselines.experiment import run_episode
+from baselines.speed import measure, speed_main
+from cpf_env import scenarios
+from cpf_env.metrics import episode_metrics
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _load_example(name: str):
+    spec = importlib.util.spec_from_file_location(name, ROOT / "examples" / f"{name}.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_reproduce_example_runs_small(tmp_path, capsys):
+    example = _load_example("reproduce_wang2014")
+    assert example.main(steps=30, out=str(tmp_path), figures=False) == 0
+    metrics = json.loads((tmp_path / "wang2014_nn_dsc" / "metrics.json").read_text())
+    assert metrics["steps"] == 30 and metrics["policy"] == "nn_dsc"
+    assert "Claims of Wang, Wang & Peng (2014)" in capsys.readouterr().out
+
+
+def test_speed_measure_reports_every_component():
+    rows = measure("wang2014", fleets=(2,), min_seconds=0.01)
+    components = {row["component"] for row in rows}
+    assert components == {
+        "FleetSim.step",
+        "nn_dsc.act_batch",
+        "nn_dsc + FleetSim.step",
+        "ParallelEnv.step",
+    }
+    for row in rows:
+        assert row["vessel_steps_per_s"] == pytest.approx(
+            row["steps_per_s"] * row["B"] * 5, rel=1e-4
+        )
+        assert row["steps_per_s"] > 0
+
+
+def test_speed_command_prints_json(capsys):
+    assert speed_main(["--fleets", "1", "--seconds", "0.01", "--json"]) == 0
+    rows = json.loads(capsys.readouterr().out)
+    assert {row["B"] for row in rows} == {1}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("policy", sorted(POLICIES))
+@pytest.mark.parametrize("name", scenarios.list_scenarios())
+def test_full_episode_of_every_policy_on_every_scenario(name, policy):
+    """Whole episodes: nobody leaves its path, forces respect the limits, path errors settle."""
+    trajectory = run_episode(name, policy, seed=0)
+    scenario = scenarios.get(name)
+    assert trajectory.time.shape[0] == scenario.max_steps, "episode terminated early"
+    metrics = episode_metrics(trajectory)
+    assert metrics["force_within_limits"]
+    # Steady state within 5 cm of every path (measured: <= 2.6 cm on every pair).
+    assert max(metrics["path_error_max"]) < 0.05
