@@ -61,9 +61,9 @@ def contract(a: ArrayLike, b: ArrayLike) -> Array:
     Returns:
         The broadcast shape without its last axis.
     """
-    a, b = np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64)
-    total = a[..., 0] * b[..., 0]
-    for q in range(1, max(a.shape[-1], b.shape[-1])):
+    a, b = np.broadcast_arrays(np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64))
+    total = np.zeros(a.shape[:-1])
+    for q in range(a.shape[-1]):
         total = total + a[..., q] * b[..., q]
     return total
 

@@ -14,6 +14,9 @@ from baselines.backstepping import alpha_derivative
 from baselines.cooperative import LocalObservation
 from baselines.policy import virtual_control
 from cpf_env import scenarios
+from cpf_env.graph import Graph
+from cpf_env.paths import Circle
+from cpf_env.scenarios import InitialState, Scenario
 from cpf_env.sim import FleetSim
 from cpf_env.vessel import rotation
 
@@ -248,3 +251,23 @@ def test_backstepping_alpha_dot_along_the_closed_loop():
     difference = (alpha[1:] - alpha[:-1]) / s.dt
     scale = np.abs(alpha_dot).max(axis=(0, 1))
     assert np.all(np.abs(difference - alpha_dot[:-1]).max(axis=(0, 1)) < 0.02 * scale)
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_lone_vessel_without_neighbour_slots(name):
+    """n = 1, K = 0: the cooperative layer has nothing to sum and the vessel still follows."""
+    scenario = Scenario(
+        name="lone",
+        paths=(Circle(radius=5.0),),
+        topology=Graph.path(1, leaders=(0,)),
+        initial=InitialState(eta=((5.5, 0.0, 1.6),)),
+        max_steps=1200,
+    )
+    env = cpf_env.parallel_env(scenario)
+    assert env.layout.n_slots == 0
+    observations, _ = env.reset(seed=0)
+    policy = baselines.make_policy(name, env)
+    while env.agents:
+        observations, _, terminations, _, infos = env.step(policy.act(observations))
+    assert not terminations["vessel_0"]
+    assert infos["vessel_0"]["path_error"] < 0.01
