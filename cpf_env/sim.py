@@ -12,7 +12,7 @@ Example:
     >>> sim = FleetSim(scenarios.get("wang2014"), num_fleets=4)
     >>> obs = sim.reset(seeds=[0, 1, 2, 3])
     >>> obs.shape
-    (4, 5, 22)
+    (4, 5, 26)
     >>> obs = sim.step(np.zeros((4, 5, sim.act_dim)))
 """
 
