@@ -64,3 +64,13 @@ def test_full_episode_of_every_policy_on_every_scenario(name, policy):
     assert metrics["force_within_limits"]
     # Steady state within 5 cm of every path (measured: <= 2.6 cm on every pair).
     assert max(metrics["path_error_max"]) < 0.05
+
+
+def test_compare_policies_example_prints_one_row_per_pair(capsys):
+    example = _load_example("compare_policies")
+    rows = example.main(["--scenarios", "wang2014", "lossy_links", "--steps", "20"])
+    assert [(row[0], row[1]) for row in rows] == [
+        (name, policy) for name in ("wang2014", "lossy_links") for policy in POLICIES
+    ]
+    table = capsys.readouterr().out.splitlines()
+    assert len(table) == 2 + len(rows) and table[0].startswith("| scenario | policy |")
