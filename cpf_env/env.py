@@ -186,7 +186,7 @@ class CooperativePathFollowingEnv(ParallelEnv):
         obs = self.sim.step(batch)
         a = self.sim.arrays
         terminated = bool(a.terminated[0])
-        truncated = bool(self.sim.truncated[0]) and not terminated
+        truncated = bool(self.sim.truncated[0])
         rewards = {agent: float(a.reward[0, i]) for i, agent in enumerate(self.agents)}
         observations = self._observations(obs)
         terminations = dict.fromkeys(self.agents, terminated)

@@ -217,7 +217,7 @@ class CentralizedFleetEnv(gymnasium.Env[NDArray[np.float32], NDArray[np.float32]
         obs = self.sim.step(batch)
         a = self.sim.arrays
         terminated = bool(a.terminated[0])
-        truncated = bool(self.sim.truncated[0]) and not terminated
+        truncated = bool(self.sim.truncated[0])
         self._done = terminated or truncated
         if self.render_mode == "human":
             self.render()
@@ -327,7 +327,7 @@ class CentralizedFleetVectorEnv(VectorEnv[NDArray[np.float32], NDArray[np.float3
         obs = self.sim.step(batch)
         a = self.sim.arrays
         terminated = a.terminated.copy()
-        truncated = self.sim.truncated & ~terminated
+        truncated = self.sim.truncated.copy()
         rewards = a.reward.mean(axis=1)
         if restart.any():
             obs = self.sim.reset(fleets=np.flatnonzero(restart))

@@ -282,5 +282,9 @@ class FleetSim:
 
     @property
     def truncated(self) -> NDArray[np.bool_]:
-        """Fleets that reached ``max_steps``, shape (B,)."""
-        return self.arrays.step >= self.scenario.max_steps
+        """Fleets that reached ``max_steps`` without terminating, shape (B,).
+
+        Termination wins: a fleet that leaves its path on the last step is
+        terminated, not truncated.
+        """
+        return (self.arrays.step >= self.scenario.max_steps) & ~self.arrays.terminated

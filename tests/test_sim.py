@@ -340,6 +340,15 @@ def test_truncation_flag_and_time() -> None:
         np.testing.assert_allclose(sim.time, 0.05 * k)
 
 
+def test_termination_on_the_last_step_is_not_truncation() -> None:
+    # wang2014 starts up to 1.41 m off its paths: with a 1 m bound it terminates at once.
+    sim = FleetSim(scenarios.get("wang2014").replace(max_steps=1, max_path_error=1.0))
+    sim.reset(seeds=[0])
+    sim.step(np.zeros((1, 5, sim.act_dim)))
+    assert sim.arrays.terminated.tolist() == [True]
+    assert sim.truncated.tolist() == [False]
+
+
 # --- bad input --------------------------------------------------------------------------
 
 
