@@ -18,7 +18,7 @@ import numpy as np
 
 from baselines.experiment import run_episode
 from baselines.figures import write_figures
-from cpf_env.metrics import Trajectory, episode_metrics
+from cpf_env.metrics import Trajectory, episode_metrics, final_window
 from cpf_env.scenarios import Scenario
 
 __all__ = ["NN_TRACKING_TOLERANCE", "Claim", "evaluate_claims", "reproduce"]
@@ -53,7 +53,7 @@ def _nn_relative_error(trajectory: Trajectory, vessel: int) -> np.ndarray | None
     nn, true = trajectory.extras.get("nn_output"), trajectory.extras.get("lumped_true")
     if nn is None or true is None or not np.any(nn):
         return None
-    window = slice(3 * len(trajectory.time) // 4, None)
+    window = final_window(trajectory)
     error = nn[window, vessel] - true[window, vessel]
     scale = np.sqrt((true[window, vessel] ** 2).mean(axis=0))
     return np.sqrt((error**2).mean(axis=0)) / np.maximum(scale, 1e-12)

@@ -122,6 +122,7 @@ class CooperativePathFollowingEnv(ParallelEnv):
         check_render_mode(render_mode, self.metadata["render_modes"])
         self.scenario = make_scenario(scenario, **overrides)
         self.render_mode = render_mode
+        self.metadata = {**self.metadata, "render_fps": 1.0 / self.scenario.dt}
         self.sim = FleetSim(self.scenario, num_fleets=1)
         self.layout: ObsLayout = self.sim.layout
         self.possible_agents = [f"vessel_{i}" for i in range(self.scenario.n)]

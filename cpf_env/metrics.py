@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["Trajectory", "episode_metrics"]
+__all__ = ["Trajectory", "episode_metrics", "final_window"]
 
 
 @dataclass
@@ -61,7 +61,8 @@ class Trajectory:
         np.savez_compressed(path, **arrays)
 
 
-def _window(trajectory: Trajectory, fraction: float) -> slice:
+def final_window(trajectory: Trajectory, fraction: float = 0.25) -> slice:
+    """Slice of the last ``fraction`` of a trajectory's samples (at least one)."""
     steps = trajectory.time.shape[0]
     if not 0.0 < fraction <= 1.0:
         raise ValueError(f"window fraction must be in (0, 1], got {fraction}.")
@@ -81,7 +82,7 @@ def episode_metrics(trajectory: Trajectory, window: float = 0.25) -> dict[str, A
         over all pairs; ``speed_estimate_error_max`` needs the policy's
         ``speed_estimate`` diagnostic (else absent).
     """
-    w = _window(trajectory, window)
+    w = final_window(trajectory, window)
     theta = trajectory.theta[w]
     spread = theta.max(axis=1) - theta.min(axis=1)
     tau = trajectory.tau_applied
