@@ -18,7 +18,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from baselines import POLICIES
-from baselines.experiment import run_episode
+from cpf_commands.experiment import run_episode
 from cpf_env import scenarios
 from cpf_env.metrics import episode_metrics
 

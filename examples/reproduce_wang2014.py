@@ -12,7 +12,7 @@ Usage::
 
 from __future__ import annotations
 
-from baselines.cli import run_main
+from cpf_commands.cli import run_main
 
 
 def main(steps: int | None = None, out: str = "outputs", figures: bool = True) -> int:

@@ -7,8 +7,8 @@ from pathlib import Path
 import pytest
 
 from baselines import POLICIES
-from baselines.experiment import run_episode
-from baselines.speed import measure, speed_main
+from cpf_commands.experiment import run_episode
+from cpf_commands.speed import measure, speed_main
 from cpf_env import scenarios
 from cpf_env.metrics import episode_metrics
 

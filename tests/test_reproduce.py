@@ -5,9 +5,9 @@ import json
 import numpy as np
 import pytest
 
-from baselines.cli import run_main
-from baselines.experiment import run_episode
-from baselines.reproduce import evaluate_claims, reproduce
+from cpf_commands.cli import run_main
+from cpf_commands.experiment import run_episode
+from cpf_commands.reproduce import evaluate_claims, reproduce
 from cpf_env import scenarios
 from cpf_env.metrics import episode_metrics
 from cpf_env.vessel import coriolis_matrix, damping_matrix

@@ -14,7 +14,7 @@ second form covers current, waves and wind too, and uses the simulator's own
 right-hand side, so the physics stays written once.
 
 Example:
-    >>> from baselines.experiment import run_episode
+    >>> from cpf_commands.experiment import run_episode
     >>> trajectory = run_episode("wang2014", "nn_dsc", seed=0, steps=100)
     >>> trajectory.eta.shape
     (100, 5, 3)

@@ -16,8 +16,8 @@ from typing import Any
 
 import numpy as np
 
-from baselines.experiment import run_episode
-from baselines.figures import write_figures
+from cpf_commands.experiment import run_episode
+from cpf_commands.figures import write_figures
 from cpf_env.metrics import Trajectory, episode_metrics, final_window
 from cpf_env.scenarios import Scenario
 

@@ -41,7 +41,7 @@ def _run_parser() -> argparse.ArgumentParser:
 
 def run_main(argv: Sequence[str] | None = None) -> int:
     """``cpf-run``: see ``cpf-run --help``."""
-    from baselines.reproduce import reproduce
+    from cpf_commands.reproduce import reproduce
 
     args = _run_parser().parse_args(argv)
     start = time.perf_counter()
