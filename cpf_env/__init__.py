@@ -7,17 +7,20 @@ Factories (PettingZoo convention)::
     aec = cpf_env.env("lossy_links")                 # AEC form
     raw = cpf_env.raw_env(scenario, max_steps=500)   # the unwrapped class
 
-Scenarios: ``cpf_env.scenarios.list_scenarios()``.
+Scenarios: ``cpf_env.scenarios.list_scenarios()``. Documentation: ``docs/`` in
+the repository (``docs/environment.md`` for the interface, ``docs/model.md`` for
+the equations).
 """
 
 from __future__ import annotations
 
 from typing import Any
 
-from pettingzoo.utils import parallel_to_aec, wrappers
+from pettingzoo.utils import wrappers
 from pettingzoo.utils.env import AECEnv
 
 from cpf_env import scenarios
+from cpf_env.aec import CheckedAEC
 from cpf_env.env import CooperativePathFollowingEnv
 from cpf_env.gym_envs import register_envs
 from cpf_env.observation import ObsLayout
@@ -36,20 +39,65 @@ __all__ = [
 ]
 __version__ = "0.1.0"
 
+#: The ParallelEnv class itself (no wrapper); see ``CooperativePathFollowingEnv``.
 raw_env = CooperativePathFollowingEnv
 
 
 def parallel_env(
     scenario: str | Scenario = "wang2014", **kwargs: Any
 ) -> CooperativePathFollowingEnv:
-    """The ParallelEnv for ``scenario`` (a name or a ``Scenario``); kwargs override its fields."""
+    """Make the PettingZoo ``ParallelEnv``: one agent per vessel, all acting at once.
+
+    Args:
+        scenario: A registered name (``cpf_env.scenarios.list_scenarios()``:
+            ``wang2014`` is the paper's simulation) or a ``Scenario`` object.
+        **kwargs: ``render_mode`` (``"human"``, ``"rgb_array"`` or None);
+            ``max_cycles`` (PettingZoo's name for the episode length in control
+            steps, the same as ``max_steps``; give one of the two); and any
+            ``Scenario`` field as an override, e.g. ``max_steps=500``, ``v0=0.2``,
+            ``dt=0.02``, ``substeps=2``, ``links=LinkImpairments(0.1, 2)``,
+            ``reward=RewardWeights(team=True)``. Unknown names raise ``ValueError``
+            listing the valid ones; values are checked as ``Scenario`` checks them.
+
+    Returns:
+        A ``CooperativePathFollowingEnv``. Agents ``vessel_0 .. vessel_{n-1}``.
+        ``action_space(agent)``: ``Box(4 + m)`` float32, [tau_u (N), tau_v (N),
+        tau_r (N m), theta_dot (1/s), message (m floats)], bounded by the force
+        limits (beyond them the plant saturates), +-theta_dot_max and
+        +-message_max. ``observation_space(agent)``: ``Box(18 + K (3 + m))``
+        float32, the vessel's local view (named slices in ``env.layout``). The
+        class docstring (``help(cpf_env.CooperativePathFollowingEnv)``) and
+        ``docs/environment.md`` give the tables, the reward, episode end and infos.
+
+    Example:
+        >>> import cpf_env
+        >>> env = cpf_env.parallel_env("lossy_links", max_cycles=20)
+        >>> observations, infos = env.reset(seed=0)
+        >>> env.observation_space("vessel_0").shape, env.action_space("vessel_0").shape
+        ((26,), (5,))
+    """
     return CooperativePathFollowingEnv(scenario, **kwargs)
 
 
 def env(scenario: str | Scenario = "wang2014", **kwargs: Any) -> AECEnv:
-    """The AEC form of ``parallel_env`` (agents act in turn; the step happens after the last)."""
-    aec = parallel_to_aec(parallel_env(scenario, **kwargs))
-    # No AssertOutOfBoundsWrapper: force commands beyond the limits are legal (the plant saturates).
+    """Make the AEC form of ``parallel_env``: agents act in turn, the fleet steps after the last.
+
+    Arguments, spaces and agents are those of ``parallel_env`` (``max_cycles``
+    included). Each action is checked at the turn it is given: a bad one raises
+    ``ValueError`` and the same agent acts again (``cpf_env.aec.CheckedAEC``).
+    PettingZoo's ``OrderEnforcingWrapper`` is applied; its
+    ``AssertOutOfBoundsWrapper`` is not, because force commands beyond the
+    limits are legal (the plant saturates them).
+
+    Example:
+        >>> import cpf_env
+        >>> aec = cpf_env.env("wang2014", max_cycles=5)
+        >>> aec.reset(seed=0)
+        >>> for agent in aec.agent_iter():
+        ...     observation, reward, termination, truncation, info = aec.last()
+        ...     aec.step(None if termination or truncation else aec.action_space(agent).sample())
+    """
+    aec = CheckedAEC(parallel_env(scenario, **kwargs))
     return wrappers.OrderEnforcingWrapper(aec)
 
 

@@ -12,6 +12,7 @@ Import            ``cpf_env.parallel_env(scenario="wang2014", **overrides)``
 from __future__ import annotations
 
 import functools
+import warnings
 from typing import Any
 
 import numpy as np
@@ -21,12 +22,18 @@ from numpy.typing import NDArray
 from pettingzoo import ParallelEnv
 
 from cpf_env import kernels, scenarios
-from cpf_env.observation import ObsLayout
+from cpf_env.observation import ObsLayout, observation_box
 from cpf_env.scenarios import Scenario
-from cpf_env.sim import FleetSim
+from cpf_env.sim import FleetSim, as_real_actions
 from cpf_env.views import FleetViews, check_render_mode
 
-__all__ = ["CooperativePathFollowingEnv", "make_scenario"]
+__all__ = [
+    "CooperativePathFollowingEnv",
+    "as_seed",
+    "check_reset_options",
+    "make_scenario",
+    "warn_reset_options",
+]
 
 
 def make_scenario(scenario: str | Scenario = "wang2014", **overrides: Any) -> Scenario:
@@ -39,6 +46,38 @@ def make_scenario(scenario: str | Scenario = "wang2014", **overrides: Any) -> Sc
             f"got {type(scenario).__name__}."
         )
     return scenario.replace(**overrides) if overrides else scenario
+
+
+_NO_OPTIONS = (
+    "this env takes no reset options (the scenario fixes the task); change the scenario "
+    "instead, e.g. parallel_env(scenario, max_steps=...) or Scenario.replace(...)"
+)
+
+
+def check_reset_options(options: dict[str, Any] | None) -> None:
+    """Raise ``ValueError`` for any reset option (the Gymnasium views take none)."""
+    if options:
+        raise ValueError(f"reset takes no options, got {sorted(options)}: {_NO_OPTIONS}.")
+
+
+def warn_reset_options(options: dict[str, Any] | None) -> None:
+    """Warn that reset options are ignored (the PettingZoo envs must accept and take none).
+
+    PettingZoo's ``api_test`` calls ``reset(seed=0, options={"options": 1})`` and
+    requires it to succeed, so the PettingZoo forms warn where the Gymnasium
+    views raise.
+    """
+    if options:
+        warnings.warn(
+            f"reset ignores options {sorted(options)}: {_NO_OPTIONS}.", UserWarning, stacklevel=3
+        )
+
+
+def as_seed(seed: object) -> int | None:
+    """A reset seed as Gymnasium's seeding wants it: None or a python int (numpy ints welcome)."""
+    if isinstance(seed, np.integer):
+        return int(seed)
+    return seed  # type: ignore[return-value]  # anything else: Gymnasium's own check raises
 
 
 class CooperativePathFollowingEnv(ParallelEnv):
@@ -64,19 +103,22 @@ class CooperativePathFollowingEnv(ParallelEnv):
     | 3 | theta_dot, rate of the path variable | 1/s | +-theta_dot_max (clipped) |
     | 4.. | message broadcast to neighbours | - | +-message_max (clipped) |
 
-    (*) Commands beyond the limits are allowed: the plant saturates them (PAPER.md eq. [6]).
+    (*) Commands beyond the limits are allowed: the plant saturates them
+    (``docs/model.md``, "Input saturation").
 
     ## Observation Space
 
     ``Box(18 + K (3 + m))`` per vessel, float32; see ``cpf_env.observation``
     for the table and ``self.layout`` (``ObsLayout``) for named slices. No other
-    vessel's pose, and no v0 unless b_i = 1.
+    vessel's pose, and no v0 unless b_i = 1. Bounds +-``OBS_BOUND`` (finite, not
+    physical; ``cpf_env.observation``).
 
     ## Rewards
 
-    ``-dt (w_pos ||z1_xy||^2 + w_head z1_psi^2 + w_sync s_i^2 + w_speed (theta_dot_i - v0)^2
-    + w_tau ||tau_i / tau_max||^2)``, weights in ``Scenario.reward`` (optionally a
-    shared team reward).
+    A per-vessel sum of non-positive terms (path, heading, synchronization,
+    speed, effort) with weights in ``Scenario.reward``, optionally shared as a
+    team reward; the exact forms are in ``cpf_env.reward`` and
+    ``docs/environment.md``.
 
     ## Starting State
 
@@ -86,12 +128,18 @@ class CooperativePathFollowingEnv(ParallelEnv):
     ## Episode End
 
     Terminated for all vessels when one is farther than ``max_path_error`` from
-    its path; truncated after ``max_steps`` control steps (``dt`` each).
+    its path (latched until reset); truncated after ``max_steps`` control steps
+    (``dt`` each). If the plant diverges (a non-finite state) ``step`` raises
+    ``RuntimeError`` naming fleet, vessel and quantity, and the episode is over
+    (``agents`` is empty): call ``reset()``.
 
     ## Arguments
 
     ``scenario`` (name or ``Scenario``), ``render_mode`` (``"human"`` or
-    ``"rgb_array"``) and any ``Scenario`` field as an override.
+    ``"rgb_array"``), ``max_cycles`` (PettingZoo's name for the episode
+    length: sets ``max_steps``; give one of the two) and any ``Scenario``
+    field as an override. ``reset`` takes a seed (python or numpy int); it has
+    no options and warns if given some.
 
     ## Example
 
@@ -117,9 +165,18 @@ class CooperativePathFollowingEnv(ParallelEnv):
         self,
         scenario: str | Scenario = "wang2014",
         render_mode: str | None = None,
+        max_cycles: int | None = None,
         **overrides: Any,
     ) -> None:
         check_render_mode(render_mode, self.metadata["render_modes"])
+        if max_cycles is not None:
+            if "max_steps" in overrides:
+                raise ValueError(
+                    "give the episode length once: max_cycles (PettingZoo's name) or "
+                    f"max_steps, not both (got max_cycles={max_cycles!r}, "
+                    f"max_steps={overrides['max_steps']!r})."
+                )
+            overrides["max_steps"] = max_cycles
         self.scenario = make_scenario(scenario, **overrides)
         self.render_mode = render_mode
         self.metadata = {**self.metadata, "render_fps": 1.0 / self.scenario.dt}
@@ -135,7 +192,7 @@ class CooperativePathFollowingEnv(ParallelEnv):
     def observation_space(self, agent: str) -> spaces.Box:
         """Local observation space of ``agent`` (the same object on every call)."""
         self._check_agent(agent)
-        return spaces.Box(-np.inf, np.inf, shape=(self.layout.size,), dtype=np.float32)
+        return observation_box(self.layout.size)
 
     @functools.cache  # noqa: B019
     def action_space(self, agent: str) -> spaces.Box:
@@ -151,7 +208,7 @@ class CooperativePathFollowingEnv(ParallelEnv):
     @functools.cached_property
     def state_space(self) -> spaces.Box:
         """Global state for a centralized critic: (eta, nu, theta, tau_applied) of every vessel."""
-        return spaces.Box(-np.inf, np.inf, shape=(self.scenario.n * 10,), dtype=np.float32)
+        return observation_box(self.scenario.n * 10)
 
     def _check_agent(self, agent: str) -> int:
         if agent not in self._index:
@@ -161,7 +218,14 @@ class CooperativePathFollowingEnv(ParallelEnv):
     def reset(
         self, seed: int | None = None, options: dict | None = None
     ) -> tuple[dict[str, NDArray[np.float32]], dict[str, dict]]:
-        """Start an episode; ``seed`` fixes initial state, models and all noise."""
+        """Start an episode; ``seed`` fixes initial state, models and all noise.
+
+        Raises:
+            UserWarning: (a warning) for any ``options``: this env takes none and
+                ignores them (PettingZoo's API test passes some, so it cannot raise).
+        """
+        warn_reset_options(options)
+        seed = as_seed(seed)
         if seed is not None:
             self.np_random, _ = seeding.np_random(seed)
             self.sim.rngs[0] = self.np_random
@@ -177,14 +241,19 @@ class CooperativePathFollowingEnv(ParallelEnv):
         """Apply one action per live agent for one control period ``dt``.
 
         Raises:
-            ValueError: Missing or extra agent, wrong shape, non-finite action;
-                nothing is changed.
-            RuntimeError: Step after the episode ended, or a non-finite state (a bug).
+            ValueError: Missing or extra agent, wrong shape, complex or non-finite
+                action; nothing is changed.
+            RuntimeError: Step after the episode ended, or the plant diverged (the
+                message says where and what to change; the episode is then over).
         """
         if not self.agents:
             raise RuntimeError("the episode is over (or never started); call reset().")
         batch = self._action_batch(actions)
-        obs = self.sim.step(batch)
+        try:
+            obs = self.sim.step(batch)
+        except RuntimeError:
+            self.agents = []  # no live agents over a diverged (NaN) state
+            raise
         a = self.sim.arrays
         terminated = bool(a.terminated[0])
         truncated = bool(self.sim.truncated[0])
@@ -214,16 +283,25 @@ class CooperativePathFollowingEnv(ParallelEnv):
             )
         batch = np.empty((1, self.scenario.n, self.sim.act_dim))
         for agent in self.agents:
-            action = np.asarray(actions[agent], dtype=np.float64)
-            if action.shape != (self.sim.act_dim,):
-                raise ValueError(
-                    f"action of {agent} has shape {action.shape}; expected ({self.sim.act_dim},) "
-                    "= [tau_u, tau_v, tau_r, theta_dot, message...]."
-                )
-            if not np.all(np.isfinite(action)):
-                raise ValueError(f"action of {agent} is not finite: {action.tolist()}.")
-            batch[0, self._index[agent]] = action
+            batch[0, self._index[agent]] = self.check_action(agent, actions[agent])
         return batch
+
+    def check_action(self, agent: str, action: Any) -> NDArray[np.float64]:
+        """Validate one agent's action and return it as float64 (4 + m,); changes nothing.
+
+        Raises:
+            ValueError: Unknown agent, wrong shape, a complex or non-finite entry.
+        """
+        self._check_agent(agent)
+        array = as_real_actions(action, f"action of {agent}")
+        if array.shape != (self.sim.act_dim,):
+            raise ValueError(
+                f"action of {agent} has shape {array.shape}; expected ({self.sim.act_dim},) "
+                "= [tau_u, tau_v, tau_r, theta_dot, message...]."
+            )
+        if not np.all(np.isfinite(array)):
+            raise ValueError(f"action of {agent} is not finite: {array.tolist()}.")
+        return array
 
     def _observations(self, obs: NDArray[np.float32]) -> dict[str, NDArray[np.float32]]:
         return {agent: obs[0, i].copy() for i, agent in enumerate(self.possible_agents)}
@@ -255,7 +333,11 @@ class CooperativePathFollowingEnv(ParallelEnv):
         return per_vessel.reshape(-1).astype(np.float32)
 
     def render(self) -> NDArray[np.uint8] | None:
-        """Top-down view: paths, vessels, virtual targets; see ``cpf_env.render``."""
+        """Top-down view: paths, vessels, virtual targets; see ``cpf_env.render``.
+
+        Raises:
+            RuntimeError: Before the first ``reset()`` (there is no fleet to draw).
+        """
         return self._views.draw(self.sim, fleet=0)
 
     def close(self) -> None:

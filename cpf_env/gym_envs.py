@@ -22,9 +22,10 @@ from gymnasium.vector.utils import batch_space
 from numpy.typing import ArrayLike, NDArray
 
 from cpf_env import kernels
-from cpf_env.env import make_scenario
+from cpf_env.env import as_seed, check_reset_options, make_scenario
+from cpf_env.observation import observation_box
 from cpf_env.scenarios import Scenario, list_scenarios
-from cpf_env.sim import FleetSim
+from cpf_env.sim import FleetSim, as_real_actions
 from cpf_env.views import FleetViews, check_render_mode
 
 __all__ = [
@@ -44,7 +45,6 @@ _ERRORS = (
     ("sync_error", kernels.ERR_SYNC),
     ("speed_error", kernels.ERR_SPEED),
 )
-_FINITE = float(np.finfo(np.float32).max)  # observations are finite (the sim raises otherwise)
 _RENDER_FPS = 20  # default; instances use 1 / dt
 
 
@@ -59,14 +59,14 @@ def _fleet_spaces(
     low = np.hstack([tau_min, -rate, -message]).reshape(-1)
     high = np.hstack([tau_max, rate, message]).reshape(-1)
     return (
-        spaces.Box(-_FINITE, _FINITE, shape=(n * obs_dim,), dtype=np.float32),
+        observation_box(n * obs_dim),
         spaces.Box(low.astype(np.float32), high.astype(np.float32), dtype=np.float32),
     )
 
 
 def _as_actions(sim: FleetSim, actions: ArrayLike, batched: bool) -> NDArray[np.float64]:
     """Check flat actions, (n act_dim,) or (B, n act_dim), and return (B, n, act_dim) float64."""
-    array = np.array(actions, dtype=np.float64)  # a copy: callers may edit the batch
+    array = as_real_actions(actions)  # a copy: callers may edit the batch
     shape = (sim.num_fleets, sim.n * sim.act_dim) if batched else (sim.n * sim.act_dim,)
     if array.shape != shape:
         raise ValueError(
@@ -74,11 +74,6 @@ def _as_actions(sim: FleetSim, actions: ArrayLike, batched: bool) -> NDArray[np.
             f"message x {sim.act_dim - 4}] = {sim.n} x {sim.act_dim}), got {array.shape}."
         )
     return sim.validate_actions(array.reshape(sim.num_fleets, sim.n, sim.act_dim))
-
-
-def _check_options(options: dict[str, Any] | None) -> None:
-    if options:
-        raise ValueError(f"reset takes no options, got {sorted(options)}.")
 
 
 class CentralizedFleetEnv(gymnasium.Env[NDArray[np.float32], NDArray[np.float32]]):
@@ -123,7 +118,8 @@ class CentralizedFleetEnv(gymnasium.Env[NDArray[np.float32], NDArray[np.float32]
     | 16, 17 | b_i, v0 as heard (0 if b_i = 0) | -, m/s |
     | 18.. | K neighbour slots [a_ij, theta_j - theta_i, age, msg_j] | -, ~m, steps, - |
 
-    The bounds are +-float32 max: every component is finite (a non-finite state raises).
+    The bounds are +-``OBS_BOUND`` (``cpf_env.observation``): finite, the same rule as
+    the ParallelEnv's, not a physical range (a non-finite state raises).
 
     ## Rewards
 
@@ -193,8 +189,8 @@ class CentralizedFleetEnv(gymnasium.Env[NDArray[np.float32], NDArray[np.float32]
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[NDArray[np.float32], dict[str, Any]]:
         """Start an episode; ``seed`` fixes initial state, models and all noise. No options."""
-        _check_options(options)
-        super().reset(seed=seed)
+        check_reset_options(options)
+        super().reset(seed=as_seed(seed))
         self.sim.rngs[0] = self.np_random  # one generator: the simulator draws from np_random
         obs = self.sim.reset(seeds=[None])
         self._done = False
@@ -304,7 +300,7 @@ class CentralizedFleetVectorEnv(VectorEnv[NDArray[np.float32], NDArray[np.float3
                 seed (or None) per sub-environment.
             options: None (no options are supported).
         """
-        _check_options(options)
+        check_reset_options(options)
         if isinstance(seed, (int, np.integer)):
             super().reset(seed=int(seed))
             seed = [int(seed) + k for k in range(self.num_envs)]
@@ -319,7 +315,7 @@ class CentralizedFleetVectorEnv(VectorEnv[NDArray[np.float32], NDArray[np.float3
 
         Raises:
             ValueError: Wrong shape or a non-finite entry; nothing is changed.
-            RuntimeError: Step before reset, or a non-finite state (a bug).
+            RuntimeError: Step before reset, or the plant diverged (see ``FleetSim.step``).
         """
         batch = _as_actions(self.sim, actions, batched=True)
         restart = self._autoreset.copy()

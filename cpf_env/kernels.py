@@ -3,10 +3,10 @@
 One call advances B fleets x n vessels by one control period:
 
 1. saturate the force command per axis and clip the path-variable rate and
-   the message (PAPER.md eq. [6]);
+   the message (``docs/model.md``, "Input saturation");
 2. integrate the plant (``cpf_env.plant``) with ``substeps`` RK4 steps, the
    command and the environmental forces held over the control period
-   (PAPER.md section 8);
+   (``docs/model.md``, "Time discretization");
 3. advance theta by the commanded rate (exact for a held rate);
 4. advance the Gauss-Markov disturbance states exactly;
 5. send each vessel's packet (theta, message) and deliver, through the active
@@ -90,8 +90,8 @@ class FleetArrays(NamedTuple):
     obs: np.ndarray  # (B, n, obs_dim) float32 observations
     reward: np.ndarray  # (B, n) reward of the last step
     errors: np.ndarray  # (B, n, 4) path, heading, sync, speed error after the last step
-    terminated: np.ndarray  # (B,) bool: a vessel left its path
-    nonfinite: np.ndarray  # (B,) bool: the state became NaN/inf (a bug)
+    terminated: np.ndarray  # (B,) bool: a vessel left its path (latched until reset)
+    nonfinite: np.ndarray  # (B,) bool: the state became NaN/inf (the plant diverged)
 
 
 class KernelConstants(NamedTuple):
@@ -193,7 +193,7 @@ def plant_accelerations(
 
 @numba.njit(cache=True)
 def _apply_action(a: FleetArrays, c: KernelConstants, actions: np.ndarray, b: int, i: int) -> None:
-    """Store the command, saturate it (eq. [6]) and clip rate and message."""
+    """Store the command, saturate it per axis and clip rate and message."""
     for k in range(3):
         command = actions[b, i, k]
         a.tau_command[b, i, k] = command
@@ -338,7 +338,7 @@ def observe_fleet(a: FleetArrays, c: KernelConstants, b: int, speed_reference: f
     if c.team_reward:
         for i in range(n):
             a.reward[b, i] = total / n
-    a.terminated[b] = terminated
+    a.terminated[b] = a.terminated[b] or terminated  # latched; reset clears it
     a.nonfinite[b] = not finite
 
 

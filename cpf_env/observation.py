@@ -1,7 +1,7 @@
 """Local observation of one vessel: layout and the compiled builder.
 
 Vessel i observes only what is on board or arrives over its links
-(ARCHITECTURE.md, "Observation of vessel i"):
+(``docs/environment.md``, "Observation"):
 
 ======  ===========  ===========================================================
 index   name         meaning (units)
@@ -23,6 +23,16 @@ than K neighbours), and then the whole slot is zero. At reset every vessel
 holds its neighbours' initial theta and a zero message, with age 0 (a
 hand-shake before the start, even on delayed links); after that only what the
 links deliver arrives.
+
+Bounds: the components have no physical bounds the env could promise (theta
+grows with time, velocities depend on the model), so every observation and
+state space is ``observation_box``: float32 in [-OBS_BOUND, OBS_BOUND] with
+``OBS_BOUND`` half the float32 maximum. The bounds are finite (PettingZoo's
+``api_test`` and SuperSuit's ``normalize_obs`` require it) and so is their
+width high - low (min-max scaling does not overflow); they are not a scale to
+normalize by: use running statistics (SB3 ``VecNormalize``, Gymnasium
+``NormalizeObservation``). The simulator raises before a state turns
+non-finite, so observations stay inside.
 """
 
 from __future__ import annotations
@@ -31,9 +41,27 @@ import math
 from dataclasses import dataclass
 
 import numba
+import numpy as np
+from gymnasium import spaces
 from numpy.typing import NDArray
 
-__all__ = ["ObsLayout", "wrap_angle"]
+__all__ = ["OBS_BOUND", "ObsLayout", "observation_box", "wrap_angle"]
+
+#: Bound of every observation and state component (half the float32 maximum, see above).
+OBS_BOUND = float(np.finfo(np.float32).max) / 2.0
+
+
+def observation_box(size: int) -> spaces.Box:
+    """The observation (or state) space of ``size`` components: the one rule for bounds.
+
+    Args:
+        size: Number of components.
+
+    Returns:
+        ``Box(-OBS_BOUND, OBS_BOUND, (size,), float32)``.
+    """
+    return spaces.Box(-OBS_BOUND, OBS_BOUND, shape=(size,), dtype=np.float32)
+
 
 # Offsets, shared by ObsLayout and the compiled builder (numba freezes globals).
 NU, Z1, T1, T2, THETA, TAU, LEADER, V0, SLOTS = 0, 3, 6, 9, 12, 13, 16, 17, 18

@@ -25,6 +25,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from cpf_env.checks import as_integer, as_real, check_plant_step
 from cpf_env.disturbances import Disturbances, GaussMarkov, OceanCurrent
 from cpf_env.graph import Graph, LinkImpairments, SwitchingTopology, as_switching
 from cpf_env.paths import Path, Sinusoid
@@ -41,6 +42,15 @@ __all__ = [
 ]
 
 Vector3 = tuple[float, float, float]
+
+#: Scalar float fields of ``Scenario`` and their units (for error messages).
+_REAL_FIELDS = {
+    "model_spread": "relative",
+    "dt": "s",
+    "theta_dot_max": "1/s",
+    "message_max": "-",
+    "max_path_error": "m",
+}
 
 
 def _as_rows(name: str, value: object, n: int, width: int) -> tuple[tuple[float, ...], ...]:
@@ -214,12 +224,33 @@ class Scenario:
             )
         object.__setattr__(self, "tau_max", tau_max)
         object.__setattr__(self, "tau_min", tau_min)
+        self._check_numbers()
+        if self.links.delay_steps >= self.max_steps:
+            raise ValueError(
+                f"links.delay_steps = {self.links.delay_steps} is not shorter than the episode "
+                f"(max_steps = {self.max_steps}): no packet would ever arrive. Use a delay "
+                "shorter than max_steps (a delay of d steps is d * dt seconds)."
+            )
+        check_plant_step(
+            self.vessel_models,
+            self.disturbances.unmodeled_scale,
+            self.model_spread,
+            self.dt,
+            self.substeps,
+        )
+
+    def _check_numbers(self) -> None:
+        """Coerce the scalar fields to float / int (numpy scalars welcome) and check ranges."""
+        for name, unit in _REAL_FIELDS.items():
+            object.__setattr__(self, name, as_real(f"Scenario.{name}", getattr(self, name), unit))
+        for name in ("substeps", "max_steps", "message_size"):
+            object.__setattr__(self, name, as_integer(f"Scenario.{name}", getattr(self, name)))
         checks = {
-            "dt": self.dt > 0.0,
-            "substeps": isinstance(self.substeps, int) and self.substeps >= 1,
-            "max_steps": isinstance(self.max_steps, int) and self.max_steps >= 1,
+            "dt": 0.0 < self.dt < math.inf,
+            "substeps": self.substeps >= 1,
+            "max_steps": self.max_steps >= 1,
             "theta_dot_max": self.theta_dot_max > 0.0,
-            "message_size": isinstance(self.message_size, int) and self.message_size >= 0,
+            "message_size": self.message_size >= 0,
             "message_max": self.message_max > 0.0,
             "max_path_error": self.max_path_error > 0.0,
             "model_spread": 0.0 <= self.model_spread < 1.0,
@@ -227,9 +258,10 @@ class Scenario:
         for name, ok in checks.items():
             if not ok:
                 raise ValueError(
-                    f"Scenario.{name} = {getattr(self, name)!r} is invalid: dt, theta_dot_max, "
-                    "message_max and max_path_error must be > 0, substeps and max_steps integers "
-                    ">= 1, message_size an integer >= 0, model_spread in [0, 1)."
+                    f"Scenario.{name} = {getattr(self, name)!r} is invalid: dt must be > 0 "
+                    "and finite; theta_dot_max, message_max and max_path_error > 0; substeps and "
+                    "max_steps integers >= 1, message_size an integer >= 0, model_spread in "
+                    "[0, 1)."
                 )
 
     @property

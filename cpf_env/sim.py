@@ -29,7 +29,32 @@ from cpf_env.paths import encode_paths
 from cpf_env.scenarios import Scenario
 from cpf_env.vessel import PARAM_SIZE
 
-__all__ = ["FleetSim", "observation_layout"]
+__all__ = ["FleetSim", "as_real_actions", "observation_layout"]
+
+#: Names of the integrated state per vessel, as (array, component, what it is).
+_STATE_NAMES = (
+    ("eta", 0, "x position"),
+    ("eta", 1, "y position"),
+    ("eta", 2, "heading psi"),
+    ("nu", 0, "surge velocity u"),
+    ("nu", 1, "sway velocity v"),
+    ("nu", 2, "yaw rate r"),
+)
+
+
+def as_real_actions(actions: object, what: str = "actions") -> NDArray[np.float64]:
+    """``actions`` as a float64 array, or ValueError if they are not real numbers.
+
+    Complex values are rejected rather than silently losing their imaginary
+    part; so are strings, None and other non-numeric objects.
+    """
+    array = np.asarray(actions)
+    if array.dtype.kind not in "biuf":
+        raise ValueError(
+            f"{what} must be real numbers, got dtype {array.dtype} "
+            f"({'complex values' if array.dtype.kind == 'c' else 'not numbers'})."
+        )
+    return array.astype(np.float64)
 
 
 def observation_layout(scenario: Scenario) -> ObsLayout:
@@ -38,33 +63,51 @@ def observation_layout(scenario: Scenario) -> ObsLayout:
     return ObsLayout(n_slots=slots.shape[1], msg_size=scenario.message_size)
 
 
+def _floats(value: ArrayLike) -> NDArray[np.float64]:
+    """``value`` as a C-contiguous float64 array (one numba type for every scenario)."""
+    return np.ascontiguousarray(value, dtype=np.float64)
+
+
+def _ints(value: ArrayLike) -> NDArray[np.int64]:
+    """``value`` as a C-contiguous int64 array (one numba type for every scenario)."""
+    return np.ascontiguousarray(value, dtype=np.int64)
+
+
 def _constants(scenario: Scenario) -> kernels.KernelConstants:
+    """The scenario in kernel form.
+
+    Every field has the same numba type whatever the scenario and fleet size
+    (C-contiguous float64/int64 arrays of fixed ndim, python floats, ints and
+    bools), so one compilation of the kernels serves every scenario: a
+    strided table (a switching topology's slot weights were one) would make
+    numba compile the whole step again.
+    """
     topology = scenario.switching
     slots = graph.neighbour_slots(topology)
     switch_steps, period = graph.switch_table(topology)
     kinds, path_params = encode_paths(scenario.paths)
     tau_min, tau_max = scenario.tau_limits
     return kernels.KernelConstants(
-        tau_min=tau_min,
-        tau_max=tau_max,
-        tau_scale=np.maximum(np.abs(tau_min), np.abs(tau_max)),
+        tau_min=_floats(tau_min),
+        tau_max=_floats(tau_max),
+        tau_scale=_floats(np.maximum(np.abs(tau_min), np.abs(tau_max))),
         theta_dot_max=float(scenario.theta_dot_max),
         message_max=float(scenario.message_max),
-        path_kinds=kinds,
-        path_params=path_params,
-        disturbances=scenario.disturbances.encode(),
-        slots=slots,
-        slot_weights=graph.slot_weights(topology, slots),
-        leaders=graph.leader_schedule(topology),
-        switch_steps=switch_steps,
+        path_kinds=_ints(kinds),
+        path_params=_floats(path_params),
+        disturbances=_floats(scenario.disturbances.encode()),
+        slots=_ints(slots),
+        slot_weights=_floats(graph.slot_weights(topology, slots)),
+        leaders=_floats(graph.leader_schedule(topology)),
+        switch_steps=_ints(switch_steps),
         switch_period=int(period),
         loss_probability=float(scenario.links.loss_probability),
         delay=int(scenario.links.delay_steps),
-        v0_times=np.array(scenario.v0_schedule.times),
-        v0_values=np.array(scenario.v0_schedule.values),
+        v0_times=_floats(scenario.v0_schedule.times),
+        v0_values=_floats(scenario.v0_schedule.values),
         dt=float(scenario.dt),
         substeps=int(scenario.substeps),
-        reward_weights=scenario.reward.encode(),
+        reward_weights=_floats(scenario.reward.encode()),
         team_reward=bool(scenario.reward.team),
         max_path_error=float(scenario.max_path_error),
     )
@@ -145,6 +188,11 @@ class FleetSim:
         return self._rngs
 
     @property
+    def started(self) -> bool:
+        """True once ``reset()`` has been called (the arrays hold an episode)."""
+        return not self._needs_reset
+
+    @property
     def time(self) -> NDArray[np.float64]:
         """Simulated time of each fleet (s), shape (B,)."""
         return self.arrays.step * self.scenario.dt
@@ -169,7 +217,7 @@ class FleetSim:
             Observations of every fleet, shape (B, n, obs_dim), float32 (a view;
             copy it if you keep it across steps).
         """
-        index = np.arange(self.num_fleets) if fleets is None else np.asarray(fleets, np.int64)
+        index = np.arange(self.num_fleets) if fleets is None else _ints(fleets)
         if index.ndim != 1 or np.any((index < 0) | (index >= self.num_fleets)):
             raise ValueError(f"fleets must be indices in [0, {self.num_fleets}), got {fleets!r}.")
         seeds = [None] * len(index) if seeds is None else list(seeds)
@@ -214,9 +262,10 @@ class FleetSim:
         """Check an action batch and return it as float64 (B, n, act_dim).
 
         Raises:
-            ValueError: Wrong shape or a non-finite entry (naming fleet, vessel, component).
+            ValueError: Wrong shape, complex values or a non-finite entry (naming fleet,
+                vessel, component).
         """
-        array = np.asarray(actions, dtype=np.float64)
+        array = as_real_actions(actions)
         expected = (self.num_fleets, self.n, self.act_dim)
         if array.shape != expected:
             raise ValueError(
@@ -245,20 +294,44 @@ class FleetSim:
 
         Raises:
             ValueError: Bad actions (state untouched).
-            RuntimeError: Stepping before reset, or a non-finite state (a bug).
+            RuntimeError: Stepping before reset; a fleet that diverged and was not
+                reset; or the plant diverged in this step (the message names fleet,
+                vessel and quantity and what to change). Fleets that diverged must be
+                reset before the simulator steps again.
         """
         if self._needs_reset:
             raise RuntimeError("call reset() before step().")
-        validated = self.validate_actions(actions)
-        self._step_kernel(self.arrays, self.constants, validated)
         if self.arrays.nonfinite.any():
             fleets = np.flatnonzero(self.arrays.nonfinite).tolist()
             raise RuntimeError(
-                f"non-finite vessel state in fleet(s) {fleets} at step "
-                f"{self.arrays.step[fleets[0]]}: the plant diverged; this is a bug, "
-                "please report it."
+                f"fleet(s) {fleets} diverged and have not been reset; reset them "
+                "(reset(fleets=...)) before stepping again."
             )
+        validated = self.validate_actions(actions)
+        self._step_kernel(self.arrays, self.constants, validated)
+        if self.arrays.nonfinite.any():
+            raise RuntimeError(self._divergence_message())
         return self.arrays.obs
+
+    def _divergence_message(self) -> str:
+        """Say which fleet, vessel and quantity became non-finite, and what to change."""
+        a, s = self.arrays, self.scenario
+        b = int(np.flatnonzero(a.nonfinite)[0])
+        bad = np.argwhere(~np.isfinite(np.concatenate([a.eta[b], a.nu[b]], axis=1)))
+        vessel, column = (int(x) for x in bad[0])
+        quantity = _STATE_NAMES[column][2]
+        others = sorted({int(i) for i in bad[:, 0]} - {vessel})
+        return (
+            f"the plant diverged in fleet {b}: the {quantity} of vessel_{vessel} became "
+            f"non-finite at step {int(a.step[b])} (t = {a.step[b] * s.dt:g} s)"
+            + (f", and the state of vessel(s) {others} too" if others else "")
+            + f". The RK4 sub-step dt / substeps = {s.dt:g} / {s.substeps} s could not "
+            "follow the forces on it: the model's nonlinear terms (quadratic damping, "
+            f"the paper's cubic unmodeled terms times unmodeled_scale = "
+            f"{s.disturbances.unmodeled_scale:g}) grow with speed. Use more substeps or a "
+            "smaller dt, a smaller unmodeled_scale or milder model parameters, or check "
+            "the commands driving it. Reset the fleet to continue."
+        )
 
     def accelerations(self, tau: ArrayLike | None = None) -> NDArray[np.float64]:
         """True accelerations nu' (B, n, 3) at the current state (m/s^2, m/s^2, rad/s^2).

@@ -41,10 +41,16 @@ class FleetViews:
         self._renderers: dict[int, FleetRenderer] = {}
 
     def draw(self, sim: FleetSim, fleet: int = 0) -> NDArray[np.uint8] | None:
-        """Draw fleet ``fleet``: an (H, W, 3) frame in rgb_array mode, None otherwise."""
+        """Draw fleet ``fleet``: an (H, W, 3) frame in rgb_array mode, None otherwise.
+
+        Raises:
+            RuntimeError: Before the simulator's first reset (there is no fleet yet).
+        """
         if self.render_mode is None:
             gymnasium.logger.warn("render() called without render_mode; pass render_mode=...")
             return None
+        if not sim.started:
+            raise RuntimeError("render() before reset(): there is no fleet to draw; call reset().")
         if fleet not in self._renderers:
             from cpf_env.render import FleetRenderer
 

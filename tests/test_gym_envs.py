@@ -197,9 +197,10 @@ def test_bad_action_raises_and_leaves_state_untouched(
         env.step(make_bad(np.zeros(env.action_space.shape, dtype=np.float32)))
     assert_unchanged(before, env.sim)
 
-    envs = CentralizedFleetVectorEnv(2, scenario="lossy_links", max_steps=1)
+    envs = CentralizedFleetVectorEnv(2, scenario="lossy_links", max_steps=6)  # delay 5 < 6
     envs.reset(seed=0)
-    envs.step(np.zeros(envs.action_space.shape))  # both truncated: the next step would reset
+    for _ in range(6):
+        envs.step(np.zeros(envs.action_space.shape))  # both truncated: the next step would reset
     before = snapshot(envs.sim)
     with pytest.raises(ValueError, match=match):
         envs.step(make_bad(np.zeros(envs.action_space.shape, dtype=np.float32)))

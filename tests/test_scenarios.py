@@ -250,7 +250,7 @@ def scenario_with(**changes: object) -> Scenario:
         ),
         (lambda: scenario_with(dt=0.0), r"Scenario.dt = 0.0 is invalid.*must be > 0"),
         (lambda: scenario_with(substeps=0), r"Scenario.substeps = 0 is invalid"),
-        (lambda: scenario_with(substeps=2.5), r"Scenario.substeps = 2.5 is invalid"),
+        (lambda: scenario_with(substeps=2.5), r"Scenario.substeps must be an integer, got 2.5"),
         (lambda: scenario_with(max_steps=0), r"Scenario.max_steps = 0 is invalid"),
         (lambda: scenario_with(model_spread=1.0), r"Scenario.model_spread = 1.0 is invalid"),
         (lambda: scenario_with(max_path_error=-1.0), r"max_path_error = -1.0 is invalid"),
