@@ -2,7 +2,7 @@
 
 Vessel i reads from its local observation its own path variable, the
 neighbours' path-variable differences and messages (their speed estimates),
-and v0 if it hears the leader. From these it computes, per PAPER.md section 5:
+and v0 if it hears the leader. From these it computes, per docs/model.md section 8:
 
 - the synchronization error s_i = sum_j a_ij (theta_i - theta_j), with
   theta_j - theta_i taken from the neighbour slots as received;
@@ -16,7 +16,7 @@ and v0 if it hears the leader. From these it computes, per PAPER.md section 5:
 Discrete time (one update per control step dt, the inputs held over the
 step): gamma and vhat are linear in themselves, so they are advanced by the
 exact exponential-Euler map x+ = e^{-a dt} x + (1 - e^{-a dt}) / a * u
-(PAPER.md section 8). For vhat, a = k5 sum_j a_ij + k6 b_i and
+(docs/model.md, section 7). For vhat, a = k5 sum_j a_ij + k6 b_i and
 u = k5 sum_j a_ij vhat_j + k6 b_i v0: the update is a convex combination of
 the vessel's own estimate and its neighbours' and the leader's, stable for
 any dt. The estimate a vessel broadcasts at step k is vhat_i(k + 1), so that
@@ -69,7 +69,7 @@ def contract(a: ArrayLike, b: ArrayLike) -> Array:
 
 
 def exponential_euler(rate: ArrayLike, dt: float) -> tuple[Array, Array]:
-    """Coefficients of the exact step of x' = -a x + u with u held over dt (PAPER.md s. 8).
+    """Coefficients of the exact step of x' = -a x + u with u held over dt (docs/model.md s. 7).
 
     Args:
         rate: Decay rate a >= 0 (1/s), any shape.

@@ -3,7 +3,7 @@
 Gains are shared by every vessel of the fleet (the paper gives every vessel the
 same values). Diagonal gain matrices are given by their diagonal; a scalar is
 broadcast to the three axes (surge, sway, yaw). Defaults are the paper's
-section 4 (PAPER.md section 6); K5, K6 and the NN size l are not given there
+section 4 (docs/model.md, section 7); K5, K6 and the NN size l are not given there
 and default to 1, 1 and 20.
 
 ======================  ===========  =========================================
@@ -72,7 +72,7 @@ def _integer(name: str, value: object, minimum: int) -> int:
 
 @dataclass(frozen=True)
 class CooperativeGains:
-    """Gains of the cooperative layer (PAPER.md section 5).
+    """Gains of the cooperative layer (docs/model.md, section 8).
 
     Attributes:
         k3: Synchronization gain on s_i - mu_i in omega_is (1/s), eq. [34].
@@ -131,7 +131,7 @@ class BacksteppingGains(CooperativeGains):
 
 @dataclass(frozen=True)
 class NNDSCGains(BacksteppingGains):
-    """Gains of the NN-based adaptive DSC (PAPER.md sections 4 and 6).
+    """Gains of the NN-based adaptive DSC (docs/model.md, section 7).
 
     Attributes:
         rho: Time constant of the DSC filter (s), eq. [18].

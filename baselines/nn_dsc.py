@@ -1,6 +1,6 @@
 """The paper's controller: NN-based adaptive dynamic surface control, and its ablations.
 
-Wang, Wang & Peng (2014), PAPER.md section 4, per vessel i:
+Wang, Wang & Peng (2014), docs/model.md section 7, per vessel i:
 
     alpha_i = -K1 z_i1 + t_i1 vhat_i                                        [15]
     rho nubar_id' + nubar_id = alpha_i,   nubar_id(0) = alpha_i(0)           [18]
@@ -25,8 +25,8 @@ step k - 1; every input is held over the step, as the plant holds tau):
 3. nubar, What (and gamma, vhat in the cooperative layer) are advanced to
    k + 1 with the inputs of step k.
 
-The stiff linear parts are integrated exactly (exponential Euler, PAPER.md
-section 8): the DSC filter (rate 1/rho), the auxiliary system (K_pi) and the
+The stiff linear parts are integrated exactly (exponential Euler,
+docs/model.md section 7): the DSC filter (rate 1/rho), the auxiliary system (K_pi) and the
 sigma-modification leakage of What (Gamma_W k_W), each with its input held
 over the step; so are gamma and vhat. Nothing is integrated by forward Euler.
 

@@ -6,7 +6,7 @@ fleets. It reads nothing but the observation and the scenario's known
 constants (nominal model, saturation limits, dt, message size) and never
 touches a simulator.
 
-Interface (ARCHITECTURE.md, "Policies"):
+Interface (docs/extending.md, "A policy"):
 
 - ``act_batch(obs (B, n, obs_dim)) -> (B, n, 4 + m)``: the core, float64;
 - ``act(observations: dict) -> dict`` for the PettingZoo ``ParallelEnv`` (B = 1, float32);

@@ -4,7 +4,7 @@
 as the ParallelEnv) with an analytic policy and returns a ``Trajectory``.
 Sample k holds the state at t_k, the action taken then, and the reward that
 action earned. Besides the policy's diagnostics it records the true lumped
-uncertainty the paper's NN is meant to learn (PAPER.md eq. [26]),
+uncertainty the paper's NN is meant to learn (eq. [26]; docs/model.md, section 7),
 
     f_i = C(nu) nu + D(nu) nu + Delta(nu) - tau_w(t, nu) + M nubar_d'
         = M (nubar_d' - a_free),

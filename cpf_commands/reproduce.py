@@ -1,6 +1,6 @@
 """Reproduce the paper's simulation: run, measure the five claims, write figures and metrics.
 
-The claims are those of PAPER.md section 7, each checked over the last
+The claims are those of the paper's section 4 (docs/reproduction.md), each checked over the last
 quarter of the episode with the thresholds of the project's acceptance
 criteria. Claim 2 (the NN tracks the lumped uncertainty) has no threshold in
 the paper; it is reported as the relative RMS error of the NN output per axis,
@@ -34,7 +34,7 @@ class Claim:
     """One claim of the paper with its measured value.
 
     Attributes:
-        number: 1..5 as in PAPER.md section 7.
+        number: 1..5 as in docs/reproduction.md.
         figure: The paper's figure.
         statement: What the paper claims.
         measured: What this run measured, in words with numbers.
@@ -60,7 +60,7 @@ def _nn_relative_error(trajectory: Trajectory, vessel: int) -> np.ndarray | None
 
 
 def evaluate_claims(trajectory: Trajectory, metrics: dict[str, Any]) -> list[Claim]:
-    """Check the paper's five claims (PAPER.md section 7) on a recorded run."""
+    """Check the paper's five claims (docs/reproduction.md) on a recorded run."""
     n = trajectory.eta.shape[1]
     nn_vessel, force_vessel = min(1, n - 1), min(2, n - 1)
     path = max(metrics["path_error_max"])

@@ -3,7 +3,7 @@
 Three parts, combined by the simulator's plant right-hand side:
 
 * The paper's unmodeled dynamics Delta_i(nu) and disturbance tau_wi(t, nu)
-  (Wang, Wang & Peng 2014, section 4; PAPER.md section 1), scaled by
+  (Wang, Wang & Peng 2014, section 4; docs/model.md, section 2), scaled by
   ``Disturbances.unmodeled_scale``. Sign convention of eq. [3]: Delta on the
   left-hand side, tau_w on the right.
 * An earth-fixed, irrotational ocean current V_c = (V_x, V_y) (m/s), constant

@@ -39,6 +39,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import cast
 
 import numba
 import numpy as np
@@ -51,7 +52,7 @@ __all__ = ["OBS_BOUND", "ObsLayout", "observation_box", "wrap_angle"]
 OBS_BOUND = float(np.finfo(np.float32).max) / 2.0
 
 
-def observation_box(size: int) -> spaces.Box:
+def observation_box(size: int) -> spaces.Box[np.float32]:
     """The observation (or state) space of ``size`` components: the one rule for bounds.
 
     Args:
@@ -60,7 +61,8 @@ def observation_box(size: int) -> spaces.Box:
     Returns:
         ``Box(-OBS_BOUND, OBS_BOUND, (size,), float32)``.
     """
-    return spaces.Box(-OBS_BOUND, OBS_BOUND, shape=(size,), dtype=np.float32)
+    box = spaces.Box(-OBS_BOUND, OBS_BOUND, shape=(size,), dtype=np.float32)
+    return cast("spaces.Box[np.float32]", box)
 
 
 # Offsets, shared by ObsLayout and the compiled builder (numba freezes globals).

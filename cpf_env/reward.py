@@ -1,6 +1,6 @@
 """Per-step reward of a vessel and the weights that shape it.
 
-Reward of vessel i for one control step (ARCHITECTURE.md):
+Reward of vessel i for one control step (docs/environment.md, "Reward"):
 
     r_i = -dt * ( w_pos ||z1_xy||^2 + w_head z1_psi^2 + w_sync s_i^2
                   + w_speed (theta_dot_i - v0)^2 + w_tau ||tau_i / tau_max||^2 )

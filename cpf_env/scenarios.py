@@ -344,7 +344,7 @@ def list_scenarios() -> list[str]:
     return list(_REGISTRY)
 
 
-#: Lateral offsets y_i (m) of the paper's five sinusoids (PAPER.md section 6).
+#: Lateral offsets y_i (m) of the paper's five sinusoids (docs/model.md, section 10).
 _WANG2014_OFFSETS = (-8.0, -4.0, 0.0, 4.0, 8.0)
 
 
@@ -354,7 +354,7 @@ def _parallel_sinusoids(offsets: Sequence[float]) -> tuple[Path, ...]:
 
 
 def wang2014() -> Scenario:
-    """The paper's section 4 (PAPER.md section 6): five Cybership II, chain graph, v0 = 0.1."""
+    """The paper's section 4 (docs/model.md, s. 10): five Cybership II, chain graph, v0 = 0.1."""
     offsets = _WANG2014_OFFSETS
     x0 = [-1.0, 1.0, -0.5, 0.5, 0.0]
     dy = [1.0, -1.0, 0.5, -0.5, 1.0]

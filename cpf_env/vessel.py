@@ -56,7 +56,7 @@ X_U = _P["X_u"]
 class VesselModel:
     """Rigid-body, added-mass and damping parameters of a 3-DOF vessel.
 
-    Defaults are Cybership II (PAPER.md section 1). Hydrodynamic derivatives
+    Defaults are Cybership II (docs/model.md, section 1). Hydrodynamic derivatives
     follow SNAME notation; ``X_uu`` stands for X_|u|u, ``Y_rv`` for Y_|r|v, etc.
 
     Attributes:
@@ -112,7 +112,7 @@ class VesselModel:
             )
 
     def mass_matrix(self) -> NDArray[np.float64]:
-        """Return M = M_RB + M_A, shape (3, 3), eq. below [3] in PAPER.md."""
+        """Return M = M_RB + M_A, shape (3, 3), docs/model.md, section 1."""
         m, xg = self.mass, self.x_g
         return np.array(
             [
@@ -159,13 +159,13 @@ CYBERSHIP2 = VesselModel()
 
 @numba.njit(cache=True, inline="always")
 def coriolis_coefficients(p: NDArray[np.float64], u: float, v: float, r: float) -> tuple:
-    """Return (c13, c23) of C(nu) = [[0, 0, c13], [0, 0, c23], [-c13, -c23, 0]] (PAPER.md s. 1)."""
+    """Return (c13, c23) of C(nu) = [[0, 0, c13], [0, 0, c23], [-c13, -c23, 0]] (docs/model.md)."""
     return -p[M22] * v - p[M23] * r, p[M11] * u
 
 
 @numba.njit(cache=True, inline="always")
 def damping_coefficients(p: NDArray[np.float64], u: float, v: float, r: float) -> tuple:
-    """Return (d11, d22, d23, d32, d33) of the nonlinear damping D(nu) (PAPER.md section 1)."""
+    """Return (d11, d22, d23, d32, d33) of the nonlinear damping D(nu) (docs/model.md s. 1)."""
     au, av, ar = abs(u), abs(v), abs(r)
     d11 = -p[X_U] - p[X_U + 1] * au - p[X_U + 2] * u * u
     d22 = -p[X_U + 3] - p[X_U + 4] * av - p[X_U + 5] * ar

@@ -1,6 +1,6 @@
 """Shared helpers for the simulator and env tests.
 
-Reference formulas here are written from PAPER.md directly (model attributes,
+Reference formulas here are written from docs/model.md directly (model attributes,
 not the kernel's parameter vector), so tests compare the code against an
 independent transcription of the equations.
 """
@@ -38,7 +38,7 @@ TAU_MIN = (
 def reference_matrices(
     model: VesselModel, nu: Sequence[float]
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """M, C(nu), D(nu) of PAPER.md section 1, transcribed from the model's attributes."""
+    """M, C(nu), D(nu) of docs/model.md section 1, transcribed from the model's attributes."""
     u, v, r = (float(x) for x in nu)
     m, xg = model.mass, model.x_g
     mass = np.array(
@@ -66,7 +66,7 @@ def reference_matrices(
 
 
 def rotation_matrix(psi: float) -> np.ndarray:
-    """J(psi) of PAPER.md eq. [4]."""
+    """J(psi) of eq. [4] (docs/model.md section 1)."""
     c, s = np.cos(psi), np.sin(psi)
     return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
 

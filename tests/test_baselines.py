@@ -5,8 +5,6 @@ from __future__ import annotations
 import gymnasium
 import numpy as np
 import pytest
-from stable_baselines3.common.evaluation import evaluate_policy
-from stable_baselines3.common.vec_env import DummyVecEnv
 
 import baselines
 import cpf_env
@@ -174,6 +172,9 @@ def test_episode_start_resets_only_that_fleet(per_vessel_rows):
 
 
 def test_evaluate_policy_on_the_centralized_gym_env():
+    # SB3 is an optional dependency ([rl]); .ci/lower-bounds runs without it.
+    evaluate_policy = pytest.importorskip("stable_baselines3.common.evaluation").evaluate_policy
+    DummyVecEnv = pytest.importorskip("stable_baselines3.common.vec_env").DummyVecEnv
     envs = DummyVecEnv(
         [lambda: gymnasium.make("cpf_env/CentralizedFleet-v0", max_steps=40) for _ in range(2)]
     )

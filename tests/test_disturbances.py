@@ -1,4 +1,4 @@
-"""Unmodeled dynamics, ocean current, wave and wind processes (PAPER.md section 1)."""
+"""Unmodeled dynamics, ocean current, wave and wind processes (docs/model.md, section 2)."""
 
 from __future__ import annotations
 

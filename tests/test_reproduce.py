@@ -32,7 +32,7 @@ def test_trajectory_shapes_and_alignment(short_run):
 
 
 def test_lumped_uncertainty_matches_paper_formula(short_run):
-    """f = C(nu) nu + D(nu) nu + Delta(nu) - tau_w(t, nu) + M nubar_dot (PAPER.md eq. [26])."""
+    """f = C(nu) nu + D(nu) nu + Delta(nu) - tau_w(t, nu) + M nubar_dot ([26], docs/model.md)."""
     t = short_run
     model = scenarios.get("wang2014").vessel_models[0]
     params, mass = model.to_params(), model.mass_matrix()

@@ -60,7 +60,7 @@ def test_scenarios_are_frozen() -> None:
         scenario.dt = 0.1  # type: ignore[misc]
 
 
-# --- the paper's scenario (PAPER.md section 6) ------------------------------------------
+# --- the paper's scenario (docs/model.md, s. 10) ------------------------------------------
 
 
 def test_wang2014_is_the_papers_simulation() -> None:
@@ -102,7 +102,7 @@ def test_wang2014_is_the_papers_simulation() -> None:
     np.testing.assert_array_equal(sim.arrays.nu[0], 0.0)
 
 
-# --- the named variants (ARCHITECTURE.md, "Scenarios") ----------------------------------
+# --- the named variants (docs/model.md, s. 10) --------------------------------------
 
 PAPER_TAU_MAX = np.array([9.2, 4.5, 3.0])
 VARIANTS = {

@@ -1,4 +1,4 @@
-"""Vessel model: matrices against PAPER.md section 1, rotation, energy balance.
+"""Vessel model: matrices against docs/model.md section 1, rotation, energy balance.
 
 Finding documented here (test_cybership2_damping_is_not_dissipative): the
 identified Cybership II damping is not dissipative. The symmetric part of the
@@ -7,7 +7,7 @@ is [[0.89, 3.61], [3.61, 1.9]], eigenvalues -2.25 and 5.04, so for small sway
 and yaw rates of opposite sign nu^T D(nu) nu < 0 (down to -0.0223 W at
 |(v, r)| = 0.2; the quadratic terms restore dissipation beyond |(v, r)| ~ 0.38
 or at surge speeds of 0.2 m/s), and an unforced vessel started at
-nu = (0, -0.1, 0.2) gains 5.6 % kinetic energy over 0.8 s. PAPER.md's "energy
+nu = (0, -0.1, 0.2) gains 5.6 % kinetic energy over 0.8 s. The textbook "energy
 never increases" property holds only for a dissipative damping: it is tested
 for such a variant and for pure surge; for Cybership II we test the exact power
 balance dE/dt = -nu^T D nu + nu^T tau instead.
@@ -153,7 +153,7 @@ def test_rotation_composes_by_adding_angles() -> None:
 
 @pytest.mark.parametrize("yaw_rate", [-0.7, 0.3, 1.9])
 def test_rotation_transpose_derivative_is_minus_r_s_jt(yaw_rate: float) -> None:
-    """d/dt J(psi)^T = -r S J^T with psi' = r (PAPER.md eq. [14]), by central differences."""
+    """d/dt J(psi)^T = -r S J^T with psi' = r (eq. [14], docs/model.md), by differences."""
     skew = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 0.0]])
     h = 1e-5
     for psi in ANGLES[:8]:
