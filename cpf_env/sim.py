@@ -325,12 +325,12 @@ class FleetSim:
             f"the plant diverged in fleet {b}: the {quantity} of vessel_{vessel} became "
             f"non-finite at step {int(a.step[b])} (t = {a.step[b] * s.dt:g} s)"
             + (f", and the state of vessel(s) {others} too" if others else "")
-            + f". The RK4 sub-step dt / substeps = {s.dt:g} / {s.substeps} s could not "
-            "follow the forces on it: the model's nonlinear terms (quadratic damping, "
-            f"the paper's cubic unmodeled terms times unmodeled_scale = "
-            f"{s.disturbances.unmodeled_scale:g}) grow with speed. Use more substeps or a "
-            "smaller dt, a smaller unmodeled_scale or milder model parameters, or check "
-            "the commands driving it. Reset the fleet to continue."
+            + f". Either the RK4 sub-step dt / substeps = {s.dt:g} / {s.substeps} s is too "
+            "long for the forces at that state (quadratic damping and the paper's cubic "
+            f"unmodeled terms, times unmodeled_scale = {s.disturbances.unmodeled_scale:g}, grow "
+            "with speed), or the commands drove the vessel to extreme speeds. Use more "
+            "substeps or a smaller dt, a smaller unmodeled_scale or milder model parameters, "
+            "or check the policy. Reset the fleet to continue."
         )
 
     def accelerations(self, tau: ArrayLike | None = None) -> NDArray[np.float64]:
