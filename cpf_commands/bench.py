@@ -28,8 +28,10 @@ from tqdm.auto import tqdm
 
 from cpf_commands.bench_report import CellResult, write_outputs
 from cpf_commands.episodes import run_episodes
-from cpf_commands.policies import PolicySpec, policy_label, resolve_policy
+from cpf_commands.policies import PolicySpec, policy_argument, policy_label, resolve_policy
 from cpf_env import scenarios
+from cpf_env.env import make_scenario
+from cpf_env.scenarios import Scenario
 from cpf_env.suite import is_deterministic, list_suite
 
 __all__ = ["BASE_SEED", "bench_main", "run_bench"]
@@ -56,7 +58,7 @@ def _labelled(policies: Sequence[PolicySpec] | Mapping[str, PolicySpec]) -> dict
 
 def run_bench(
     policies: Sequence[PolicySpec] | Mapping[str, PolicySpec],
-    scenario_names: Sequence[str],
+    scenario_names: Sequence[str | Scenario],
     seeds: int = 10,
     base_seed: int = BASE_SEED,
     steps: int | None = None,
@@ -70,7 +72,7 @@ def run_bench(
     Args:
         policies: Policy specifications (see ``resolve_policy``), or a mapping
             label -> specification.
-        scenario_names: Registered scenario names.
+        scenario_names: Registered scenario names or ``Scenario`` objects.
         seeds: Episodes per (policy, scenario) (one on a deterministic scenario).
         base_seed: Episode k is reset with seed ``base_seed + k``.
         steps: Horizon override (default: each scenario's ``max_steps``).
@@ -89,7 +91,7 @@ def run_bench(
         raise ValueError(f"seeds must be >= 1, got {seeds}.")
     if steps is not None and int(steps) < 1:
         raise ValueError(f"steps must be >= 1, got {steps}.")
-    tasks = [scenarios.get(name) for name in scenario_names]
+    tasks = [make_scenario(name) for name in scenario_names]
     labelled = _labelled(policies)
     built = {
         (label, task.name): resolve_policy(spec, task)
@@ -128,6 +130,7 @@ def _parser() -> argparse.ArgumentParser:
         "--policies",
         nargs="+",
         default=list(POLICIES),
+        type=policy_argument,
         metavar="POLICY",
         help="baseline names or cpf-train --out folders",
     )

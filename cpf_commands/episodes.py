@@ -73,11 +73,15 @@ Array = NDArray[np.float64]
 
 
 def _reduce(series: dict[str, Array], mask: NDArray[np.bool_], dt: float) -> dict[str, Array]:
-    """Metrics over the steps in ``mask`` (T, S) of per-step series with leading axes (T, S)."""
-    count = np.maximum(mask.sum(axis=0), 1)
+    """Metrics over the steps in ``mask`` (S, T) of per-step series of shape (S, T).
+
+    Every reduction runs along the contiguous last axis, so fleet k's numbers
+    do not depend on how many fleets ran beside it.
+    """
+    count = np.maximum(mask.sum(axis=1), 1)
 
     def total(x: Array) -> Array:
-        return np.where(mask, x, 0.0).sum(axis=0)
+        return np.where(mask, x, 0.0).sum(axis=1)
 
     def rms(x: Array) -> Array:
         return np.sqrt(total(x**2) / count)
@@ -87,7 +91,7 @@ def _reduce(series: dict[str, Array], mask: NDArray[np.bool_], dt: float) -> dic
         "cost": -total(series["reward"]),
         **{name: -total(series[name]) for name in _TERM_COSTS},
         "path_error_rms": np.sqrt(total(series["path_error_sq"]) / count),
-        "path_error_max": np.where(mask, series["path_error_max"], 0.0).max(axis=0),
+        "path_error_max": np.where(mask, series["path_error_max"], 0.0).max(axis=1),
         "heading_error_rms": np.sqrt(total(series["heading_error_sq"]) / count),
         "coordination_error_rms": rms(series["spread"]),
         "speed_error_rms": np.sqrt(total(series["speed_error_sq"]) / count),
@@ -137,7 +141,7 @@ def run_episodes(
         "energy",
         "saturated",
     )
-    series = {name: np.zeros((horizon, S)) for name in names}
+    series = {name: np.zeros((S, horizon)) for name in names}
     has_estimate = True
     alive = np.ones(S, dtype=bool)
     failed = np.zeros(S, dtype=bool)
@@ -149,20 +153,20 @@ def run_episodes(
         actions[~alive] = 0.0
         obs = sim.step(actions)
         errors = a.errors
-        series["reward"][t] = a.reward.mean(axis=1)
+        series["reward"][:, t] = a.reward.mean(axis=1)
         for k, name in enumerate(_TERM_COSTS):
-            series[name][t] = a.reward_terms[:, :, k].mean(axis=1)
-        series["path_error_sq"][t] = (errors[..., kernels.ERR_PATH] ** 2).mean(axis=1)
-        series["path_error_max"][t] = errors[..., kernels.ERR_PATH].max(axis=1)
-        series["heading_error_sq"][t] = (errors[..., kernels.ERR_HEADING] ** 2).mean(axis=1)
-        series["speed_error_sq"][t] = (errors[..., kernels.ERR_SPEED] ** 2).mean(axis=1)
-        series["spread"][t] = a.theta.max(axis=1) - a.theta.min(axis=1)
-        series["energy"][t] = ((a.tau_applied / tau_scale) ** 2).sum(axis=2).mean(axis=1)
-        series["saturated"][t] = (a.tau_command != a.tau_applied).any(axis=2).mean(axis=1)
+            series[name][:, t] = a.reward_terms[:, :, k].mean(axis=1)
+        series["path_error_sq"][:, t] = (errors[..., kernels.ERR_PATH] ** 2).mean(axis=1)
+        series["path_error_max"][:, t] = errors[..., kernels.ERR_PATH].max(axis=1)
+        series["heading_error_sq"][:, t] = (errors[..., kernels.ERR_HEADING] ** 2).mean(axis=1)
+        series["speed_error_sq"][:, t] = (errors[..., kernels.ERR_SPEED] ** 2).mean(axis=1)
+        series["spread"][:, t] = a.theta.max(axis=1) - a.theta.min(axis=1)
+        series["energy"][:, t] = ((a.tau_applied / tau_scale) ** 2).sum(axis=2).mean(axis=1)
+        series["saturated"][:, t] = (a.tau_command != a.tau_applied).any(axis=2).mean(axis=1)
         if estimate is None:
             has_estimate = False
         else:
-            series["estimate_error_sq"][t] = ((np.asarray(estimate) - v0) ** 2).mean(axis=1)
+            series["estimate_error_sq"][:, t] = ((np.asarray(estimate) - v0) ** 2).mean(axis=1)
         now = alive & a.terminated
         failed |= now
         end[now] = t + 1
@@ -173,13 +177,13 @@ def run_episodes(
             if progress is not None:
                 progress.update(horizon - t - 1)
             break
-    time = np.arange(horizon)[:, None]
-    counted = time < end
+    time = np.arange(horizon)[None, :]
+    counted = time < end[:, None]
     start = horizon - max(1, round(WINDOW_FRACTION * horizon))
-    window = counted & (time >= np.minimum(start, end - 1))
+    window = counted & (time >= np.minimum(start, end - 1)[:, None])
     metrics = _reduce(series, counted, scenario.dt)
     metrics.update({f"{k}_window": v for k, v in _reduce(series, window, scenario.dt).items()})
-    metrics["coordination_error_end"] = series["spread"][end - 1, np.arange(S)]
+    metrics["coordination_error_end"] = series["spread"][np.arange(S), end - 1]
     if not has_estimate:
         for name in ("speed_estimate_error_rms", "speed_estimate_error_rms_window"):
             metrics[name] = np.full(S, np.nan)

@@ -20,6 +20,7 @@ Example:
 
 from __future__ import annotations
 
+import argparse
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any, Protocol, runtime_checkable
@@ -30,7 +31,7 @@ from numpy.typing import NDArray
 from cpf_env.env import make_scenario
 from cpf_env.scenarios import Scenario
 
-__all__ = ["BenchPolicy", "PolicySpec", "policy_label", "resolve_policy"]
+__all__ = ["BenchPolicy", "PolicySpec", "policy_argument", "policy_label", "resolve_policy"]
 
 
 @runtime_checkable
@@ -62,6 +63,30 @@ def policy_label(spec: PolicySpec) -> str:
     return str(getattr(spec, "name", getattr(spec, "__name__", type(spec).__name__)))
 
 
+def _check_name(spec: str | Path) -> None:
+    """Raise ValueError unless ``spec`` is a baseline name or an existing folder."""
+    from baselines import POLICIES
+
+    if str(spec) not in POLICIES and not Path(spec).is_dir():
+        raise ValueError(
+            f"policy {str(spec)!r} is neither a baseline ({', '.join(sorted(POLICIES))}) "
+            "nor an existing cpf-train --out folder."
+        )
+
+
+def policy_argument(text: str) -> str:
+    """``argparse`` type of a policy argument: a baseline name or an existing folder.
+
+    Raises:
+        argparse.ArgumentTypeError: Neither (argparse reports the message).
+    """
+    try:
+        _check_name(text)
+    except ValueError as error:
+        raise argparse.ArgumentTypeError(str(error)) from error
+    return text
+
+
 def resolve_policy(spec: PolicySpec, scenario: str | Scenario, **options: Any) -> BenchPolicy:
     """Build the policy ``spec`` for ``scenario``.
 
@@ -87,12 +112,7 @@ def resolve_policy(spec: PolicySpec, scenario: str | Scenario, **options: Any) -
             f"options {sorted(options)} apply to baselines only, not to {policy_label(spec)!r}."
         )
     if isinstance(spec, str | Path):
-        folder = Path(spec)
-        if not folder.is_dir():
-            raise ValueError(
-                f"policy {str(spec)!r} is neither a baseline ({', '.join(sorted(POLICIES))}) "
-                "nor an existing cpf-train --out folder."
-            )
+        _check_name(spec)
         try:
             from agents import load_policy  # type: ignore[attr-defined]
         except ImportError as error:
@@ -100,7 +120,7 @@ def resolve_policy(spec: PolicySpec, scenario: str | Scenario, **options: Any) -
                 f"{str(spec)!r} is a folder, but loading trained agents needs "
                 "agents.load_policy (the learning extra: pip install 'cpf_env[rl]')."
             ) from error
-        return load_policy(folder, resolved)  # type: ignore[no-any-return]
+        return load_policy(Path(spec), resolved)  # type: ignore[no-any-return]
     if isinstance(spec, BenchPolicy):
         return spec
     if callable(spec):
