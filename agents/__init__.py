@@ -12,6 +12,8 @@ See ``docs/residual_rl.md``.
 
 from __future__ import annotations
 
+from agents.loading import TrainedPolicy, load_policy
+from agents.training import TrainConfig, train
 from agents.vec_env import FleetVecEnv
 
-__all__ = ["FleetVecEnv"]
+__all__ = ["FleetVecEnv", "TrainConfig", "TrainedPolicy", "load_policy", "train"]

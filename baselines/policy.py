@@ -271,9 +271,8 @@ class Policy(PolicyInterface, abc.ABC):
                 f"observations must have shape (B, n, obs_dim) = (B, {self.n}, {self.obs_dim}) "
                 f"with B >= 1 for scenario {self.scenario.name!r}, got {batch.shape}."
             )
-        bad = np.argwhere(~np.isfinite(batch))
-        if bad.size:
-            b, i, k = bad[0]
+        if not np.isfinite(batch).all():
+            b, i, k = np.argwhere(~np.isfinite(batch))[0]
             raise ValueError(
                 f"observation of fleet {b}, vessel_{i}, entry {k} ({self.layout.names()[k]}) "
                 f"is {batch[b, i, k]}: observations must be finite."
