@@ -11,6 +11,7 @@ import argparse
 import time
 from collections.abc import Sequence
 
+from cpf_commands.policies import policy_argument
 from cpf_env import scenarios
 
 __all__ = ["run_main"]
@@ -25,7 +26,12 @@ def _run_parser() -> argparse.ArgumentParser:
         "trajectory.npz; print the paper's claims with the measured values.",
     )
     parser.add_argument("--scenario", default="wang2014", choices=scenarios.list_scenarios())
-    parser.add_argument("--policy", default="nn_dsc", choices=sorted(POLICIES))
+    parser.add_argument(
+        "--policy",
+        default="nn_dsc",
+        type=policy_argument,
+        help=f"a baseline ({', '.join(sorted(POLICIES))}) or a cpf-train --out folder",
+    )
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument(
         "--steps",

@@ -136,7 +136,7 @@ def reproduce(
 
     Args:
         scenario: Scenario name or object.
-        policy: Policy name.
+        policy: A baseline name or a ``cpf-train --out`` folder (``resolve_policy``).
         seed: Seed of environment and policy.
         steps: Control steps (default: the scenario's episode length).
         out: Output directory; a subdirectory ``<scenario>_<policy>`` is written.
@@ -155,7 +155,7 @@ def reproduce(
         scenario=name, policy=policy, seed=seed, claims=[asdict(claim) for claim in claims]
     )
     if out is not None:
-        directory = Path(out) / f"{name}_{policy}"
+        directory = Path(out) / f"{name}_{Path(policy).name}"
         directory.mkdir(parents=True, exist_ok=True)
         (directory / "metrics.json").write_text(json.dumps(metrics, indent=2))
         trajectory.save(str(directory / "trajectory.npz"))

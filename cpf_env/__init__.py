@@ -7,9 +7,9 @@ Factories (PettingZoo convention)::
     aec = cpf_env.env("lossy_links")                 # AEC form
     raw = cpf_env.raw_env(scenario, max_steps=500)   # the unwrapped class
 
-Scenarios: ``cpf_env.scenarios.list_scenarios()``. Documentation: ``docs/`` in
-the repository (``docs/environment.md`` for the interface, ``docs/model.md`` for
-the equations).
+Scenarios: ``cpf_env.scenarios.list_scenarios()``; the benchmark suite:
+``cpf_env.suite.list_suite()``. Documentation: ``docs/`` in the repository
+(``docs/environment.md`` for the interface, ``docs/model.md`` for the equations).
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ from typing import Any
 from pettingzoo.utils import wrappers
 from pettingzoo.utils.env import AECEnv
 
-from cpf_env import scenarios
+from cpf_env import scenarios, suite
 from cpf_env.aec import CheckedAEC
 from cpf_env.env import CooperativePathFollowingEnv
 from cpf_env.gym_envs import register_envs
@@ -36,6 +36,7 @@ __all__ = [
     "parallel_env",
     "raw_env",
     "scenarios",
+    "suite",
 ]
 __version__ = "0.1.0"
 
