@@ -16,8 +16,8 @@ from __future__ import annotations
 
 from typing import Any
 
-from pettingzoo.utils import wrappers
 from pettingzoo.utils.env import AECEnv
+from pettingzoo.utils.wrappers import OrderEnforcingWrapper
 
 from cpf_env import scenarios, suite
 from cpf_env.aec import CheckedAEC
@@ -99,7 +99,7 @@ def env(scenario: str | Scenario = "wang2014", **kwargs: Any) -> AECEnv:
         ...     aec.step(None if termination or truncation else aec.action_space(agent).sample())
     """
     aec = CheckedAEC(parallel_env(scenario, **kwargs))
-    return wrappers.OrderEnforcingWrapper(aec)
+    return OrderEnforcingWrapper(aec)
 
 
 register_envs()
