@@ -26,7 +26,8 @@ from pathlib import Path
 
 from tqdm.auto import tqdm
 
-from cpf_commands.bench_report import CellResult, write_outputs
+from cpf_commands import bench_views
+from cpf_commands.bench_report import HEADLINE, CellResult, episodes_csv, summarize, summary_csv
 from cpf_commands.episodes import run_episodes
 from cpf_commands.policies import PolicySpec, policy_argument, policy_label, resolve_policy
 from cpf_env import scenarios
@@ -34,7 +35,7 @@ from cpf_env.env import make_scenario
 from cpf_env.scenarios import Scenario
 from cpf_env.suite import is_deterministic, list_suite
 
-__all__ = ["BASE_SEED", "bench_main", "run_bench"]
+__all__ = ["BASE_SEED", "bench_main", "run_bench", "write_outputs"]
 
 #: First evaluation seed (kept apart from the small seeds training runs use).
 BASE_SEED = 10_000
@@ -54,6 +55,31 @@ def _labelled(policies: Sequence[PolicySpec] | Mapping[str, PolicySpec]) -> dict
             )
         labelled[label] = spec
     return labelled
+
+
+def write_outputs(
+    cells: Sequence[CellResult],
+    out: str | Path,
+    command: str,
+    reference: str = "nn_dsc",
+    figures: bool = True,
+) -> list[dict[str, object]]:
+    """Write episodes.csv, summary.csv, summary.md and one PNG per headline metric to ``out``.
+
+    Returns:
+        The summary rows.
+    """
+    directory = Path(out)
+    directory.mkdir(parents=True, exist_ok=True)
+    rows = summarize(cells, reference)
+    (directory / "episodes.csv").write_text(episodes_csv(cells))
+    (directory / "summary.csv").write_text(summary_csv(rows))
+    (directory / "summary.md").write_text(bench_views.markdown(rows, cells, command, reference))
+    if figures:
+        for metric, title in HEADLINE:
+            drawing = bench_views.figure(rows, cells, metric, title)
+            drawing.savefig(directory / f"{metric}.png", dpi=100, metadata={"Software": None})
+    return rows
 
 
 def run_bench(
