@@ -148,9 +148,8 @@ def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="cpf-bench",
         description="Run policies x scenarios x paired seeds in batched simulators and write "
-        "episodes.csv, summary.csv, summary.md and figures (means and IQMs with 95% "
-        "bootstrap intervals, failures counted, scores relative to nn_dsc).",
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+        "episodes.csv, summary.csv, summary.md and figures: means and interquartile means "
+        "with 95 % bootstrap intervals, failures counted, scores relative to nn_dsc.",
     )
     parser.add_argument(
         "--policies",
@@ -158,7 +157,7 @@ def _parser() -> argparse.ArgumentParser:
         default=list(POLICIES),
         type=policy_argument,
         metavar="POLICY",
-        help="baseline names or cpf-train --out folders",
+        help="baseline names or cpf-train --out folders (default: every baseline)",
     )
     parser.add_argument(
         "--scenarios",
@@ -166,14 +165,26 @@ def _parser() -> argparse.ArgumentParser:
         default=list_suite(),
         choices=scenarios.list_scenarios(),
         metavar="SCENARIO",
-        help="registered scenario names (default: the benchmark suite)",
+        help="registered scenario names (default: the benchmark suite, bench_*)",
     )
-    parser.add_argument("--seeds", type=int, default=10, help="episodes per policy and scenario")
-    parser.add_argument("--base-seed", type=int, default=BASE_SEED, help="seed of episode 0")
     parser.add_argument(
-        "--steps", type=int, default=None, help="horizon override (default: the scenario's)"
+        "--seeds", type=int, default=10, help="episodes per policy and scenario (default: 10)"
     )
-    parser.add_argument("--out", default="outputs/bench", help="output folder")
+    parser.add_argument(
+        "--base-seed",
+        type=int,
+        default=BASE_SEED,
+        help=f"seed of episode 0; episode k uses base + k (default: {BASE_SEED})",
+    )
+    parser.add_argument(
+        "--steps",
+        type=int,
+        default=None,
+        help="horizon in control steps, for quick runs (default: each scenario's max_steps)",
+    )
+    parser.add_argument(
+        "--out", default="outputs/bench", help="output folder (default: outputs/bench)"
+    )
     parser.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     return parser
