@@ -218,7 +218,7 @@ def bench_main(argv: Sequence[str] | None = None) -> int:
             progress=not args.quiet,
             figures=not args.no_figures,
         )
-    except ValueError as error:
+    except (ValueError, FileNotFoundError) as error:
         parser.error(str(error))
     elapsed = time.perf_counter() - start
     print(

@@ -114,7 +114,7 @@ def resolve_policy(spec: PolicySpec, scenario: str | Scenario, **options: Any) -
     if isinstance(spec, str | Path):
         _check_name(spec)
         try:
-            from agents import load_policy  # type: ignore[attr-defined]
+            from agents import load_policy
         except ImportError as error:
             raise ValueError(
                 f"{str(spec)!r} is a folder, but loading trained agents needs "
