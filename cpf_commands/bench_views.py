@@ -125,7 +125,8 @@ def figure(
                     fontsize=7,
                     color="red",
                 )
-        ax.set_title(name, fontsize=9)
+        deterministic = any(c.deterministic for c in cells if c.scenario == name)
+        ax.set_title(f"{name} (deterministic)" if deterministic else name, fontsize=9)
         ax.set_xticks(range(len(policies)), policies, rotation=45, ha="right", fontsize=7)
         ax.tick_params(axis="y", labelsize=7)
         ax.grid(axis="y", alpha=0.3)
