@@ -29,7 +29,13 @@ from tqdm.auto import tqdm
 from cpf_commands import bench_views
 from cpf_commands.bench_report import HEADLINE, CellResult, episodes_csv, summarize, summary_csv
 from cpf_commands.episodes import run_episodes
-from cpf_commands.policies import PolicySpec, policy_argument, policy_label, resolve_policy
+from cpf_commands.policies import (
+    BenchPolicy,
+    PolicySpec,
+    policy_argument,
+    policy_label,
+    resolve_policy,
+)
 from cpf_env import scenarios
 from cpf_env.env import make_scenario
 from cpf_env.scenarios import Scenario
@@ -62,9 +68,18 @@ def write_outputs(
     out: str | Path,
     command: str,
     reference: str = "nn_dsc",
+    skipped: Mapping[tuple[str, str], str] | None = None,
     figures: bool = True,
 ) -> list[dict[str, object]]:
     """Write episodes.csv, summary.csv, summary.md and one PNG per headline metric to ``out``.
+
+    Args:
+        cells: The results.
+        out: Output folder (created).
+        command: The command line recorded in summary.md.
+        reference: The policy scores are relative to.
+        skipped: (policy, scenario) -> why it was not run, listed in summary.md.
+        figures: Write the PNG figures.
 
     Returns:
         The summary rows.
@@ -74,12 +89,36 @@ def write_outputs(
     rows = summarize(cells, reference)
     (directory / "episodes.csv").write_text(episodes_csv(cells))
     (directory / "summary.csv").write_text(summary_csv(rows))
-    (directory / "summary.md").write_text(bench_views.markdown(rows, cells, command, reference))
+    text = bench_views.markdown(rows, cells, command, reference, skipped or {})
+    (directory / "summary.md").write_text(text)
     if figures:
         for metric, title in HEADLINE:
             drawing = bench_views.figure(rows, cells, metric, title)
             drawing.savefig(directory / f"{metric}.png", dpi=100, metadata={"Software": None})
     return rows
+
+
+def _build(
+    labelled: dict[str, PolicySpec], tasks: Sequence[Scenario]
+) -> tuple[dict[tuple[str, str], BenchPolicy], dict[tuple[str, str], str]]:
+    """Each policy built for each scenario, and the (label, scenario) pairs that did not fit.
+
+    Raises:
+        ValueError: A policy that fits none of the scenarios (the first reason).
+    """
+    built: dict[tuple[str, str], BenchPolicy] = {}
+    skipped: dict[tuple[str, str], str] = {}
+    for label, spec in labelled.items():
+        reasons = []
+        for task in tasks:
+            try:
+                built[(label, task.name)] = resolve_policy(spec, task)
+            except ValueError as error:
+                skipped[(label, task.name)] = str(error)
+                reasons.append(str(error))
+        if len(reasons) == len(tasks):
+            raise ValueError(reasons[0])
+    return built, skipped
 
 
 def run_bench(
@@ -108,10 +147,13 @@ def run_bench(
         figures: Write the PNG figures.
 
     Returns:
-        One ``CellResult`` per (policy, scenario), policies outermost.
+        One ``CellResult`` per (policy, scenario), policies outermost. A policy
+        that cannot be built for a scenario (a trained agent whose observation
+        layout differs) skips it; summary.md lists what was skipped and why.
 
     Raises:
-        ValueError: Unknown scenario or policy, fewer than one seed, or a bad horizon.
+        ValueError: Unknown scenario or policy, a policy that fits none of the
+            scenarios, fewer than one seed, or a bad horizon.
     """
     if int(seeds) < 1:
         raise ValueError(f"seeds must be >= 1, got {seeds}.")
@@ -119,17 +161,15 @@ def run_bench(
         raise ValueError(f"steps must be >= 1, got {steps}.")
     tasks = [make_scenario(name) for name in scenario_names]
     labelled = _labelled(policies)
-    built = {
-        (label, task.name): resolve_policy(spec, task)
-        for label, spec in labelled.items()
-        for task in tasks
-    }
+    built, skipped = _build(labelled, tasks)
     horizon = {task.name: task.max_steps if steps is None else int(steps) for task in tasks}
-    total = len(labelled) * sum(horizon.values())
+    total = sum(horizon[scenario] for _, scenario in built)
     cells = []
     with tqdm(total=total, disable=not progress, unit="step", desc="cpf-bench") as bar:
         for label in labelled:
             for task in tasks:
+                if (label, task.name) not in built:
+                    continue
                 bar.set_postfix_str(f"{label} on {task.name}")
                 deterministic = is_deterministic(task)
                 episode_seeds = tuple(base_seed + k for k in range(1 if deterministic else seeds))
@@ -138,7 +178,7 @@ def run_bench(
                 )
                 cells.append(CellResult(label, task.name, episode_seeds, deterministic, metrics))
     if out is not None:
-        write_outputs(cells, out, command, figures=figures)
+        write_outputs(cells, out, command, skipped=skipped, figures=figures)
     return cells
 
 

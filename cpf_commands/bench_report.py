@@ -144,6 +144,8 @@ def _suite_rows(
     references = [by_key[(reference, name)] for name in names]
     rows = []
     for policy in dict.fromkeys(cell.policy for cell in cells):
+        if any((policy, name) not in by_key for name in names):
+            continue  # not run on every scenario: no suite-wide row
         own = [by_key[(policy, name)] for name in names]
         failures = sum(int(cell.metrics["terminated"].sum()) for cell in own)
         for metric, _ in HEADLINE:

@@ -7,7 +7,7 @@ the same rows give the same bytes.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 from matplotlib.figure import Figure
@@ -33,7 +33,11 @@ def _table(header: Sequence[str], body: Sequence[Sequence[str]]) -> list[str]:
 
 
 def markdown(
-    rows: list[dict[str, object]], cells: Sequence[CellResult], command: str, reference: str
+    rows: list[dict[str, object]],
+    cells: Sequence[CellResult],
+    command: str,
+    reference: str,
+    skipped: Mapping[tuple[str, str], str],
 ) -> str:
     """``summary.md``: the command, how to read it, and the headline metrics' tables."""
     index = {(r["policy"], r["scenario"], r["metric"]): r for r in rows}
@@ -51,6 +55,9 @@ def markdown(
         f"failure. `/ {reference}`: the mean cost over {reference}'s; `P(beats)`: probability "
         f"of a lower cost than {reference} on the same seed. All numbers: `summary.csv`.",
     ]
+    if skipped:
+        lines += ["", "Not run (the policy does not fit the scenario):", ""]
+        lines += [f"- {policy} on {name}: {why}" for (policy, name), why in skipped.items()]
     if any(r["scenario"] == "all" for r in rows):
         body = []
         for policy in policies:
