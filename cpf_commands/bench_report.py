@@ -26,7 +26,7 @@ from cpf_commands.episodes import METRICS
 
 __all__ = ["HEADLINE", "SUMMARY_COLUMNS", "CellResult", "episodes_csv", "summarize", "summary_csv"]
 
-#: Metrics shown in summary.md and drawn as figures: (metric, heading in tables and figures).
+#: Metrics shown in summary.md and drawn as figures: (metric, heading), cost first.
 HEADLINE: tuple[tuple[str, str], ...] = (
     ("cost", "cost"),
     ("cost_window", "cost, final window"),

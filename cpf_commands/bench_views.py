@@ -17,11 +17,13 @@ from cpf_commands.bench_report import HEADLINE, CellResult
 __all__ = ["figure", "markdown"]
 
 
-def _interval(row: dict[str, object] | None) -> str:
-    """The mean with its interval in brackets (the mean alone for one episode)."""
+def _interval(row: dict[str, object] | None, estimate: str = "mean") -> str:
+    """An estimate ("mean" or "iqm") with its interval in brackets (alone for one episode)."""
     if row is None:
         return ""
-    mean, low, high = (float(row[k]) for k in ("mean", "ci_low", "ci_high"))  # type: ignore[arg-type]
+    prefix = "" if estimate == "mean" else f"{estimate}_"
+    keys = (estimate, f"{prefix}ci_low", f"{prefix}ci_high")
+    mean, low, high = (float(row[k]) for k in keys)  # type: ignore[arg-type]
     if row["n_episodes"] == 1:
         return f"{mean:.3g}"
     return f"{mean:.3g} [{low:.3g}, {high:.3g}]"
@@ -52,8 +54,9 @@ def markdown(
         "Mean over episodes with its 95 % bootstrap interval in brackets (2000 replicates, "
         "fixed seed); every policy runs the same seeds. Failures are episodes that left the "
         "path: counted, never dropped; a failed episode's metrics cover its steps up to the "
-        f"failure. `/ {reference}`: the mean cost over {reference}'s; `P(beats)`: probability "
-        f"of a lower cost than {reference} on the same seed. All numbers: `summary.csv`.",
+        f"failure. IQM: interquartile mean. `/ {reference}`: the mean cost over {reference}'s; "
+        f"`P(beats)`: probability of a lower cost than {reference} on the same seed. "
+        "All numbers: `summary.csv`.",
     ]
     if skipped:
         lines += ["", "Not run (the policy does not fit the scenario):", ""]
@@ -89,9 +92,11 @@ def markdown(
             p = "" if cost["p_beats_reference"] is None else f"{cost['p_beats_reference']:.2f}"
             failures = f"{cost['failures']}/{cost['n_episodes']}"
             found = [index.get((policy, name, m)) for m, _ in HEADLINE]
-            body.append([policy, *(_interval(r) for r in found), failures, ratio, p])
+            text = [_interval(r) for r in found]
+            body.append([policy, text[0], _interval(cost, "iqm"), *text[1:], failures, ratio, p])
         lines += ["", f"## {name} ({count})", ""]
-        lines += _table(["policy", *headings, "failures", f"/ {reference}", "P(beats)"], body)
+        header = ["policy", headings[0], "cost IQM", *headings[1:]]
+        lines += _table([*header, "failures", f"/ {reference}", "P(beats)"], body)
     return "\n".join(lines) + "\n"
 
 
