@@ -53,7 +53,7 @@ def train_runs(
                     fleets=fleets,
                     timesteps=timesteps,
                     seed=seed,
-                    batch_size=4096,
+                    batch_size=2560,
                     log_std_init=-1.0 if base != "none" else -0.5,
                 )
                 print(f"training {folder.name} ...", flush=True)
@@ -101,7 +101,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--results", default="results/residual_rl", help="evaluation output")
     parser.add_argument("--timesteps", type=int, default=1_500_000, help="per training run")
     parser.add_argument("--train-seeds", type=int, nargs="+", default=[0, 1, 2], help="seeds")
-    parser.add_argument("--fleets", type=int, default=128, help="fleets per training run")
+    parser.add_argument("--fleets", type=int, default=64, help="fleets per training run")
     parser.add_argument("--seeds", type=int, default=20, help="evaluation episodes")
     parser.add_argument("--scenarios", nargs="+", default=list(SCENARIOS), help="scenarios")
     args = parser.parse_args(argv)
