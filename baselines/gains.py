@@ -18,8 +18,10 @@ in our copy; PAPER.md section 4), chosen by ``NNDSCGains.leakage``:
 
 ``"gamma_scaled"`` (the default) is stable at the RL control step of 0.05 s
 but learns only s / (K2 + s) of the lumped uncertainty, s = ||sigma||^2 / k_W;
-``"plain"`` integrates (s = Gamma_W ||sigma||^2 / k_W) and tracks it, but needs a
-control step of about 0.01 s (loop gain (K2 + s) dt / M33).
+``"plain"`` integrates (s = Gamma_W ||sigma||^2 / k_W ~ 1010) and tracks it, but
+with K2 it forms a lightly damped PI loop (yaw: sqrt(s / M33) ~ 19 rad/s) that
+sampling destabilizes above a control step of about 0.01 s: use it with the
+0.01 s scenarios ``*_fine`` (``docs/reproduction.md``).
 
 ======================  ===========  =========================================
 class                   used by      fields

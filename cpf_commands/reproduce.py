@@ -18,7 +18,7 @@ fine-step scenarios, which exist for it, the policy's own default elsewhere.
 from __future__ import annotations
 
 import json
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -40,6 +40,7 @@ __all__ = [
     "Claim",
     "default_leakage",
     "evaluate_claims",
+    "policy_options",
     "predicted_nn_error",
     "reproduce",
     "settling_time",
@@ -66,6 +67,8 @@ class Claim:
         statement: What the paper claims.
         measured: What this run measured, in words with numbers.
         holds: Whether the measured value meets the stated threshold.
+        values: The measured numbers by name (JSON-ready), e.g. ``relative_error``
+            and ``predicted_relative_error`` (surge, sway, yaw) for claim 2.
     """
 
     number: int
@@ -73,6 +76,7 @@ class Claim:
     statement: str
     measured: str
     holds: bool
+    values: dict[str, Any] = field(default_factory=dict)
 
 
 def default_leakage(scenario: str) -> str:
@@ -147,8 +151,8 @@ def predicted_nn_error(
 
 def _nn_claim(
     trajectory: Trajectory, vessel: int, gains: NNDSCGains | None
-) -> tuple[str, bool] | None:
-    """Claim 2's message and verdict, or None if the policy has no NN."""
+) -> tuple[str, bool, dict[str, Any]] | None:
+    """Claim 2's message, verdict and values, or None if the policy has no NN."""
     nn_error = _nn_relative_error(trajectory, vessel)
     if nn_error is None:
         return None
@@ -157,15 +161,17 @@ def _nn_claim(
         + ", ".join(f"{e:.3f}" for e in nn_error)
         + f" (tracks if < {NN_TRACKING_TOLERANCE})"
     )
+    values: dict[str, Any] = {"relative_error": nn_error.tolist()}
     prediction = None if gains is None else predicted_nn_error(trajectory, gains, vessel)
     if gains is not None and prediction is not None:
         predicted, s = prediction
+        values.update(predicted_relative_error=predicted.tolist(), s_mean=s)
         message += (
             "; steady-state formula K2/(K2+s) predicts "
             + ", ".join(f"{e:.3f}" for e in predicted)
             + f" with s = {gains.static_gain():g} ||sigma||^2 = {s:.3g} (leakage={gains.leakage})"
         )
-    return message, bool(np.all(nn_error < NN_TRACKING_TOLERANCE))
+    return message, bool(np.all(nn_error < NN_TRACKING_TOLERANCE)), values
 
 
 def evaluate_claims(
@@ -203,6 +209,7 @@ def evaluate_claims(
             "every vessel converges to a small neighbourhood of its path",
             f"max path error over last quarter {path:.3g} m (threshold {PATH_TOLERANCE} m)",
             path < PATH_TOLERANCE,
+            {"path_error_max": path},
         )
     ]
     if nn is not None:
@@ -222,6 +229,7 @@ def evaluate_claims(
             f"max |theta_i - theta_j| over last quarter {coordination:.3g} "
             f"(threshold {COORDINATION_TOLERANCE})",
             coordination < COORDINATION_TOLERANCE,
+            {"coordination_error_max": coordination},
         ),
         Claim(
             4,
@@ -233,6 +241,7 @@ def evaluate_claims(
             + ", ".join(f"{t:.3g}" for t in limits)
             + ")",
             bool(np.all(tau <= limits + 1e-12)) and metrics["force_within_limits"],
+            {"force_max_abs": tau.tolist(), "limits": limits.tolist()},
         ),
     ]
     if speed is not None:
@@ -244,6 +253,7 @@ def evaluate_claims(
                 f"max |vhat_i - v0| over last quarter {max(speed):.3g} m/s "
                 f"(threshold {SPEED_TOLERANCE})",
                 max(speed) < SPEED_TOLERANCE,
+                {"speed_estimate_error_max": max(speed)},
             )
         )
     return claims
@@ -257,7 +267,7 @@ def warm_up(scenario: str | Scenario) -> None:
     sim.step(np.zeros((1, sim.scenario.n, sim.act_dim)))
 
 
-def _policy_options(policy: str, scenario: str, leakage: str | None) -> dict[str, Any]:
+def policy_options(policy: str, scenario: str, leakage: str | None) -> dict[str, Any]:
     """Options for ``make_policy``: the weight-law reading, for policies that have one."""
     gains_type = getattr(POLICIES.get(policy), "gains_type", None)
     if gains_type is None or "leakage" not in gains_type.option_names():
@@ -302,7 +312,7 @@ def reproduce(
         writes, ``output_directory``.
     """
     resolved = make_scenario(scenario)
-    options = _policy_options(policy, resolved.name, leakage)
+    options = policy_options(policy, resolved.name, leakage)
     if progress:
         warm_up(resolved)
     trajectory = run_episode(
