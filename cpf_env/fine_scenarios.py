@@ -5,9 +5,10 @@ simulated in continuous time. Its claim that the NN tracks the lumped
 uncertainty (Fig. 4) holds with the integrating reading of the weight law
 (``nn_dsc`` with ``leakage="plain"``), and that reading needs a control step
 of 0.01 s or less (its yaw loop decays at 0.01 s, not at 0.0125 s; see
-``docs/reproduction.md``). These scenarios are the RL scenarios at dt = 0.01 s, the plant integrated by
-one RK4 step per control step (the same 0.01 s RK4 step as at dt = 0.05 s
-with 5 sub-steps), over the same simulated time:
+``docs/reproduction.md``). These scenarios are the RL scenarios at
+dt = 0.01 s, the plant integrated by one RK4 step per control step (the same
+0.01 s RK4 step as at dt = 0.05 s with 5 sub-steps), over the same simulated
+time:
 
 =====================  =================================================================
 name                   what it shows

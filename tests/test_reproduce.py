@@ -1,5 +1,6 @@
 from __future__ import annotations
 
+import importlib.util
 import json
 import runpy
 import sys
@@ -179,6 +180,22 @@ def test_example_help_shows_its_own_name(monkeypatch, capsys):
         runpy.run_path(str(ROOT / "examples" / "reproduce_wang2014.py"), run_name="__main__")
     assert exit_info.value.code == 0
     assert capsys.readouterr().out.startswith("usage: reproduce_wang2014.py")
+
+
+def test_reproduction_tables_example(capsys):
+    spec = importlib.util.spec_from_file_location(
+        "reproduction_tables", ROOT / "examples" / "reproduction_tables.py"
+    )
+    tables = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(tables)
+    claims = tables.main(["claims", "--steps", "20"]).splitlines()
+    assert len(claims) == 2 + 5 and "formula:" in claims[3]
+    rows = tables.ablation_rows(steps=10)
+    assert [(r[0], r[2]) for r in rows] == [
+        (s, p) for s in tables.ABLATION_SCENARIOS for p in tables.ABLATION_POLICIES
+    ]
+    assert {r[1] for r in rows if r[0].endswith("_fine")} == {"plain"}
+    assert {r[1] for r in rows if not r[0].endswith("_fine")} == {"gamma_scaled"}
 
 
 def test_cli_rejects_unknown_scenario(capsys):
