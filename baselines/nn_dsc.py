@@ -14,6 +14,13 @@ Wang, Wang & Peng (2014), PAPER.md section 4, per vessel i:
 
 with the cooperative layer of ``baselines.cooperative`` (eqs. [34]-[35]).
 
+Two readings of [30] are offered (option ``leakage``, ``baselines.gains``):
+the default above, and ``"plain"``, the integrating one under which the NN
+tracks f (claim 2) but which needs a control step of about 0.01 s. Both adapt
+on e_i2 = z_i2 - pi_i, as the command does: our choice (the paper's proof
+suggests z_i2). It is what lets the auxiliary system keep an integrating NN
+from learning the saturation as model error (``docs/reproduction.md``).
+
 Discrete time, one update per control step k (obs_k is the observation after
 step k - 1; every input is held over the step, as the plant holds tau):
 
