@@ -6,13 +6,13 @@ fleets. It reads nothing but the observation and the scenario's known
 constants (nominal model, saturation limits, dt, message size) and never
 touches a simulator.
 
-Interface (ARCHITECTURE.md, "Policies"):
+Interface (``baselines.interface.PolicyInterface``, shared with trained agents):
 
-- ``act_batch(obs (B, n, obs_dim)) -> (B, n, 4 + m)``: the core, float64;
+- ``act_batch(obs (B, n, obs_dim), fleets=None) -> (B, n, 4 + m)``: the core, float64;
 - ``act(observations: dict) -> dict`` for the PettingZoo ``ParallelEnv`` (B = 1, float32);
 - ``predict(obs, state, episode_start, deterministic)`` in the Stable-Baselines3 style,
   so ``stable_baselines3.common.evaluation.evaluate_policy`` runs it;
-- ``reset(seed=None)``: forget all internal states (they restart on the next act);
+- ``reset(seed=None)`` / ``reset_fleets(mask)``: forget all / some fleets' internal states;
 - ``diagnostics``: internal signals of the last ``act_batch``, leading axes (B, n).
 
 Action of vessel i: [tau0 (3, N, N, N m, before saturation), theta_dot (1/s),
@@ -22,7 +22,6 @@ vhat_i(k + 1) (m/s), 0 ...]: the env saturates tau0 and integrates theta.
 from __future__ import annotations
 
 import abc
-from collections.abc import Callable, Mapping
 from typing import Any, ClassVar
 
 import numpy as np
@@ -30,6 +29,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from baselines.cooperative import CooperativeLayer, CooperativeStep, LocalObservation
 from baselines.gains import CooperativeGains
+from baselines.interface import PolicyInterface
 from cpf_env import scenarios
 from cpf_env.scenarios import Scenario
 from cpf_env.sim import observation_layout
@@ -86,7 +86,7 @@ def virtual_control(k1: Array, z1: Array, t1: Array, vhat: Array) -> Array:
     return -k1 * z1 + t1 * vhat[..., None]
 
 
-class Policy(abc.ABC):
+class Policy(PolicyInterface, abc.ABC):
     """Base class: the cooperative layer, state bookkeeping and the input layouts.
 
     Subclasses give the kinetic part (the force command) through
@@ -177,28 +177,76 @@ class Policy(abc.ABC):
         self._steps = np.zeros(0, dtype=np.int64)
         self.diagnostics = {}
 
-    def act_batch(self, obs: ArrayLike) -> Array:
+    def act_batch(self, obs: ArrayLike, fleets: ArrayLike | None = None) -> Array:
         """Actions of B fleets from their local observations.
 
         Args:
-            obs: (B, n, obs_dim) local observations at step k.
+            obs: (B, n, obs_dim) local observations at step k; with ``fleets``,
+                (len(fleets), n, obs_dim), one row per listed fleet.
+            fleets: Indices of the fleets to act for (default: all). The other
+                fleets' internal states are left untouched, so a vector env can
+                restart and act for a few fleets after an auto-reset. Needs
+                internal states already allocated for the full batch.
 
         Returns:
-            (B, n, 4 + m) float64: tau0 (N, N, N m), theta_dot (1/s), message
-            [vhat_i(k + 1), 0, ...].
+            (B, n, 4 + m) float64 (one row per acting fleet): tau0 (N, N, N m),
+            theta_dot (1/s), message [vhat_i(k + 1), 0, ...].
 
         Raises:
-            ValueError: Wrong shape, non-finite entries, or a different B than
-                the previous call without ``reset()`` in between.
+            ValueError: Wrong shape, non-finite entries, a different B than
+                the previous call without ``reset()`` in between, or bad indices.
         """
         batch = self._validate(obs)
-        states = self._states_for(batch.shape[0])
+        if fleets is None:
+            return self._act(batch, self._states_for(batch.shape[0]), self._started, self._steps)
+        index = self._fleet_index(fleets, batch.shape[0])
+        full = self._states_for(self._started.shape[0])
+        states = {key: value[index] for key, value in full.items()}
+        started, steps = self._started[index], self._steps[index]
+        actions = self._act(batch, states, started, steps)
+        for key, value in states.items():
+            full[key][index] = value
+        self._started[index], self._steps[index] = started, steps
+        return actions
+
+    def reset_fleets(self, fleets: ArrayLike) -> None:
+        """Restart the internal states of some fleets; the others are untouched.
+
+        Args:
+            fleets: (B,) bool mask, or indices, of the fleets to restart. Their
+                states are re-initialized on their next act, as after ``reset()``.
+        """
+        if self._states is None:
+            return
+        num_fleets = self._started.shape[0]
+        mask = np.asarray(fleets)
+        if mask.dtype != bool:
+            index = self._fleet_index(mask, mask.shape[0] if mask.ndim == 1 else -1)
+            mask = np.zeros(num_fleets, dtype=bool)
+            mask[index] = True
+        if mask.shape != (num_fleets,):
+            raise ValueError(
+                f"fleets must be a mask of shape ({num_fleets},) or indices, got {mask.shape}."
+            )
+        for key, array in self._states.items():  # new arrays: past diagnostics stay intact
+            self._states[key] = np.where(mask.reshape(-1, *[1] * (array.ndim - 1)), 0.0, array)
+        self._started[mask] = False
+        self._steps[mask] = 0
+
+    def _act(
+        self,
+        batch: Array,
+        states: dict[str, Array],
+        started: NDArray[np.bool_],
+        steps: NDArray[np.int64],
+    ) -> Array:
+        """One step for the fleets whose states are given; updates them in place."""
         local = LocalObservation.parse(self.layout, batch)
-        cooperation = self.cooperation.step(local, states["vhat"], states["gamma"], self._steps)
-        tau0, kinetic = self._kinetics(local, cooperation, states, self._started.copy())
+        cooperation = self.cooperation.step(local, states["vhat"], states["gamma"], steps)
+        tau0, kinetic = self._kinetics(local, cooperation, states, started.copy())
         states["vhat"], states["gamma"] = cooperation.vhat_next, cooperation.gamma_next
-        self._started[:] = True
-        self._steps += 1
+        started[:] = True
+        steps += 1
         actions = np.zeros((*batch.shape[:2], self.act_dim))
         actions[..., :3] = tau0
         actions[..., 3] = cooperation.theta_dot
@@ -213,55 +261,6 @@ class Policy(abc.ABC):
         }
         return actions
 
-    def act(self, observations: Mapping[str, ArrayLike]) -> dict[str, NDArray[np.float32]]:
-        """Actions for the ParallelEnv: one float32 array (4 + m,) per agent.
-
-        Raises:
-            ValueError: Missing or unexpected agents, or a bad observation.
-        """
-        missing = [agent for agent in self.agents if agent not in observations]
-        extra = [agent for agent in observations if agent not in self.agents]
-        if missing or extra:
-            raise ValueError(
-                f"observations must have one entry per vessel {self.agents}: missing {missing}, "
-                f"unexpected {extra}."
-            )
-        actions = self.act_batch(np.stack([np.asarray(observations[a]) for a in self.agents])[None])
-        return {a: actions[0, i].astype(np.float32) for i, a in enumerate(self.agents)}
-
-    def predict(
-        self,
-        observation: ArrayLike,
-        state: object = None,
-        episode_start: ArrayLike | None = None,
-        deterministic: bool = True,
-    ) -> tuple[NDArray[np.float32], None]:
-        """Stable-Baselines3-style prediction over any of three layouts.
-
-        Accepted ``observation`` layouts and the matching action layouts:
-
-        - (n * obs_dim,) one fleet, local observations concatenated -> (n * act_dim,);
-        - (N, n * obs_dim) one fleet per row (centralized view) -> (N, n * act_dim);
-        - (B * n, obs_dim) one vessel per row, a fleet's vessels consecutive -> (B * n, act_dim);
-        - (B, n, obs_dim) -> (B, n, act_dim).
-
-        Args:
-            observation: Observations in one of the layouts above.
-            state: Ignored (SB3 recurrent state); the internal states are the policy's own.
-            episode_start: Bool per row (per fleet, or per vessel row): True resets
-                the internal states of that fleet before acting. All True resets
-                everything (the batch size may then change).
-            deterministic: Ignored; the policies are deterministic.
-
-        Returns:
-            (actions float32 in the matching layout, None).
-        """
-        del state, deterministic
-        batch, restore = self._to_batch(np.asarray(observation))
-        if episode_start is not None:
-            self._episode_start(np.asarray(episode_start, dtype=bool).reshape(-1), batch.shape[0])
-        return restore(self.act_batch(batch)).astype(np.float32), None
-
     # --- helpers --------------------------------------------------------------------------
 
     def _validate(self, obs: ArrayLike) -> Array:
@@ -272,14 +271,31 @@ class Policy(abc.ABC):
                 f"observations must have shape (B, n, obs_dim) = (B, {self.n}, {self.obs_dim}) "
                 f"with B >= 1 for scenario {self.scenario.name!r}, got {batch.shape}."
             )
-        bad = np.argwhere(~np.isfinite(batch))
-        if bad.size:
-            b, i, k = bad[0]
+        if not np.isfinite(batch).all():
+            b, i, k = np.argwhere(~np.isfinite(batch))[0]
             raise ValueError(
                 f"observation of fleet {b}, vessel_{i}, entry {k} ({self.layout.names()[k]}) "
                 f"is {batch[b, i, k]}: observations must be finite."
             )
         return batch
+
+    def _fleet_index(self, fleets: ArrayLike, rows: int) -> NDArray[np.int64]:
+        """Validate fleet indices against the allocated batch and the number of rows."""
+        index = np.asarray(fleets)
+        num_fleets = self._started.shape[0] if self._states is not None else 0
+        if (
+            index.ndim != 1
+            or index.shape[0] != rows
+            or not np.issubdtype(index.dtype, np.integer)
+            or np.any((index < 0) | (index >= num_fleets))
+            or np.unique(index).shape[0] != index.shape[0]
+        ):
+            raise ValueError(
+                f"fleets must be {rows} distinct integer indices in [0, {num_fleets}) of the "
+                f"batch this policy holds states for, got {np.asarray(fleets).tolist()!r}; act "
+                "once on the whole batch (fleets=None) to allocate the states first."
+            )
+        return index.astype(np.int64)
 
     def _states_for(self, num_fleets: int) -> dict[str, Array]:
         """The internal states, allocated (zeros) on first use; a new B needs a reset."""
@@ -294,41 +310,3 @@ class Policy(abc.ABC):
                 f"got B = {num_fleets}; call reset() before changing the number of fleets."
             )
         return self._states
-
-    def _episode_start(self, starts: NDArray[np.bool_], num_fleets: int) -> None:
-        """Reset the fleets flagged in ``starts`` (one flag per fleet or per vessel row)."""
-        if starts.shape[0] == num_fleets * self.n:
-            starts = np.any(starts.reshape(num_fleets, self.n), axis=1)
-        elif starts.shape[0] != num_fleets:
-            raise ValueError(
-                f"episode_start must have one flag per fleet ({num_fleets}) or per vessel "
-                f"row ({num_fleets * self.n}), got {starts.shape[0]}."
-            )
-        if starts.all():
-            self.reset()
-        elif self._states is not None and starts.any():
-            self._states_for(num_fleets)  # checks B
-            for key, array in self._states.items():  # new arrays: past diagnostics stay intact
-                self._states[key] = np.where(
-                    starts.reshape(-1, *[1] * (array.ndim - 1)), 0.0, array
-                )
-            self._started[starts] = False
-            self._steps[starts] = 0
-
-    def _to_batch(self, obs: NDArray[Any]) -> tuple[Array, Callable[[Array], Array]]:
-        """Bring a ``predict`` layout to (B, n, obs_dim) and return the inverse map for actions."""
-        n, d, a = self.n, self.obs_dim, self.act_dim
-        if obs.shape == (n * d,):
-            return obs.reshape(1, n, d), lambda act: act.reshape(n * a)
-        if obs.ndim == 2 and obs.shape[1] == n * d:
-            rows = obs.shape[0]
-            return obs.reshape(rows, n, d), lambda act: act.reshape(rows, n * a)
-        if obs.ndim == 2 and obs.shape[1] == d and obs.shape[0] % n == 0:
-            rows = obs.shape[0]
-            return obs.reshape(rows // n, n, d), lambda act: act.reshape(rows, a)
-        if obs.ndim == 3:
-            return obs, lambda act: act
-        raise ValueError(
-            f"predict accepts observations of shape (n*obs_dim,) = ({n * d},), (N, {n * d}), "
-            f"(B*n, {d}) with rows a multiple of n = {n}, or (B, {n}, {d}); got {obs.shape}."
-        )

@@ -14,6 +14,7 @@ import time
 from collections.abc import Sequence
 from typing import Any
 
+from cpf_commands.policies import policy_argument
 from cpf_env import scenarios
 
 __all__ = ["run_main"]
@@ -45,7 +46,12 @@ def _run_parser(prog: str = "cpf-run") -> argparse.ArgumentParser:
         "arguments: the paper's reproduction, wang2014_fine with nn_dsc, leakage=plain.",
     )
     parser.add_argument("--scenario", default="wang2014_fine", choices=scenarios.list_scenarios())
-    parser.add_argument("--policy", default="nn_dsc", choices=sorted(POLICIES))
+    parser.add_argument(
+        "--policy",
+        default="nn_dsc",
+        type=policy_argument,
+        help=f"a baseline ({', '.join(sorted(POLICIES))}) or a cpf-train --out folder",
+    )
     parser.add_argument(
         "--leakage",
         default=None,

@@ -27,6 +27,7 @@ from typing import Any
 import numpy as np
 from tqdm.auto import tqdm
 
+from cpf_commands.policies import resolve_policy
 from cpf_env.env import make_scenario
 from cpf_env.metrics import Trajectory
 from cpf_env.paths import encode_paths, evaluate_paths
@@ -48,24 +49,22 @@ def run_episode(
 
     Args:
         scenario: Scenario name or object.
-        policy: Name in ``baselines.POLICIES``.
+        policy: A baseline name or a ``cpf-train --out`` folder (``resolve_policy``).
         seed: Reset seed of the environment and the policy.
         steps: Control steps to run (default: the scenario's ``max_steps``);
             the run stops early if the episode terminates.
-        policy_options: Options for ``make_policy`` (e.g. gains).
+        policy_options: Gains of a baseline (e.g. ``K2=(30, 30, 5)``).
         progress: Show a progress bar.
 
     Returns:
         The recorded trajectory (T = number of steps taken).
     """
-    from baselines import make_policy
-
     resolved = make_scenario(scenario)
     horizon = resolved.max_steps if steps is None else int(steps)
     if horizon < 1:
         raise ValueError(f"steps must be >= 1, got {steps}.")
     sim = FleetSim(resolved, num_fleets=1)
-    controller = make_policy(policy, sim, **(policy_options or {}))
+    controller = resolve_policy(policy, resolved, **(policy_options or {}))
     controller.reset(seed=seed)
     obs = sim.reset(seeds=[seed])
     a = sim.arrays

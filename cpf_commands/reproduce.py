@@ -294,7 +294,7 @@ def reproduce(
 
     Args:
         scenario: Scenario name or object.
-        policy: Policy name.
+        policy: A baseline name or a ``cpf-train --out`` folder (``resolve_policy``).
         seed: Seed of environment and policy.
         steps: Control steps (default: the scenario's episode length).
         out: Output directory; a subdirectory ``<scenario>_<policy>`` is written.
@@ -334,7 +334,7 @@ def reproduce(
         claims=[asdict(claim) for claim in claims],
     )
     if out is not None:
-        directory = Path(out) / f"{resolved.name}_{policy}"
+        directory = Path(out) / f"{resolved.name}_{Path(policy).name}"
         directory.mkdir(parents=True, exist_ok=True)
         (directory / "metrics.json").write_text(json.dumps(metrics, indent=2))
         trajectory.save(str(directory / "trajectory.npz"))

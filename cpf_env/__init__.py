@@ -7,7 +7,8 @@ Factories (PettingZoo convention)::
     aec = cpf_env.env("lossy_links")                 # AEC form
     raw = cpf_env.raw_env(scenario, max_steps=500)   # the unwrapped class
 
-Scenarios: ``cpf_env.scenarios.list_scenarios()``.
+Scenarios: ``cpf_env.scenarios.list_scenarios()``; the benchmark suite:
+``cpf_env.suite.list_suite()``.
 """
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ from typing import Any
 from pettingzoo.utils import parallel_to_aec, wrappers
 from pettingzoo.utils.env import AECEnv
 
-from cpf_env import scenarios
+from cpf_env import scenarios, suite
 from cpf_env.env import CooperativePathFollowingEnv
 from cpf_env.gym_envs import register_envs
 from cpf_env.observation import ObsLayout
@@ -33,6 +34,7 @@ __all__ = [
     "parallel_env",
     "raw_env",
     "scenarios",
+    "suite",
 ]
 __version__ = "0.1.0"
 

@@ -89,6 +89,7 @@ class FleetArrays(NamedTuple):
     history: np.ndarray  # (B, delay + 1, n, 1 + m) packets sent, ring buffer by step
     obs: np.ndarray  # (B, n, obs_dim) float32 observations
     reward: np.ndarray  # (B, n) reward of the last step
+    reward_terms: np.ndarray  # (B, n, 5) each term's part of the vessel's own reward
     errors: np.ndarray  # (B, n, 4) path, heading, sync, speed error after the last step
     terminated: np.ndarray  # (B,) bool: a vessel left its path
     nonfinite: np.ndarray  # (B,) bool: the state became NaN/inf (a bug)
@@ -116,7 +117,7 @@ class KernelConstants(NamedTuple):
     v0_values: np.ndarray  # (S,) m/s
     dt: float
     substeps: int
-    reward_weights: np.ndarray  # (5,)
+    reward_params: np.ndarray  # (10,) RewardWeights.encode()
     team_reward: bool
     max_path_error: float
 
@@ -330,7 +331,14 @@ def observe_fleet(a: FleetArrays, c: KernelConstants, b: int, speed_reference: f
         a.errors[b, i, ERR_SYNC] = sync
         a.errors[b, i, ERR_SPEED] = speed_error
         reward = step_reward(
-            c.reward_weights, c.dt, frame[0], sync, speed_error, a.tau_applied[b, i], c.tau_scale[i]
+            c.reward_params,
+            c.dt,
+            frame[0],
+            sync,
+            speed_error,
+            a.tau_applied[b, i],
+            c.tau_scale[i],
+            a.reward_terms[b, i],
         )
         a.reward[b, i] = reward
         total += reward
@@ -360,10 +368,12 @@ def step_fleet(a: FleetArrays, c: KernelConstants, actions: np.ndarray, b: int) 
 
 @numba.njit(cache=True)
 def reset_observation(a: FleetArrays, c: KernelConstants, b: int) -> None:
-    """Observe fleet b right after a reset; its reward is zero."""
+    """Observe fleet b right after a reset; its reward and reward terms are zero."""
     observe_fleet(a, c, b, leader_speed(c, a.step[b] * c.dt))
     for i in range(a.eta.shape[1]):
         a.reward[b, i] = 0.0
+        for k in range(a.reward_terms.shape[2]):
+            a.reward_terms[b, i, k] = 0.0
 
 
 # The loops over fleets only dispatch: numba's parfor pass can drop writes made

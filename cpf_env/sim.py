@@ -26,6 +26,7 @@ from numpy.typing import ArrayLike, NDArray
 from cpf_env import graph, kernels, vessel
 from cpf_env.observation import ObsLayout
 from cpf_env.paths import encode_paths
+from cpf_env.reward import REWARD_TERMS
 from cpf_env.scenarios import Scenario
 from cpf_env.vessel import PARAM_SIZE
 
@@ -64,7 +65,7 @@ def _constants(scenario: Scenario) -> kernels.KernelConstants:
         v0_values=np.array(scenario.v0_schedule.values),
         dt=float(scenario.dt),
         substeps=int(scenario.substeps),
-        reward_weights=scenario.reward.encode(),
+        reward_params=scenario.reward.encode(),
         team_reward=bool(scenario.reward.team),
         max_path_error=float(scenario.max_path_error),
     )
@@ -127,6 +128,7 @@ class FleetSim:
             history=np.zeros((B, scenario.links.delay_steps + 1, n, 1 + m)),
             obs=np.zeros((B, n, self.obs_dim), dtype=np.float32),
             reward=np.zeros((B, n)),
+            reward_terms=np.zeros((B, n, len(REWARD_TERMS))),
             errors=np.zeros((B, n, 4)),
             terminated=np.zeros(B, dtype=bool),
             nonfinite=np.zeros(B, dtype=bool),

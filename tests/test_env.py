@@ -21,7 +21,7 @@ import cpf_env
 from cpf_env import scenarios
 from cpf_env.env import CooperativePathFollowingEnv
 from cpf_env.graph import LinkImpairments
-from cpf_env.reward import RewardWeights
+from cpf_env.reward import REWARD_TERMS, RewardWeights
 from cpf_env.scenarios import Scenario, SpeedSchedule
 from cpf_env.sim import FleetSim
 
@@ -275,7 +275,20 @@ def test_bad_actions_raise_and_change_nothing(kind: str, match: str) -> None:
 
 # --- reward -------------------------------------------------------------------------------
 
-WEIGHTS = RewardWeights(position=0.7, heading=0.3, sync=1.3, speed=2.1, effort=0.05)
+WEIGHTS = RewardWeights(
+    position=0.7, heading=0.3, sync=1.3, speed=2.1, effort=0.05, form="quadratic"
+)
+LOG_WEIGHTS = RewardWeights(
+    position=0.7,
+    heading=0.3,
+    sync=1.3,
+    speed=2.1,
+    effort=0.05,
+    position_scale=0.02,
+    heading_scale=0.07,
+    sync_scale=0.03,
+    speed_scale=0.005,
+)
 
 
 def reward_scenarios() -> dict[str, Scenario]:
@@ -289,7 +302,22 @@ def reward_scenarios() -> dict[str, Scenario]:
         ),
         "switching_topology": fast_switching(reward=WEIGHTS),
         "heterogeneous": scenarios.get("heterogeneous"),
+        "log_form": scenarios.get("lossy_links").replace(
+            reward=LOG_WEIGHTS, tau_max=TAU_MAX, tau_min=TAU_MIN, v0=v0
+        ),
     }
+
+
+def expected_terms(w: RewardWeights, dt: float, errors: tuple[float, ...]) -> np.ndarray:
+    """Each term's -dt w_k c_k from the errors (path, heading, sync, speed, ||tau/tau_max||)."""
+    weights = np.array([w.position, w.heading, w.sync, w.speed, w.effort])
+    x = np.array(errors)
+    if w.form == "log":
+        scales = np.array([w.position_scale, w.heading_scale, w.sync_scale, w.speed_scale])
+        costs = np.append(np.log1p((x[:4] / scales) ** 2), x[4] ** 2)
+    else:
+        costs = x**2
+    return -dt * weights * costs
 
 
 def wrap(angle: float) -> float:
@@ -298,8 +326,9 @@ def wrap(angle: float) -> float:
 
 @pytest.mark.parametrize("name", list(reward_scenarios()))
 def test_reward_equals_the_documented_formula(name: str) -> None:
-    """r_i = -dt (w_pos |z1_xy|^2 + w_head z1_psi^2 + w_sync s_i^2 + w_speed (thetadot_i - v0)^2
-    + w_tau |tau_i / tau_max|^2), s_i on the true path variables of the active graph."""
+    """r_i = -dt sum_k w_k rho(x_k / scale_k) (log form) or -dt (w_pos |z1_xy|^2 + ... +
+    w_tau |tau_i / tau_max|^2) (quadratic form), s_i on the true path variables of the active
+    graph; the infos' reward_terms are the terms and sum to the reward."""
     scenario = reward_scenarios()[name].replace(max_path_error=1e6)
     env = cpf_env.parallel_env(scenario)
     env.reset(seed=2)
@@ -319,15 +348,12 @@ def test_reward_equals_the_documented_formula(name: str) -> None:
             z1[2] = wrap(info["eta"][2] - point[0, 2])
             sync = float(np.sum(adjacency[i] * (theta[i] - theta)))
             speed = float(np.clip(batch[0, i, 3], -1.0, 1.0)) - v0
-            effort = np.sum((info["tau_applied"] / tau_scale[i]) ** 2)
-            expected = -dt * (
-                w.position * (z1[0] ** 2 + z1[1] ** 2)
-                + w.heading * z1[2] ** 2
-                + w.sync * sync**2
-                + w.speed * speed**2
-                + w.effort * effort
-            )
-            assert rewards[agent] == pytest.approx(expected, rel=1e-12, abs=1e-15)
+            effort = np.sqrt(np.sum((info["tau_applied"] / tau_scale[i]) ** 2))
+            terms = expected_terms(w, dt, (np.hypot(z1[0], z1[1]), z1[2], sync, speed, effort))
+            assert rewards[agent] == pytest.approx(terms.sum(), rel=1e-12, abs=1e-15)
+            reported = np.array([info["reward_terms"][term] for term in REWARD_TERMS])
+            np.testing.assert_allclose(reported, terms, rtol=1e-11, atol=1e-15)
+            assert rewards[agent] == pytest.approx(reported.sum(), rel=1e-14, abs=1e-16)
             assert info["path_error"] == pytest.approx(np.hypot(z1[0], z1[1]), rel=1e-12)
             assert info["heading_error"] == pytest.approx(z1[2], rel=1e-12, abs=1e-15)
             assert info["sync_error"] == pytest.approx(sync, rel=1e-12, abs=1e-15)

@@ -1,0 +1,191 @@
+"""``cpf-bench``: policies x scenarios x seeds, with honest statistics.
+
+Every policy (a baseline name, a ``cpf-train --out`` folder, or a policy
+object, all through ``cpf_commands.policies.resolve_policy``) runs every
+scenario on the same evaluation seeds ``base_seed + k`` (paired episodes),
+all seeds of a (policy, scenario) in one batched simulator
+(``cpf_commands.episodes``). A scenario in which nothing is random
+(``cpf_env.suite.is_deterministic``) runs one episode: its seeds would all
+give the same one. The output folder gets ``episodes.csv``, ``summary.csv``,
+``summary.md`` and one figure per headline metric (``bench_report``).
+
+Example:
+    >>> from cpf_commands.bench import run_bench
+    >>> cells = run_bench(["nn_dsc"], ["bench_mild"], seeds=2, steps=20, out=None)
+    >>> cells[0].seeds, cells[0].metrics["cost"].shape
+    ((10000, 10001), (2,))
+"""
+
+from __future__ import annotations
+
+import argparse
+import shlex
+import time
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+
+from tqdm.auto import tqdm
+
+from cpf_commands.bench_report import CellResult, write_outputs
+from cpf_commands.episodes import run_episodes
+from cpf_commands.policies import PolicySpec, policy_argument, policy_label, resolve_policy
+from cpf_env import scenarios
+from cpf_env.env import make_scenario
+from cpf_env.scenarios import Scenario
+from cpf_env.suite import is_deterministic, list_suite
+
+__all__ = ["BASE_SEED", "bench_main", "run_bench"]
+
+#: First evaluation seed (kept apart from the small seeds training runs use).
+BASE_SEED = 10_000
+
+
+def _labelled(policies: Sequence[PolicySpec] | Mapping[str, PolicySpec]) -> dict[str, PolicySpec]:
+    """Label -> specification, refusing two policies with the same label."""
+    if isinstance(policies, Mapping):
+        return dict(policies)
+    labelled: dict[str, PolicySpec] = {}
+    for spec in policies:
+        label = policy_label(spec)
+        if label in labelled:
+            raise ValueError(
+                f"two policies are labelled {label!r}; pass a mapping label -> policy to "
+                "tell them apart."
+            )
+        labelled[label] = spec
+    return labelled
+
+
+def run_bench(
+    policies: Sequence[PolicySpec] | Mapping[str, PolicySpec],
+    scenario_names: Sequence[str | Scenario],
+    seeds: int = 10,
+    base_seed: int = BASE_SEED,
+    steps: int | None = None,
+    out: str | Path | None = None,
+    command: str = "",
+    progress: bool = False,
+    figures: bool = True,
+) -> list[CellResult]:
+    """Run every policy on every scenario for ``seeds`` paired seeds, and write the outputs.
+
+    Args:
+        policies: Policy specifications (see ``resolve_policy``), or a mapping
+            label -> specification.
+        scenario_names: Registered scenario names or ``Scenario`` objects.
+        seeds: Episodes per (policy, scenario) (one on a deterministic scenario).
+        base_seed: Episode k is reset with seed ``base_seed + k``.
+        steps: Horizon override (default: each scenario's ``max_steps``).
+        out: Output folder; None writes nothing.
+        command: The command line recorded in summary.md.
+        progress: Show a progress bar (stderr).
+        figures: Write the PNG figures.
+
+    Returns:
+        One ``CellResult`` per (policy, scenario), policies outermost.
+
+    Raises:
+        ValueError: Unknown scenario or policy, fewer than one seed, or a bad horizon.
+    """
+    if int(seeds) < 1:
+        raise ValueError(f"seeds must be >= 1, got {seeds}.")
+    if steps is not None and int(steps) < 1:
+        raise ValueError(f"steps must be >= 1, got {steps}.")
+    tasks = [make_scenario(name) for name in scenario_names]
+    labelled = _labelled(policies)
+    built = {
+        (label, task.name): resolve_policy(spec, task)
+        for label, spec in labelled.items()
+        for task in tasks
+    }
+    horizon = {task.name: task.max_steps if steps is None else int(steps) for task in tasks}
+    total = len(labelled) * sum(horizon.values())
+    cells = []
+    with tqdm(total=total, disable=not progress, unit="step", desc="cpf-bench") as bar:
+        for label in labelled:
+            for task in tasks:
+                bar.set_postfix_str(f"{label} on {task.name}")
+                deterministic = is_deterministic(task)
+                episode_seeds = tuple(base_seed + k for k in range(1 if deterministic else seeds))
+                metrics = run_episodes(
+                    built[(label, task.name)], task, episode_seeds, steps=steps, progress=bar
+                )
+                cells.append(CellResult(label, task.name, episode_seeds, deterministic, metrics))
+    if out is not None:
+        write_outputs(cells, out, command, figures=figures)
+    return cells
+
+
+def _parser() -> argparse.ArgumentParser:
+    from baselines import POLICIES
+
+    parser = argparse.ArgumentParser(
+        prog="cpf-bench",
+        description="Run policies x scenarios x paired seeds in batched simulators and write "
+        "episodes.csv, summary.csv, summary.md and figures (means and IQMs with 95% "
+        "bootstrap intervals, failures counted, scores relative to nn_dsc).",
+        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+    )
+    parser.add_argument(
+        "--policies",
+        nargs="+",
+        default=list(POLICIES),
+        type=policy_argument,
+        metavar="POLICY",
+        help="baseline names or cpf-train --out folders",
+    )
+    parser.add_argument(
+        "--scenarios",
+        nargs="+",
+        default=list_suite(),
+        choices=scenarios.list_scenarios(),
+        metavar="SCENARIO",
+        help="registered scenario names (default: the benchmark suite)",
+    )
+    parser.add_argument("--seeds", type=int, default=10, help="episodes per policy and scenario")
+    parser.add_argument("--base-seed", type=int, default=BASE_SEED, help="seed of episode 0")
+    parser.add_argument(
+        "--steps", type=int, default=None, help="horizon override (default: the scenario's)"
+    )
+    parser.add_argument("--out", default="outputs/bench", help="output folder")
+    parser.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
+    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    return parser
+
+
+def _command(args: argparse.Namespace) -> str:
+    """The command line that regenerates a run's files (the output folder left out)."""
+    parts = ["cpf-bench", "--policies", *args.policies, "--scenarios", *args.scenarios]
+    parts += ["--seeds", str(args.seeds)]
+    if args.base_seed != BASE_SEED:
+        parts += ["--base-seed", str(args.base_seed)]
+    if args.steps is not None:
+        parts += ["--steps", str(args.steps)]
+    return shlex.join(parts)
+
+
+def bench_main(argv: Sequence[str] | None = None) -> int:
+    """``cpf-bench``: see ``cpf-bench --help``."""
+    parser = _parser()
+    args = parser.parse_args(argv)
+    start = time.perf_counter()
+    try:
+        run_bench(
+            args.policies,
+            args.scenarios,
+            seeds=args.seeds,
+            base_seed=args.base_seed,
+            steps=args.steps,
+            out=args.out,
+            command=_command(args),
+            progress=not args.quiet,
+            figures=not args.no_figures,
+        )
+    except ValueError as error:
+        parser.error(str(error))
+    elapsed = time.perf_counter() - start
+    print(
+        f"cpf-bench: {len(args.policies)} policies x {len(args.scenarios)} scenarios in "
+        f"{elapsed:.0f} s; results in {args.out}/ (summary.md, summary.csv, episodes.csv)"
+    )
+    return 0
