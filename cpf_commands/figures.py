@@ -89,19 +89,17 @@ def nn_figure(trajectory: Trajectory, vessel: int = 1, zoom_from: float = 0.1) -
             continue
         error, gain = _fit(nn[last, vessel, k], true[last, vessel, k])
         axes[k, 1].axvspan(trajectory.time[last][0], trajectory.time[-1], color="0.9", zorder=0)
-        axes[k, 1].text(
-            0.02,
-            0.95,
+        axes[k, 1].set_title(
             f"shaded last quarter: relative RMS error {error:.3f}, fitted NN = {gain:.3f} f",
-            transform=axes[k, 1].transAxes,
-            va="top",
             fontsize=8,
-            bbox={"facecolor": "white", "alpha": 0.8, "edgecolor": "0.7"},
+            loc="left",
         )
     axes[0, 0].legend(fontsize=8)
     axes[0, 0].set_title("whole run")
-    axes[0, 1].set_title(f"from t = {trajectory.time[start]:.0f} s (own scale)")
-    fig.suptitle(f"Lumped uncertainty of vessel {vessel + 1} and its NN approximation")
+    fig.suptitle(
+        f"Lumped uncertainty of vessel {vessel + 1} and its NN approximation: whole run (left), "
+        f"from t = {trajectory.time[start]:.0f} s on its own scale (right)"
+    )
     return fig
 
 
@@ -135,11 +133,11 @@ def coordination_figure(trajectory: Trajectory) -> Figure:
 
 
 def _zoom_end(trajectory: Trajectory, vessel: int) -> float:
-    """End (s) of Fig. 6's zoom: past the last saturated sample, within [2 s, 25 % of the run]."""
+    """End (s) of Fig. 6's zoom: 1.5 x the last saturated time + 1 s, within [2 s, the run]."""
     saturated = np.any(trajectory.tau_command[:, vessel] != trajectory.tau_applied[:, vessel], -1)
     time = trajectory.time
     last = float(time[np.flatnonzero(saturated)[-1]]) if saturated.any() else 0.0
-    return float(np.clip(1.5 * last + 1.0, min(2.0, time[-1]), max(0.25 * time[-1], time[0])))
+    return float(np.clip(1.5 * last + 1.0, min(2.0, time[-1]), time[-1]))
 
 
 def forces_figure(trajectory: Trajectory, vessel: int = 2) -> Figure:
