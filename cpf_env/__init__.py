@@ -15,8 +15,9 @@ from __future__ import annotations
 
 from typing import Any
 
-from pettingzoo.utils import parallel_to_aec, wrappers
+from pettingzoo.utils import parallel_to_aec
 from pettingzoo.utils.env import AECEnv
+from pettingzoo.utils.wrappers import OrderEnforcingWrapper
 
 from cpf_env import scenarios, suite
 from cpf_env.env import CooperativePathFollowingEnv
@@ -52,7 +53,7 @@ def env(scenario: str | Scenario = "wang2014", **kwargs: Any) -> AECEnv:
     """The AEC form of ``parallel_env`` (agents act in turn; the step happens after the last)."""
     aec = parallel_to_aec(parallel_env(scenario, **kwargs))
     # No AssertOutOfBoundsWrapper: force commands beyond the limits are legal (the plant saturates).
-    return wrappers.OrderEnforcingWrapper(aec)
+    return OrderEnforcingWrapper(aec)
 
 
 register_envs()

@@ -9,14 +9,15 @@ import numpy as np
 import pytest
 from stable_baselines3.common.evaluation import evaluate_policy
 from stable_baselines3.common.monitor import Monitor
-from stable_baselines3.common.vec_env import VecMonitor
+from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 
 from agents import TrainConfig, load_policy, train
-from agents.training import _build_model, make_env
+from agents.training import ALGORITHMS, _build_model, make_env
 from baselines import make_policy
 from cpf_commands.train import train_main
 from cpf_env import FleetSim, scenarios
 from cpf_env.gym_envs import CentralizedFleetEnv
+from cpf_env.residual import ResidualController
 
 TINY = {"fleets": 2, "n_steps": 16, "batch_size": 80, "n_epochs": 1, "net_arch": (16, 16)}
 
@@ -46,6 +47,22 @@ def test_train_and_load_round_trip(tmp_path: Path, algo: str, base: str) -> None
     assert actions.shape == (3, 5, 5) and np.all(np.isfinite(actions))
     again = load_policy(folder).act_batch(obs)
     assert np.array_equal(actions, again)  # deterministic, reproducible after loading
+    # the same numbers through SB3's own objects: VecNormalize.load and Model.load
+    venv = make_env(config, num_fleets=3)
+    stats = VecNormalize.load(str(folder / "vecnormalize.pkl"), venv)
+    stats.training = False
+    model = ALGORITHMS[algo].load(folder / "model.zip", device="cpu")
+    controller = ResidualController(
+        policy.scenario,
+        None if base == "none" else make_policy(base, policy.scenario),
+        3,
+        venv.controller.config,
+    )
+    inputs = controller.observe(obs).reshape(15, -1).astype(np.float32)
+    action, _ = model.predict(stats.normalize_obs(inputs), deterministic=True)
+    np.testing.assert_allclose(
+        actions, controller.compose(action.reshape(3, 5, -1)), rtol=1e-6, atol=1e-6
+    )
     if base == "nn_dsc":
         base_actions = make_policy("nn_dsc", policy.scenario).act_batch(obs)
         residual = actions[..., :3] - base_actions[..., :3]
