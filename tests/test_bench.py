@@ -320,7 +320,8 @@ def test_a_trained_agent_goes_through_the_bench_like_a_baseline(trained_agent):
 
 def test_cpf_run_takes_a_trained_agent_path(trained_agent, tmp_path, capsys):
     folder, calls = trained_agent
-    argv = ["--policy", str(folder), "--steps", "10", "--out", str(tmp_path / "out")]
+    argv = ["--policy", str(folder), "--scenario", "wang2014", "--steps", "10"]
+    argv += ["--out", str(tmp_path / "out")]
     assert run_main([*argv, "--no-figures", "--quiet"]) == 0
     assert calls == [(folder, "wang2014")]
     assert (tmp_path / "out" / "wang2014_agent" / "metrics.json").exists()

@@ -25,8 +25,9 @@ def _load_example(name: str):
 def test_reproduce_example_runs_small(tmp_path, capsys):
     example = _load_example("reproduce_wang2014")
     assert example.main(steps=30, out=str(tmp_path), figures=False) == 0
-    metrics = json.loads((tmp_path / "wang2014_nn_dsc" / "metrics.json").read_text())
+    metrics = json.loads((tmp_path / "wang2014_fine_nn_dsc" / "metrics.json").read_text())
     assert metrics["steps"] == 30 and metrics["policy"] == "nn_dsc"
+    assert metrics["policy_options"] == {"leakage": "plain"}
     assert "Claims of Wang, Wang & Peng (2014)" in capsys.readouterr().out
 
 
