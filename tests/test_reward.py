@@ -31,7 +31,7 @@ def test_default_is_the_log_form_with_task_tolerances() -> None:
     weights = RewardWeights()
     assert weights.form == "log"
     assert (weights.position_scale, weights.sync_scale) == (0.01, 0.001)
-    assert weights.encode().shape == (10,)
+    assert weights.encode().shape == (11,)
 
 
 def steady_state_costs(form: str) -> dict[str, np.ndarray]:
@@ -62,3 +62,29 @@ def test_log_form_makes_the_path_term_the_steady_state_cost() -> None:
     quadratic_gap = quadratic["nn_dsc"].sum() / quadratic["backstepping"].sum() - 1.0
     log_gap = log["nn_dsc"].sum() / log["backstepping"].sum() - 1.0
     assert log_gap > 10 * abs(quadratic_gap)
+
+
+@pytest.mark.parametrize("form", ["log", "quadratic"])
+def test_leaving_the_path_costs_the_rest_of_the_episode_at_the_limit(form: str) -> None:
+    """On the step a fleet terminates every vessel pays w_fail (T - t) w_pos rho(d_max / s_pos),
+    once; so ending early is never cheaper than staying at the termination distance."""
+    reward = RewardWeights(form=form, failure=0.7, position=1.3, position_scale=0.02)
+    scenario = scenarios.get("wang2014").replace(reward=reward, max_path_error=1.5)
+    sim = FleetSim(scenario, num_fleets=2)
+    obs = sim.reset(seeds=[0, 1])
+    actions = np.zeros((2, 5, sim.act_dim))
+    actions[0, :, 0] = -9.2  # fleet 0 backs away from its path; fleet 1 drifts, slowly
+    step = 0
+    while not sim.arrays.terminated[0]:
+        obs = sim.step(actions)
+        step += 1
+        assert step < 500
+    failure = REWARD_TERMS.index("failure")
+    terms = sim.arrays.reward_terms
+    x = 1.5 / 0.02 if form == "log" else 1.5
+    at_limit = 1.3 * (np.log1p(x**2) if form == "log" else x**2)
+    expected = -0.7 * (scenario.max_steps - step) * scenario.dt * at_limit
+    np.testing.assert_allclose(terms[0, :, failure], expected, rtol=1e-12)
+    np.testing.assert_allclose(sim.arrays.reward[0], terms[0].sum(axis=1), rtol=1e-12)
+    assert not sim.arrays.terminated[1] and np.all(terms[1, :, failure] == 0.0)
+    del obs
