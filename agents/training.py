@@ -32,7 +32,7 @@ import platform
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 import torch
@@ -213,7 +213,7 @@ def _build_model(config: TrainConfig, env: VecNormalize | VecMonitor) -> BaseAlg
             device="cpu",
             policy_kwargs={"net_arch": arch, "log_std_init": config.log_std_init},
         )
-        layer = model.policy.action_net
+        layer = cast(torch.nn.Linear, model.policy.action_net)
     else:
         model = SAC(
             "MlpPolicy",
@@ -228,10 +228,11 @@ def _build_model(config: TrainConfig, env: VecNormalize | VecMonitor) -> BaseAlg
             device="cpu",
             policy_kwargs={"net_arch": arch, "log_std_init": config.log_std_init},
         )
-        layer = model.actor.mu
+        layer = cast(torch.nn.Linear, model.actor.mu)
+        log_std = cast(torch.nn.Linear, model.actor.log_std)
         with torch.no_grad():  # state-independent initial noise exp(log_std_init)
-            model.actor.log_std.weight.zero_()
-            model.actor.log_std.bias.fill_(config.log_std_init)
+            log_std.weight.zero_()
+            log_std.bias.fill_(config.log_std_init)
     with torch.no_grad():
         layer.weight.zero_()
         layer.bias.zero_()

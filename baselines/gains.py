@@ -6,12 +6,30 @@ broadcast to the three axes (surge, sway, yaw). Defaults are the paper's
 section 4 (docs/model.md, section 7); K5, K6 and the NN size l are not given there
 and default to 1, 1 and 20.
 
+The weight law [30] has two readings (the paper's displayed equation is lost
+in our copy; docs/model.md section 7), chosen by ``NNDSCGains.leakage``:
+
+==================  ==========================================  ==============================
+``leakage``         law                                         What at rest, leakage rate
+==================  ==========================================  ==============================
+``"gamma_scaled"``  What' = -Gamma_W (sigma e2^T + k_W What)    -sigma e2^T / k_W, 100 1/s
+``"plain"``         What' = -Gamma_W sigma e2^T - k_W What      -Gamma_W sigma e2^T / k_W, 1 1/s
+==================  ==========================================  ==============================
+
+``"gamma_scaled"`` (the default) is stable at the RL control step of 0.05 s
+but learns only s / (K2 + s) of the lumped uncertainty, s = ||sigma||^2 / k_W;
+``"plain"`` integrates (s = Gamma_W ||sigma||^2 / k_W ~ 1010) and tracks it, but
+with K2 it forms a lightly damped PI loop (yaw: sqrt(s / M33) ~ 19 rad/s) that
+sampling destabilizes above a control step of about 0.01 s: use it with the
+0.01 s scenarios ``*_fine`` (``docs/reproduction.md``).
+
 ======================  ===========  =========================================
 class                   used by      fields
 ======================  ===========  =========================================
 ``CooperativeGains``    all          k3, k4 (synchronization [34]), k5, k6 (estimator [35])
 ``BacksteppingGains``   backstepping + K1 [15], K2
-``NNDSCGains``          nn_dsc, ...  + rho [18], K_pi [21], k_W, Gamma_W [30], hidden, nn_seed
+``NNDSCGains``          nn_dsc, ...  + rho [18], K_pi [21], k_W, Gamma_W, leakage [30],
+                                     hidden, nn_seed
 ======================  ===========  =========================================
 
 Example:
@@ -30,7 +48,10 @@ from typing import Any, TypeVar
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["BacksteppingGains", "CooperativeGains", "NNDSCGains"]
+__all__ = ["LEAKAGE_LAWS", "BacksteppingGains", "CooperativeGains", "NNDSCGains"]
+
+#: Readings of the weight law [30] (see the module docstring).
+LEAKAGE_LAWS = ("gamma_scaled", "plain")
 
 Diagonal = tuple[float, float, float]
 _G = TypeVar("_G", bound="CooperativeGains")
@@ -138,6 +159,8 @@ class NNDSCGains(BacksteppingGains):
         K_pi: Diagonal of K_pi, rate of the saturation auxiliary system (1/s), eq. [21].
         k_W: sigma-modification leakage of the NN weights, eq. [30].
         Gamma_W: Adaptation gain of the NN weights, eq. [30].
+        leakage: Reading of [30]: ``"gamma_scaled"`` (Gamma_W multiplies the
+            leakage k_W What too) or ``"plain"`` (it does not); see the module docstring.
         hidden: Number l of tanh hidden nodes of the NN, eq. [28].
         nn_seed: Seed of the NN's fixed N(0, 1) input weights.
     """
@@ -146,14 +169,29 @@ class NNDSCGains(BacksteppingGains):
     K_pi: Diagonal = (200.0, 200.0, 200.0)
     k_W: float = 1.0
     Gamma_W: float = 100.0
+    leakage: str = "gamma_scaled"
     hidden: int = 20
     nn_seed: int = 0
 
     def __post_init__(self) -> None:
         super().__post_init__()
         _scalar("rho", self.rho, allow_zero=False)
+        if self.leakage not in LEAKAGE_LAWS:
+            raise ValueError(
+                f"option leakage must be one of {list(LEAKAGE_LAWS)}, got {self.leakage!r}."
+            )
         object.__setattr__(self, "hidden", _integer("hidden", self.hidden, minimum=1))
         object.__setattr__(self, "nn_seed", _integer("nn_seed", self.nn_seed, minimum=0))
+
+    def leakage_rate(self) -> float:
+        """Decay rate of What under [30] with sigma e2^T = 0 (1/s)."""
+        return self.Gamma_W * self.k_W if self.leakage == "gamma_scaled" else self.k_W
+
+    def static_gain(self) -> float:
+        """What / (-sigma e2^T) at equilibrium of [30] (inf without leakage, k_W = 0)."""
+        if self.k_W == 0.0:
+            return math.inf
+        return 1.0 / self.k_W if self.leakage == "gamma_scaled" else self.Gamma_W / self.k_W
 
     def input_weights(self) -> NDArray[np.float64]:
         """Fixed NN input weights v_l ~ N(0, 1) drawn from ``nn_seed``, shape (hidden, 7)."""

@@ -10,8 +10,16 @@ Wang, Wang & Peng (2014), docs/model.md section 7, per vessel i:
     xi_i = [1, nu_i, nubar_id'],   sigma_l(xi) = tanh(v_l^T xi)             [28]
     tau_i0 = -K2 e_i2 - z_i1 + What_i^T sigma(xi_i)                         [29]
     What_i' = -Gamma_W (sigma(xi_i) e_i2^T + k_W What_i),   What_i(0) = 0   [30]
+      (option leakage="plain": What_i' = -Gamma_W sigma(xi_i) e_i2^T - k_W What_i)
 
 with the cooperative layer of ``baselines.cooperative`` (eqs. [34]-[35]).
+
+Two readings of [30] are offered (option ``leakage``, ``baselines.gains``):
+the default above, and ``"plain"``, the integrating one under which the NN
+tracks f (claim 2) but which needs a control step of about 0.01 s. Both adapt
+on e_i2 = z_i2 - pi_i, as the command does: our choice (the paper's proof
+suggests z_i2). It is what lets the auxiliary system keep an integrating NN
+from learning the saturation as model error (``docs/reproduction.md``).
 
 Discrete time, one update per control step k (obs_k is the observation after
 step k - 1; every input is held over the step, as the plant holds tau):
@@ -27,7 +35,8 @@ step k - 1; every input is held over the step, as the plant holds tau):
 
 The stiff linear parts are integrated exactly (exponential Euler,
 docs/model.md section 7): the DSC filter (rate 1/rho), the auxiliary system (K_pi) and the
-sigma-modification leakage of What (Gamma_W k_W), each with its input held
+sigma-modification leakage of What (Gamma_W k_W, or k_W under
+``leakage="plain"``), each with its input held
 over the step; so are gamma and vhat. Nothing is integrated by forward Euler.
 
 The NN's fixed input weights v_l (``NNDSCGains.input_weights``) are the same
@@ -92,7 +101,7 @@ class NNDSCPolicy(Policy):
         self._input_weights = g.input_weights()
         self._filter_decay, _ = exponential_euler(1.0 / g.rho, self.dt)
         self._aux_decay, self._aux_gain = exponential_euler(np.array(g.K_pi), self.dt)
-        self._leak_decay, leak_gain = exponential_euler(g.Gamma_W * g.k_W, self.dt)
+        self._leak_decay, leak_gain = exponential_euler(g.leakage_rate(), self.dt)
         self._adapt_gain = g.Gamma_W * leak_gain
 
     def _kinetic_states(self) -> dict[str, tuple[int, ...]]:
@@ -156,7 +165,7 @@ class NNDSCPolicy(Policy):
         xi = np.concatenate([np.ones((*nu.shape[:-1], 1)), nu, nubar_dot], axis=-1)
         sigma = np.tanh(contract(xi[..., None, :], self._input_weights))  # (B, n, l)
         output = contract(np.swapaxes(weights, -1, -2), sigma[..., None, :])  # What^T sigma
-        # [30], exact for sigma e2^T held over the step (leakage rate Gamma_W k_W).
+        # [30], exact for sigma e2^T held over the step (leakage rate Gamma_W k_W or k_W).
         weights_next = self._leak_decay * weights - self._adapt_gain * (
             sigma[..., :, None] * e2[..., None, :]
         )

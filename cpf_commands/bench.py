@@ -26,15 +26,22 @@ from pathlib import Path
 
 from tqdm.auto import tqdm
 
-from cpf_commands.bench_report import CellResult, write_outputs
+from cpf_commands import bench_views
+from cpf_commands.bench_report import HEADLINE, CellResult, episodes_csv, summarize, summary_csv
 from cpf_commands.episodes import run_episodes
-from cpf_commands.policies import PolicySpec, policy_argument, policy_label, resolve_policy
+from cpf_commands.policies import (
+    BenchPolicy,
+    PolicySpec,
+    policy_argument,
+    policy_label,
+    resolve_policy,
+)
 from cpf_env import scenarios
 from cpf_env.env import make_scenario
 from cpf_env.scenarios import Scenario
 from cpf_env.suite import is_deterministic, list_suite
 
-__all__ = ["BASE_SEED", "bench_main", "run_bench"]
+__all__ = ["BASE_SEED", "bench_main", "run_bench", "write_outputs"]
 
 #: First evaluation seed (kept apart from the small seeds training runs use).
 BASE_SEED = 10_000
@@ -54,6 +61,64 @@ def _labelled(policies: Sequence[PolicySpec] | Mapping[str, PolicySpec]) -> dict
             )
         labelled[label] = spec
     return labelled
+
+
+def write_outputs(
+    cells: Sequence[CellResult],
+    out: str | Path,
+    command: str,
+    reference: str = "nn_dsc",
+    skipped: Mapping[tuple[str, str], str] | None = None,
+    figures: bool = True,
+) -> list[dict[str, object]]:
+    """Write episodes.csv, summary.csv, summary.md and one PNG per headline metric to ``out``.
+
+    Args:
+        cells: The results.
+        out: Output folder (created).
+        command: The command line recorded in summary.md.
+        reference: The policy scores are relative to.
+        skipped: (policy, scenario) -> why it was not run, listed in summary.md.
+        figures: Write the PNG figures.
+
+    Returns:
+        The summary rows.
+    """
+    directory = Path(out)
+    directory.mkdir(parents=True, exist_ok=True)
+    rows = summarize(cells, reference)
+    (directory / "episodes.csv").write_text(episodes_csv(cells))
+    (directory / "summary.csv").write_text(summary_csv(rows))
+    text = bench_views.markdown(rows, cells, command, reference, skipped or {})
+    (directory / "summary.md").write_text(text)
+    if figures:
+        for metric, title in HEADLINE:
+            drawing = bench_views.figure(rows, cells, metric, title)
+            drawing.savefig(directory / f"{metric}.png", dpi=100, metadata={"Software": None})
+    return rows
+
+
+def _build(
+    labelled: dict[str, PolicySpec], tasks: Sequence[Scenario]
+) -> tuple[dict[tuple[str, str], BenchPolicy], dict[tuple[str, str], str]]:
+    """Each policy built for each scenario, and the (label, scenario) pairs that did not fit.
+
+    Raises:
+        ValueError: A policy that fits none of the scenarios (the first reason).
+    """
+    built: dict[tuple[str, str], BenchPolicy] = {}
+    skipped: dict[tuple[str, str], str] = {}
+    for label, spec in labelled.items():
+        reasons = []
+        for task in tasks:
+            try:
+                built[(label, task.name)] = resolve_policy(spec, task)
+            except ValueError as error:
+                skipped[(label, task.name)] = str(error)
+                reasons.append(str(error))
+        if len(reasons) == len(tasks):
+            raise ValueError(reasons[0])
+    return built, skipped
 
 
 def run_bench(
@@ -82,10 +147,13 @@ def run_bench(
         figures: Write the PNG figures.
 
     Returns:
-        One ``CellResult`` per (policy, scenario), policies outermost.
+        One ``CellResult`` per (policy, scenario), policies outermost. A policy
+        that cannot be built for a scenario (a trained agent whose observation
+        layout differs) skips it; summary.md lists what was skipped and why.
 
     Raises:
-        ValueError: Unknown scenario or policy, fewer than one seed, or a bad horizon.
+        ValueError: Unknown scenario or policy, a policy that fits none of the
+            scenarios, fewer than one seed, or a bad horizon.
     """
     if int(seeds) < 1:
         raise ValueError(f"seeds must be >= 1, got {seeds}.")
@@ -93,17 +161,15 @@ def run_bench(
         raise ValueError(f"steps must be >= 1, got {steps}.")
     tasks = [make_scenario(name) for name in scenario_names]
     labelled = _labelled(policies)
-    built = {
-        (label, task.name): resolve_policy(spec, task)
-        for label, spec in labelled.items()
-        for task in tasks
-    }
+    built, skipped = _build(labelled, tasks)
     horizon = {task.name: task.max_steps if steps is None else int(steps) for task in tasks}
-    total = len(labelled) * sum(horizon.values())
+    total = sum(horizon[scenario] for _, scenario in built)
     cells = []
     with tqdm(total=total, disable=not progress, unit="step", desc="cpf-bench") as bar:
         for label in labelled:
             for task in tasks:
+                if (label, task.name) not in built:
+                    continue
                 bar.set_postfix_str(f"{label} on {task.name}")
                 deterministic = is_deterministic(task)
                 episode_seeds = tuple(base_seed + k for k in range(1 if deterministic else seeds))
@@ -112,7 +178,7 @@ def run_bench(
                 )
                 cells.append(CellResult(label, task.name, episode_seeds, deterministic, metrics))
     if out is not None:
-        write_outputs(cells, out, command, figures=figures)
+        write_outputs(cells, out, command, skipped=skipped, figures=figures)
     return cells
 
 
@@ -122,9 +188,8 @@ def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="cpf-bench",
         description="Run policies x scenarios x paired seeds in batched simulators and write "
-        "episodes.csv, summary.csv, summary.md and figures (means and IQMs with 95% "
-        "bootstrap intervals, failures counted, scores relative to nn_dsc).",
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+        "episodes.csv, summary.csv, summary.md and figures: means and interquartile means "
+        "with 95 % bootstrap intervals, failures counted, scores relative to nn_dsc.",
     )
     parser.add_argument(
         "--policies",
@@ -132,7 +197,7 @@ def _parser() -> argparse.ArgumentParser:
         default=list(POLICIES),
         type=policy_argument,
         metavar="POLICY",
-        help="baseline names or cpf-train --out folders",
+        help="baseline names or cpf-train --out folders (default: every baseline)",
     )
     parser.add_argument(
         "--scenarios",
@@ -140,14 +205,26 @@ def _parser() -> argparse.ArgumentParser:
         default=list_suite(),
         choices=scenarios.list_scenarios(),
         metavar="SCENARIO",
-        help="registered scenario names (default: the benchmark suite)",
+        help="registered scenario names (default: the benchmark suite, bench_*)",
     )
-    parser.add_argument("--seeds", type=int, default=10, help="episodes per policy and scenario")
-    parser.add_argument("--base-seed", type=int, default=BASE_SEED, help="seed of episode 0")
     parser.add_argument(
-        "--steps", type=int, default=None, help="horizon override (default: the scenario's)"
+        "--seeds", type=int, default=10, help="episodes per policy and scenario (default: 10)"
     )
-    parser.add_argument("--out", default="outputs/bench", help="output folder")
+    parser.add_argument(
+        "--base-seed",
+        type=int,
+        default=BASE_SEED,
+        help=f"seed of episode 0; episode k uses base + k (default: {BASE_SEED})",
+    )
+    parser.add_argument(
+        "--steps",
+        type=int,
+        default=None,
+        help="horizon in control steps, for quick runs (default: each scenario's max_steps)",
+    )
+    parser.add_argument(
+        "--out", default="outputs/bench", help="output folder (default: outputs/bench)"
+    )
     parser.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     return parser
@@ -181,7 +258,7 @@ def bench_main(argv: Sequence[str] | None = None) -> int:
             progress=not args.quiet,
             figures=not args.no_figures,
         )
-    except ValueError as error:
+    except (ValueError, FileNotFoundError) as error:
         parser.error(str(error))
     elapsed = time.perf_counter() - start
     print(

@@ -1,4 +1,4 @@
-"""Tables and figures of a benchmark run: summary rows, CSV, markdown and PNG.
+"""Statistics tables of a benchmark run: summary rows and the CSV files.
 
 ``summarize`` turns per-episode results into one row per policy x scenario x
 metric (mean and IQM with 95 % bootstrap intervals, failures, the ratio to
@@ -17,18 +17,16 @@ import csv
 import io
 from collections.abc import Sequence
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
-from matplotlib.figure import Figure
 from numpy.typing import NDArray
 
 from cpf_commands import stats
 from cpf_commands.episodes import METRICS
 
-__all__ = ["HEADLINE", "CellResult", "summarize", "write_outputs"]
+__all__ = ["HEADLINE", "SUMMARY_COLUMNS", "CellResult", "episodes_csv", "summarize", "summary_csv"]
 
-#: Metrics shown in summary.md and drawn as figures: (metric, heading in tables and figures).
+#: Metrics shown in summary.md and drawn as figures: (metric, heading), cost first.
 HEADLINE: tuple[tuple[str, str], ...] = (
     ("cost", "cost"),
     ("cost_window", "cost, final window"),
@@ -130,11 +128,51 @@ def _compare(
     row.update(p_beats_reference=p, p_ci_low=low, p_ci_high=high)
 
 
+def _wins(values: NDArray, reference: NDArray, metric: str) -> NDArray[np.float64]:
+    """1 where ``values`` beats ``reference`` on the same seed, 1/2 on a tie, else 0."""
+    x, y = _signed(metric, values), _signed(metric, reference)
+    return (x < y) + 0.5 * (x == y)
+
+
+def _suite_rows(
+    cells: Sequence[CellResult], reference: str, by_key: dict[tuple[str, str], CellResult]
+) -> list[dict[str, object]]:
+    """Rows over all scenarios: episodes normalized by the reference's mean on their scenario."""
+    names = list(dict.fromkeys(cell.scenario for cell in cells))
+    if any((reference, name) not in by_key for name in names):
+        return []
+    references = [by_key[(reference, name)] for name in names]
+    rows = []
+    for policy in dict.fromkeys(cell.policy for cell in cells):
+        if any((policy, name) not in by_key for name in names):
+            continue  # not run on every scenario: no suite-wide row
+        own = [by_key[(policy, name)] for name in names]
+        failures = sum(int(cell.metrics["terminated"].sum()) for cell in own)
+        for metric, _ in HEADLINE:
+            means = [float(base.metrics[metric].mean()) for base in references]
+            if 0.0 in means:
+                continue
+            strata = [c.metrics[metric] / m for c, m in zip(own, means, strict=True)]
+            row = _row(policy, "all", f"{metric}_normalized", strata, failures, False)
+            row["normalized"] = row["mean"]
+            if policy != reference:
+                wins = [
+                    _wins(c.metrics[metric], base.metrics[metric], metric)
+                    for c, base in zip(own, references, strict=True)
+                ]
+                low, high = stats.bootstrap_interval(wins)
+                p = float(np.concatenate(wins).mean())
+                row.update(p_beats_reference=p, p_ci_low=low, p_ci_high=high)
+            rows.append(row)
+    return rows
+
+
 def summarize(cells: Sequence[CellResult], reference: str = "nn_dsc") -> list[dict[str, object]]:
     """Summary rows (``SUMMARY_COLUMNS``) of every cell and metric, then the suite-wide rows.
 
     Metrics a policy does not have (NaN in every episode, e.g. a speed-estimate
-    error without an estimator) get no row.
+    error without an estimator) get no row. The suite-wide rows need the
+    reference on every scenario.
     """
     by_key = {(cell.policy, cell.scenario): cell for cell in cells}
     rows: list[dict[str, object]] = []
@@ -149,32 +187,7 @@ def summarize(cells: Sequence[CellResult], reference: str = "nn_dsc") -> list[di
             if base is not None and not np.all(np.isnan(base.metrics[metric])):
                 _compare(row, values, base.metrics[metric], metric, cell.policy != reference)
             rows.append(row)
-    policies = list(dict.fromkeys(cell.policy for cell in cells))
-    scenario_names = list(dict.fromkeys(cell.scenario for cell in cells))
-    references = [by_key.get((reference, name)) for name in scenario_names]
-    if any(base is None for base in references):
-        return rows
-    for policy in policies:
-        own = [by_key[(policy, name)] for name in scenario_names]
-        for metric, _ in HEADLINE:
-            means = [float(base.metrics[metric].mean()) for base in references]  # type: ignore[union-attr]
-            if any(mean == 0.0 for mean in means):
-                continue
-            strata = [c.metrics[metric] / mean for c, mean in zip(own, means, strict=True)]
-            failures = sum(int(c.metrics["terminated"].sum()) for c in own)
-            row = _row(policy, "all", f"{metric}_normalized", strata, failures, False)
-            row["normalized"] = row["mean"]
-            wins = [
-                (c.metrics[metric] < b.metrics[metric])
-                + 0.5 * (c.metrics[metric] == b.metrics[metric])  # type: ignore[union-attr]
-                for c, b in zip(own, references, strict=True)
-            ]
-            low, high = stats.bootstrap_interval(wins)
-            row.update(
-                p_beats_reference=float(np.concatenate(wins).mean()), p_ci_low=low, p_ci_high=high
-            )
-            rows.append(row)
-    return rows
+    return rows + _suite_rows(cells, reference, by_key)
 
 
 def _cell(value: object) -> str:
@@ -185,7 +198,7 @@ def _cell(value: object) -> str:
     return str(value)
 
 
-def _csv(header: Sequence[str], rows: Sequence[Sequence[object]]) -> str:
+def _table(header: Sequence[str], rows: Sequence[Sequence[object]]) -> str:
     buffer = io.StringIO()
     writer = csv.writer(buffer, lineterminator="\n")
     writer.writerow(header)
@@ -193,154 +206,17 @@ def _csv(header: Sequence[str], rows: Sequence[Sequence[object]]) -> str:
     return buffer.getvalue()
 
 
-def _interval(row: dict[str, object]) -> str:
-    mean, low, high = (float(row[k]) for k in ("mean", "ci_low", "ci_high"))  # type: ignore[arg-type]
-    if row["n_episodes"] == 1:
-        return f"{mean:.3g}"
-    return f"{mean:.3g} [{low:.3g}, {high:.3g}]"
-
-
-def _markdown(
-    rows: list[dict[str, object]], cells: Sequence[CellResult], command: str, reference: str
-) -> str:
-    index = {(r["policy"], r["scenario"], r["metric"]): r for r in rows}
-    policies = list(dict.fromkeys(cell.policy for cell in cells))
-    lines = [
-        "# cpf-bench summary",
-        "",
-        f"Regenerate with `{command}`.",
-        "",
-        "Mean over episodes with its 95 % bootstrap interval in brackets (2000 replicates, "
-        f"fixed seed); every policy runs the same seeds. `failures`: episodes that left the "
-        f"path (counted, never dropped; a failed episode's metrics cover its steps up to the "
-        f"failure). `/ {reference}`: the cost's mean over {reference}'s; `P(beats)`: probability "
-        f"of a lower cost than {reference} on the same seed. Full numbers: `summary.csv`.",
-    ]
-    if any(r["scenario"] == "all" for r in rows):
-        lines += [
-            "",
-            f"## All scenarios, each episode divided by {reference}'s mean on its scenario",
-            "",
-        ]
-        lines.append("| policy | " + " | ".join(h for _, h in HEADLINE) + " | failures |")
-        lines.append("|---" * (len(HEADLINE) + 2) + "|")
-        for policy in policies:
-            cells_ = [index.get((policy, "all", f"{m}_normalized")) for m, _ in HEADLINE]
-            text = [_interval(r) if r else "" for r in cells_]
-            failures = next((r["failures"] for r in cells_ if r), "")
-            lines.append(f"| {policy} | " + " | ".join(text) + f" | {failures} |")
-    scenario_names = list(dict.fromkeys(cell.scenario for cell in cells))
-    for name in scenario_names:
-        first = next(cell for cell in cells if cell.scenario == name)
-        count = (
-            "deterministic: every seed gives the same episode, so one episode"
-            if first.deterministic
-            else f"{len(first.seeds)} episodes, seeds {first.seeds[0]}..{first.seeds[-1]}"
-        )
-        lines += ["", f"## {name} ({count})", ""]
-        lines.append(
-            "| policy | "
-            + " | ".join(h for _, h in HEADLINE)
-            + f" | failures | / {reference} | P(beats) |"
-        )
-        lines.append("|---" * (len(HEADLINE) + 4) + "|")
-        for policy in policies:
-            row_cost = index.get((policy, name, "cost"))
-            if row_cost is None:
-                continue
-            text = [
-                _interval(index[(policy, name, m)]) if (policy, name, m) in index else ""
-                for m, _ in HEADLINE
-            ]
-            ratio = "" if row_cost["normalized"] is None else f"{row_cost['normalized']:.3g}"
-            p = (
-                ""
-                if row_cost["p_beats_reference"] is None or policy == reference
-                else f"{row_cost['p_beats_reference']:.2f}"
-            )
-            lines.append(
-                f"| {policy} | "
-                + " | ".join(text)
-                + f" | {row_cost['failures']}/{row_cost['n_episodes']} | {ratio} | {p} |"
-            )
-    return "\n".join(lines) + "\n"
-
-
-def _figure(
-    rows: list[dict[str, object]], cells: Sequence[CellResult], metric: str, title: str
-) -> Figure:
-    """One panel per scenario, one bar per policy: mean with its 95 % interval."""
-    index = {(r["policy"], r["scenario"]): r for r in rows if r["metric"] == metric}
-    policies = list(dict.fromkeys(cell.policy for cell in cells))
-    names = list(dict.fromkeys(cell.scenario for cell in cells))
-    columns = min(4, len(names))
-    grid = (len(names) + columns - 1) // columns
-    fig = Figure(figsize=(3.2 * columns, 2.8 * grid + 0.6), layout="constrained")
-    axes = np.atleast_1d(fig.subplots(grid, columns, squeeze=False)).reshape(-1)
-    colors = [f"C{k % 10}" for k in range(len(policies))]
-    for ax, name in zip(axes, names, strict=False):
-        for k, policy in enumerate(policies):
-            row = index.get((policy, name))
-            if row is None:
-                continue
-            mean = float(row["mean"])  # type: ignore[arg-type]
-            error = [[mean - float(row["ci_low"])], [float(row["ci_high"]) - mean]]  # type: ignore[arg-type]
-            ax.bar(k, mean, color=colors[k], yerr=error, capsize=3)
-            if int(row["failures"]):  # type: ignore[call-overload]
-                ax.annotate(
-                    f"{row['failures']} failed",
-                    (k, mean),
-                    ha="center",
-                    va="bottom",
-                    fontsize=7,
-                    color="red",
-                )
-        ax.set_title(name, fontsize=9)
-        ax.set_xticks(range(len(policies)), policies, rotation=45, ha="right", fontsize=7)
-        ax.tick_params(axis="y", labelsize=7)
-        ax.grid(axis="y", alpha=0.3)
-    for ax in axes[len(names) :]:
-        ax.set_visible(False)
-    fig.suptitle(f"{title}: mean and 95 % bootstrap interval")
-    return fig
-
-
-def write_outputs(
-    cells: Sequence[CellResult],
-    out: str | Path,
-    command: str,
-    reference: str = "nn_dsc",
-    figures: bool = True,
-) -> list[dict[str, object]]:
-    """Write episodes.csv, summary.csv, summary.md and one PNG per headline metric to ``out``.
-
-    Returns:
-        The summary rows.
-    """
-    directory = Path(out)
-    directory.mkdir(parents=True, exist_ok=True)
-    episode_rows = [
-        [
-            cell.policy,
-            cell.scenario,
-            seed,
-            cell.deterministic,
-            *(float(cell.metrics[m][k]) for m in METRICS),
-        ]
+def episodes_csv(cells: Sequence[CellResult]) -> str:
+    """``episodes.csv``: one row per episode, the metrics in ``METRICS`` order."""
+    rows = [
+        [cell.policy, cell.scenario, seed, cell.deterministic]
+        + [float(cell.metrics[metric][k]) for metric in METRICS]
         for cell in cells
         for k, seed in enumerate(cell.seeds)
     ]
-    (directory / "episodes.csv").write_text(
-        _csv(("policy", "scenario", "seed", "deterministic", *METRICS), episode_rows)
-    )
-    rows = summarize(cells, reference)
-    (directory / "summary.csv").write_text(
-        _csv(SUMMARY_COLUMNS, [[row[c] for c in SUMMARY_COLUMNS] for row in rows])
-    )
-    (directory / "summary.md").write_text(_markdown(rows, cells, command, reference))
-    if figures:
-        for metric, title in HEADLINE:
-            _figure(rows, cells, metric, title).savefig(
-                directory / f"{metric}.png", dpi=100, metadata={"Software": None}
-            )
-    return rows
+    return _table(("policy", "scenario", "seed", "deterministic", *METRICS), rows)
+
+
+def summary_csv(rows: Sequence[dict[str, object]]) -> str:
+    """``summary.csv``: the rows of ``summarize``, columns ``SUMMARY_COLUMNS``."""
+    return _table(SUMMARY_COLUMNS, [[row[c] for c in SUMMARY_COLUMNS] for row in rows])

@@ -101,6 +101,42 @@ def _reduce(series: dict[str, Array], mask: NDArray[np.bool_], dt: float) -> dic
     }
 
 
+#: Per-step series recorded for every fleet, each (S, T).
+_SERIES = (
+    "reward",
+    *_TERM_COSTS,
+    "path_error_sq",
+    "path_error_max",
+    "heading_error_sq",
+    "speed_error_sq",
+    "estimate_error_sq",
+    "spread",
+    "energy",
+    "saturated",
+)
+
+
+def _record(
+    series: dict[str, Array], t: int, sim: FleetSim, estimate: Array | None, v0: float
+) -> None:
+    """Write step t's fleet means (over vessels) into column t of every series."""
+    a = sim.arrays
+    errors = a.errors
+    series["reward"][:, t] = a.reward.mean(axis=1)
+    for k, name in enumerate(_TERM_COSTS):
+        series[name][:, t] = a.reward_terms[:, :, k].mean(axis=1)
+    series["path_error_sq"][:, t] = (errors[..., kernels.ERR_PATH] ** 2).mean(axis=1)
+    series["path_error_max"][:, t] = errors[..., kernels.ERR_PATH].max(axis=1)
+    series["heading_error_sq"][:, t] = (errors[..., kernels.ERR_HEADING] ** 2).mean(axis=1)
+    series["speed_error_sq"][:, t] = (errors[..., kernels.ERR_SPEED] ** 2).mean(axis=1)
+    series["spread"][:, t] = a.theta.max(axis=1) - a.theta.min(axis=1)
+    force = a.tau_applied / sim.constants.tau_scale
+    series["energy"][:, t] = (force**2).sum(axis=2).mean(axis=1)
+    series["saturated"][:, t] = (a.tau_command != a.tau_applied).any(axis=2).mean(axis=1)
+    if estimate is not None:
+        series["estimate_error_sq"][:, t] = ((np.asarray(estimate) - v0) ** 2).mean(axis=1)
+
+
 def run_episodes(
     policy: BenchPolicy,
     scenario: Scenario,
@@ -128,20 +164,7 @@ def run_episodes(
     policy.reset()
     obs = sim.reset(seeds=list(seeds))
     a, S = sim.arrays, sim.num_fleets
-    tau_scale = sim.constants.tau_scale
-    names = (
-        "reward",
-        *_TERM_COSTS,
-        "path_error_sq",
-        "path_error_max",
-        "heading_error_sq",
-        "speed_error_sq",
-        "estimate_error_sq",
-        "spread",
-        "energy",
-        "saturated",
-    )
-    series = {name: np.zeros((S, horizon)) for name in names}
+    series = {name: np.zeros((S, horizon)) for name in _SERIES}
     has_estimate = True
     alive = np.ones(S, dtype=bool)
     failed = np.zeros(S, dtype=bool)
@@ -152,21 +175,8 @@ def run_episodes(
         v0 = sim.v0_at(t * scenario.dt)
         actions[~alive] = 0.0
         obs = sim.step(actions)
-        errors = a.errors
-        series["reward"][:, t] = a.reward.mean(axis=1)
-        for k, name in enumerate(_TERM_COSTS):
-            series[name][:, t] = a.reward_terms[:, :, k].mean(axis=1)
-        series["path_error_sq"][:, t] = (errors[..., kernels.ERR_PATH] ** 2).mean(axis=1)
-        series["path_error_max"][:, t] = errors[..., kernels.ERR_PATH].max(axis=1)
-        series["heading_error_sq"][:, t] = (errors[..., kernels.ERR_HEADING] ** 2).mean(axis=1)
-        series["speed_error_sq"][:, t] = (errors[..., kernels.ERR_SPEED] ** 2).mean(axis=1)
-        series["spread"][:, t] = a.theta.max(axis=1) - a.theta.min(axis=1)
-        series["energy"][:, t] = ((a.tau_applied / tau_scale) ** 2).sum(axis=2).mean(axis=1)
-        series["saturated"][:, t] = (a.tau_command != a.tau_applied).any(axis=2).mean(axis=1)
-        if estimate is None:
-            has_estimate = False
-        else:
-            series["estimate_error_sq"][:, t] = ((np.asarray(estimate) - v0) ** 2).mean(axis=1)
+        _record(series, t, sim, estimate, v0)
+        has_estimate = has_estimate and estimate is not None
         now = alive & a.terminated
         failed |= now
         end[now] = t + 1

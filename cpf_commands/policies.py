@@ -114,13 +114,13 @@ def resolve_policy(spec: PolicySpec, scenario: str | Scenario, **options: Any) -
     if isinstance(spec, str | Path):
         _check_name(spec)
         try:
-            from agents import load_policy  # type: ignore[attr-defined]
+            from agents import load_policy
         except ImportError as error:
             raise ValueError(
                 f"{str(spec)!r} is a folder, but loading trained agents needs "
                 "agents.load_policy (the learning extra: pip install 'cpf_env[rl]')."
             ) from error
-        return load_policy(Path(spec), resolved)  # type: ignore[no-any-return]
+        return load_policy(Path(spec), resolved)
     if isinstance(spec, BenchPolicy):
         return spec
     if callable(spec):

@@ -6,9 +6,12 @@ Measures, after a warm-up that triggers numba compilation:
   observations and rewards, in vessel-steps per second;
 * the PettingZoo ``ParallelEnv`` (dict API, B = 1), in env-steps per second;
 * the reference policy's ``act_batch`` for the same batch sizes;
-* the closed loop (policy + batched simulator).
+* the closed loop (policy + batched simulator);
+* one whole episode of the scenario with the policy (B = 1), in seconds: for
+  ``wang2014``, the paper's 150 s simulation.
 
-Prints a table (or JSON with ``--json``). Numbers depend on the machine and
+Prints a table (or JSON with ``--json``: one record per line of the table,
+with ``seconds`` added on the episode's). Numbers depend on the machine and
 on ``NUMBA_NUM_THREADS``; report them with the command that produced them.
 """
 
@@ -20,6 +23,7 @@ import time
 from collections.abc import Callable, Sequence
 
 import numpy as np
+from tqdm.auto import tqdm
 
 import cpf_env
 from cpf_env.sim import FleetSim
@@ -37,16 +41,48 @@ def _rate(function: Callable[[], object], min_seconds: float) -> float:
     return calls / elapsed
 
 
+def _episode_seconds(scenario: str, policy: str, steps: int | None) -> tuple[float, int, int]:
+    """Wall time (s) of one closed-loop episode at B = 1, its steps and n (after a warm-up)."""
+    from baselines import make_policy
+
+    task = cpf_env.scenarios.get(scenario)
+    horizon = task.max_steps if steps is None else int(steps)
+    sim = FleetSim(task, num_fleets=1)
+    reference = make_policy(policy, sim)
+    reference.act_batch(sim.reset(seeds=[0]))  # warm-up: compiled kernels, first allocations
+    reference.reset()
+    start = time.perf_counter()
+    obs = sim.reset(seeds=[0])
+    for _ in range(horizon):
+        obs = sim.step(reference.act_batch(obs))
+        if sim.arrays.terminated[0]:
+            break
+    return time.perf_counter() - start, int(sim.arrays.step[0]), sim.n
+
+
 def measure(
     scenario: str = "wang2014",
     fleets: Sequence[int] = (1, 1024),
     policy: str = "nn_dsc",
     min_seconds: float = 2.0,
+    episode_steps: int | None = None,
+    progress: bool = False,
 ) -> list[dict[str, object]]:
-    """Measure throughputs; returns one row per (component, B)."""
+    """Measure throughputs; returns one row per (component, B).
+
+    Args:
+        scenario: Scenario name.
+        fleets: Batch sizes B to time.
+        policy: Baseline name of the policy.
+        min_seconds: Timing per measurement (s).
+        episode_steps: Length of the timed whole episode (default: the scenario's
+            ``max_steps``).
+        progress: Show a progress bar (stderr), one tick per measurement.
+    """
     from baselines import make_policy
 
     rows: list[dict[str, object]] = []
+    bar = tqdm(total=3 * len(fleets) + 2, disable=not progress, desc="cpf-speed")
 
     def add(component: str, batch: int, n: int, per_second: float) -> None:
         rows.append(
@@ -77,9 +113,14 @@ def measure(
         def closed_loop(sim: FleetSim = sim, reference: object = reference) -> None:
             sim_step(sim, reference.act_batch(sim.arrays.obs))  # type: ignore[attr-defined]
 
-        add("FleetSim.step", batch, n, _rate(sim_step, min_seconds))
-        add(f"{policy}.act_batch", batch, n, _rate(policy_step, min_seconds))
-        add(f"{policy} + FleetSim.step", batch, n, _rate(closed_loop, min_seconds))
+        for component, function in (
+            ("FleetSim.step", sim_step),
+            (f"{policy}.act_batch", policy_step),
+            (f"{policy} + FleetSim.step", closed_loop),
+        ):
+            bar.set_postfix_str(f"{component}, B = {batch}")
+            add(component, batch, n, _rate(function, min_seconds))
+            bar.update()
 
     env = cpf_env.parallel_env(scenario)
     _observations, _ = env.reset(seed=0)
@@ -90,27 +131,84 @@ def measure(
         if any(terminations.values()) or any(truncations.values()):
             env.reset()
 
+    bar.set_postfix_str("ParallelEnv.step")
     add("ParallelEnv.step", 1, env.scenario.n, _rate(env_step, min_seconds))
+    bar.update()
+    # The training path (FleetVecEnv stepping the residual on nn_dsc) is measured here
+    # once agents provides it.
+    bar.set_postfix_str("whole episode")
+    seconds, steps, n = _episode_seconds(scenario, policy, episode_steps)
+    add(f"{scenario} episode ({steps} steps), {policy}", 1, n, steps / seconds)
+    rows[-1]["seconds"] = seconds
+    bar.update()
+    bar.close()
     return rows
 
 
 def speed_main(argv: Sequence[str] | None = None) -> int:
     """``cpf-speed``: see ``cpf-speed --help``."""
-    parser = argparse.ArgumentParser(prog="cpf-speed", description=__doc__.splitlines()[0])
-    parser.add_argument("--scenario", default="wang2014")
-    parser.add_argument("--fleets", type=int, nargs="+", default=[1, 1024])
-    parser.add_argument("--policy", default="nn_dsc")
-    parser.add_argument("--seconds", type=float, default=2.0, help="timing per measurement")
+    from baselines import POLICIES
+
+    parser = argparse.ArgumentParser(
+        prog="cpf-speed",
+        description="Throughput of the simulator, the PettingZoo env and a policy (after a "
+        "warm-up that compiles the kernels), and the wall time of one whole episode.",
+    )
+    parser.add_argument(
+        "--scenario",
+        default="wang2014",
+        choices=cpf_env.scenarios.list_scenarios(),
+        metavar="NAME",
+        help="registered scenario (default: wang2014)",
+    )
+    parser.add_argument(
+        "--fleets",
+        type=int,
+        nargs="+",
+        default=[1, 1024],
+        metavar="B",
+        help="batch sizes to time (default: 1 1024)",
+    )
+    parser.add_argument(
+        "--policy",
+        default="nn_dsc",
+        choices=sorted(POLICIES),
+        metavar="NAME",
+        help=f"baseline policy, one of {', '.join(sorted(POLICIES))} (default: nn_dsc)",
+    )
+    parser.add_argument(
+        "--seconds", type=float, default=2.0, help="timing per measurement in s (default: 2)"
+    )
+    parser.add_argument(
+        "--episode-steps",
+        type=int,
+        default=None,
+        metavar="N",
+        help="length of the timed episode (default: the scenario's max_steps)",
+    )
     parser.add_argument("--json", action="store_true", help="print JSON instead of a table")
+    parser.add_argument("--quiet", action="store_true", help="no progress bar")
     args = parser.parse_args(argv)
-    rows = measure(args.scenario, args.fleets, args.policy, args.seconds)
+    rows = measure(
+        args.scenario,
+        args.fleets,
+        args.policy,
+        args.seconds,
+        episode_steps=args.episode_steps,
+        progress=not args.quiet,
+    )
     if args.json:
         print(json.dumps(rows, indent=2))
         return 0
-    print(f"{'component':<28} {'B':>6} {'n':>3} {'steps/s':>12} {'vessel-steps/s':>16}")
+    width = max(28, *(len(str(row["component"])) for row in rows))
+    print(
+        f"{'component':<{width}} {'B':>6} {'n':>3} {'steps/s':>12} {'vessel-steps/s':>16}"
+        f" {'seconds':>8}"
+    )
     for row in rows:
+        seconds = f"{row['seconds']:>8.2f}" if "seconds" in row else ""
         print(
-            f"{row['component']:<28} {row['B']:>6} {row['n']:>3} "
-            f"{row['steps_per_s']:>12,.0f} {row['vessel_steps_per_s']:>16,.0f}"
+            f"{row['component']:<{width}} {row['B']:>6} {row['n']:>3} "
+            f"{row['steps_per_s']:>12,.0f} {row['vessel_steps_per_s']:>16,.0f} {seconds}"
         )
     return 0

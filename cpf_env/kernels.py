@@ -61,7 +61,7 @@ from cpf_env.observation import (
 )
 from cpf_env.paths import path_point
 from cpf_env.plant import plant_rhs, rk4_period
-from cpf_env.reward import step_reward
+from cpf_env.reward import failure_penalty, step_reward
 
 # Columns of FleetArrays.errors.
 ERR_PATH, ERR_HEADING, ERR_SYNC, ERR_SPEED = 0, 1, 2, 3
@@ -89,7 +89,7 @@ class FleetArrays(NamedTuple):
     history: np.ndarray  # (B, delay + 1, n, 1 + m) packets sent, ring buffer by step
     obs: np.ndarray  # (B, n, obs_dim) float32 observations
     reward: np.ndarray  # (B, n) reward of the last step
-    reward_terms: np.ndarray  # (B, n, 5) each term's part of the vessel's own reward
+    reward_terms: np.ndarray  # (B, n, 6) each term's part of the vessel's own reward
     errors: np.ndarray  # (B, n, 4) path, heading, sync, speed error after the last step
     terminated: np.ndarray  # (B,) bool: a vessel left its path (latched until reset)
     nonfinite: np.ndarray  # (B,) bool: the state became NaN/inf (the plant diverged)
@@ -117,9 +117,10 @@ class KernelConstants(NamedTuple):
     v0_values: np.ndarray  # (S,) m/s
     dt: float
     substeps: int
-    reward_params: np.ndarray  # (10,) RewardWeights.encode()
+    reward_params: np.ndarray  # (11,) RewardWeights.encode()
     team_reward: bool
     max_path_error: float
+    max_steps: int
 
 
 @numba.njit(cache=True, inline="always")
@@ -343,6 +344,13 @@ def observe_fleet(a: FleetArrays, c: KernelConstants, b: int, speed_reference: f
         a.reward[b, i] = reward
         total += reward
         terminated = terminated or path_error > c.max_path_error
+    if terminated and not a.terminated[b]:  # the step the fleet leaves its path
+        remaining = max(c.max_steps - step, 0) * c.dt
+        penalty = failure_penalty(c.reward_params, remaining, c.max_path_error)
+        for i in range(n):
+            a.reward_terms[b, i, 5] = penalty
+            a.reward[b, i] += penalty
+            total += penalty
     if c.team_reward:
         for i in range(n):
             a.reward[b, i] = total / n

@@ -14,6 +14,8 @@ sync       s_i = sum_j a_ij (theta_i -    rho(x / sync_scale)
            theta_j) on true values
 speed      theta_dot_i - v0 (m/s)         rho(x / speed_scale)
 effort     ||tau_i / tau_max||            x^2 (always quadratic)
+failure    on the step the fleet          (T - t) / dt * w_position *
+           terminates only                rho(max_path_error / position_scale)
 =========  =============================  ======================================
 
 with z1 the body-frame path error after the step, tau_i the applied
@@ -35,6 +37,12 @@ the position term, so a 17-fold difference in tail path error between two
 controllers changes the cost by 1.6 %; residual PPO trained on it made every
 task metric worse.
 
+The failure term charges every vessel of a fleet that leaves its path
+(terminates) the position cost of sitting at the termination distance for
+the rest of the episode (T = max_steps * dt). Without it, ending an episode
+early is cheaper than finishing it: PPO from scratch learned exactly that
+(every evaluation episode failed, at a lower return than ``nn_dsc``'s).
+
 With a team reward every vessel receives the fleet mean. Each term's
 contribution -dt w_k c_k is reported separately (``FleetSim.arrays.reward_terms``
 and the env's infos), so episode costs can be decomposed.
@@ -52,12 +60,12 @@ from numpy.typing import NDArray
 __all__ = ["REWARD_FORMS", "REWARD_TERMS", "RewardWeights"]
 
 #: Names of the reward terms, in the order of ``FleetSim.arrays.reward_terms``.
-REWARD_TERMS = ("position", "heading", "sync", "speed", "effort")
+REWARD_TERMS = ("position", "heading", "sync", "speed", "effort", "failure")
 #: Accepted values of ``RewardWeights.form``.
 REWARD_FORMS = ("log", "quadratic")
 
-# Layout of ``RewardWeights.encode()``: 5 weights, the form flag, 4 scales.
-_FORM, _SCALES = 5, 6
+# Layout of ``RewardWeights.encode()``: 5 weights, the form flag, 4 scales, failure weight.
+_FORM, _SCALES, _FAILURE = 5, 6, 10
 
 
 @dataclass(frozen=True)
@@ -70,6 +78,7 @@ class RewardWeights:
         sync: Weight of the synchronization term.
         speed: Weight of the path-speed term.
         effort: Weight of the normalized-force term ||tau / tau_max||^2.
+        failure: Weight of the failure term (0 disables it).
         team: If True, every vessel gets the fleet-mean reward.
         form: ``"log"`` (cost log(1 + (x / scale)^2)) or ``"quadratic"``
             (cost x^2, scales unused): see the module docstring.
@@ -91,6 +100,7 @@ class RewardWeights:
     sync: float = 1.0
     speed: float = 0.1
     effort: float = 0.01
+    failure: float = 1.0
     team: bool = False
     form: str = "log"
     position_scale: float = 0.01
@@ -119,11 +129,11 @@ class RewardWeights:
                 )
 
     def encode(self) -> NDArray[np.float64]:
-        """The reward in kernel form, shape (10,).
+        """The reward in kernel form, shape (11,).
 
         Weights (position, heading, sync, speed, effort), the form flag (1.0 for
-        ``"log"``, 0.0 for ``"quadratic"``), and the scales (position, heading,
-        sync, speed).
+        ``"log"``, 0.0 for ``"quadratic"``), the scales (position, heading,
+        sync, speed) and the failure weight.
         """
         return np.array(
             [
@@ -137,6 +147,7 @@ class RewardWeights:
                 self.heading_scale,
                 self.sync_scale,
                 self.speed_scale,
+                self.failure,
             ]
         )
 
@@ -164,14 +175,15 @@ def step_reward(
     """Reward of one vessel for one control step (see module docstring).
 
     Args:
-        params: ``RewardWeights.encode()``, shape (10,).
+        params: ``RewardWeights.encode()``, shape (11,).
         dt: Control period (s).
         z1: Body-frame path error after the step, shape (3,).
         sync_error: s_i on true path variables.
         speed_error: theta_dot_i - v0 (m/s).
         tau: Applied force, shape (3,).
         tau_scale: Per-axis normalization max(|tau_min|, |tau_max|), shape (3,).
-        terms: Written with each term's contribution -dt w_k c_k, shape (5,).
+        terms: Written with each term's contribution -dt w_k c_k, shape (6,); the
+            failure term is 0 here (see ``failure_penalty``).
 
     Returns:
         The reward, the sum of ``terms``.
@@ -184,4 +196,18 @@ def step_reward(
     terms[2] = -dt * params[2] * _shaped(params, 2, sync_error * sync_error)
     terms[3] = -dt * params[3] * _shaped(params, 3, speed_error * speed_error)
     terms[4] = -dt * params[4] * effort
+    terms[5] = 0.0
     return terms[0] + terms[1] + terms[2] + terms[3] + terms[4]
+
+
+@numba.njit(cache=True, inline="always")
+def failure_penalty(params: NDArray, remaining: float, max_path_error: float) -> float:
+    """Failure term of each vessel of a fleet that terminates (<= 0).
+
+    Args:
+        params: ``RewardWeights.encode()``, shape (11,).
+        remaining: Time left in the episode (s), (max_steps - step) * dt.
+        max_path_error: The termination distance (m).
+    """
+    at_limit = params[0] * _shaped(params, 0, max_path_error * max_path_error)
+    return -params[_FAILURE] * remaining * at_limit

@@ -455,3 +455,6 @@ for _factory in (
     large_fleet,
 ):
     register(_factory.__name__, _factory)
+
+# The fine-step scenarios of the paper's reproduction register themselves on import.
+from cpf_env import fine_scenarios  # noqa: E402, F401

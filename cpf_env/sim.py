@@ -111,6 +111,7 @@ def _constants(scenario: Scenario) -> kernels.KernelConstants:
         reward_params=_floats(scenario.reward.encode()),
         team_reward=bool(scenario.reward.team),
         max_path_error=float(scenario.max_path_error),
+        max_steps=int(scenario.max_steps),
     )
 
 

@@ -1,79 +1,67 @@
-"""Compare the analytic policies (the paper's controller, its ablations, backstepping).
+"""Compare your own controller with the baselines, through the benchmark's code.
 
-Runs every policy on every named scenario (or the ones given) for one seed
-and prints a markdown table of steady-state metrics over the last quarter of
-each episode: what each contribution of the paper is worth, scenario by
-scenario.
+``cpf-bench`` compares named baselines and trained agents from the command
+line; from Python, ``run_bench`` also takes policy objects, or callables that
+build one per scenario. Here the candidate is the paper's controller with
+halved kinetic gains K2, compared with ``nn_dsc`` and ``backstepping`` on the
+same paired seeds; the table printed is the run's ``summary.md``.
 
 Usage::
 
-    python examples/compare_policies.py [--scenarios wang2014 saturation_heavy] [--steps N]
+    python examples/compare_policies.py [--scenarios bench_mild bench_saturation]
+        [--seeds 5] [--steps N] [--out outputs/compare_policies]
 """
 
 from __future__ import annotations
 
 import argparse
+import shlex
+import sys
 from collections.abc import Sequence
+from pathlib import Path
 
-import numpy as np
-
-from baselines import POLICIES
-from cpf_commands.experiment import run_episode
+from baselines import NNDSCGains, make_policy
+from cpf_commands.bench import run_bench
+from cpf_commands.bench_report import CellResult
+from cpf_commands.policies import BenchPolicy
 from cpf_env import scenarios
-from cpf_env.metrics import episode_metrics
+from cpf_env.scenarios import Scenario
 
-COLUMNS = (
-    "scenario",
-    "policy",
-    "path err max (m)",
-    "path err rms (m)",
-    "max abs(theta_i - theta_j)",
-    "max abs(vhat - v0) (m/s)",
-    "saturated steps",
-    "return",
-)
+SOFT_K2 = tuple(0.5 * k for k in NNDSCGains().K2)
 
 
-def compare(
-    scenario_names: Sequence[str] | None = None,
-    policies: Sequence[str] | None = None,
-    seed: int = 0,
-    steps: int | None = None,
-) -> list[tuple[object, ...]]:
-    """One row per (scenario, policy): the metrics of ``COLUMNS``."""
-    rows = []
-    for name in scenario_names or scenarios.list_scenarios():
-        for policy in policies or list(POLICIES):
-            metrics = episode_metrics(run_episode(name, policy, seed=seed, steps=steps))
-            speed = metrics.get("speed_estimate_error_max", [float("nan")])
-            rows.append((
-                name,
-                policy,
-                max(metrics["path_error_max"]),
-                max(metrics["path_error_rms"]),
-                metrics["coordination_error_max"],
-                max(speed),
-                float(np.mean(metrics["saturated_fraction"])),
-                metrics["return_mean"],
-            ))  # fmt: skip
-    return rows
+def soft_nn_dsc(scenario: Scenario) -> BenchPolicy:
+    """The candidate: ``nn_dsc`` with half its kinetic gains, built for ``scenario``."""
+    return make_policy("nn_dsc", scenario, K2=SOFT_K2)
 
 
-def main(argv: Sequence[str] | None = None) -> list[tuple[object, ...]]:
-    """Parse arguments, run the comparison, print the table, and return its rows."""
+def main(argv: Sequence[str] | None = None) -> list[CellResult]:
+    """Parse arguments, run the comparison, print summary.md and return the results."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--scenarios", nargs="+", default=None, choices=scenarios.list_scenarios())
-    parser.add_argument("--policies", nargs="+", default=None, choices=sorted(POLICIES))
-    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument(
+        "--scenarios",
+        nargs="+",
+        default=["bench_mild", "bench_saturation"],
+        choices=scenarios.list_scenarios(),
+    )
+    parser.add_argument("--seeds", type=int, default=5)
     parser.add_argument("--steps", type=int, default=None)
+    parser.add_argument("--out", default="outputs/compare_policies")
     args = parser.parse_args(argv)
-    rows = compare(args.scenarios, args.policies, args.seed, args.steps)
-    print("| " + " | ".join(COLUMNS) + " |")
-    print("|" + "---|" * len(COLUMNS))
-    for row in rows:
-        cells = [f"{x:.3g}" if isinstance(x, float) else str(x) for x in row]
-        print("| " + " | ".join(cells) + " |")
-    return rows
+    policies = {"nn_dsc": "nn_dsc", "backstepping": "backstepping", "nn_dsc_soft": soft_nn_dsc}
+    cells = run_bench(
+        policies,
+        args.scenarios,
+        seeds=args.seeds,
+        steps=args.steps,
+        out=args.out,
+        command=shlex.join(
+            ["python", "examples/compare_policies.py", *(sys.argv[1:] if argv is None else argv)]
+        ),
+        figures=False,
+    )
+    print((Path(args.out) / "summary.md").read_text())
+    return cells
 
 
 if __name__ == "__main__":

@@ -30,11 +30,32 @@ from collections.abc import Sequence
 from pathlib import Path
 
 SCENARIOS = ("bench_saturation", "bench_lossy_links")
-AGENTS = {"residual_ppo": "nn_dsc", "scratch_ppo": "none"}
+#: Agents by name: ``TrainConfig`` fields that differ from the experiment's common settings.
+AGENTS: dict[str, dict[str, object]] = {
+    "residual_ppo": {"base": "nn_dsc"},
+    "scratch_ppo": {"base": "none", "log_std_init": -0.5},
+    "residual_ppo_extras": {
+        "base": "nn_dsc",
+        "extras": ("base_action", "base_signals", "multiscale_errors"),
+    },
+    "residual_ppo_kinematic": {
+        "base": "nn_dsc",
+        "mode": "kinematic",
+        "extras": ("multiscale_errors",),
+    },
+    "residual_ppo_rate": {"base": "nn_dsc", "mode": "force_and_rate"},
+    "residual_ppo_quadratic": {"base": "nn_dsc", "reward_form": "quadratic"},
+    "residual_sac": {"algo": "sac", "base": "nn_dsc", "batch_size": 1024, "net_arch": (64, 64)},
+}
 
 
 def train_runs(
-    runs: Path, timesteps: int, seeds: Sequence[int], fleets: int, scenarios: Sequence[str]
+    runs: Path,
+    timesteps: int,
+    seeds: Sequence[int],
+    fleets: int,
+    scenarios: Sequence[str],
+    agents: Sequence[str],
 ) -> list[Path]:
     """Train every (scenario, agent, seed) not trained yet; return all run folders."""
     from agents.training import TrainConfig, train
@@ -42,19 +63,18 @@ def train_runs(
     folders = []
     for seed in seeds:  # seed outermost: an interrupted sweep still covers every cell
         for scenario in scenarios:
-            for agent, base in AGENTS.items():
+            for agent in agents:
                 folder = runs / f"{agent}_{scenario}_s{seed}"
                 folders.append(folder)
                 if (folder / "config.json").is_file():
                     continue
+                settings: dict[str, object] = {"batch_size": 2560, **AGENTS[agent]}
                 config = TrainConfig(
                     scenario=scenario,
-                    base=base,
                     fleets=fleets,
                     timesteps=timesteps,
                     seed=seed,
-                    batch_size=2560,
-                    log_std_init=-1.0 if base != "none" else -0.5,
+                    **settings,  # type: ignore[arg-type]
                 )
                 print(f"training {folder.name} ...", flush=True)
                 train(config, folder, progress=False)
@@ -104,10 +124,17 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--fleets", type=int, default=64, help="fleets per training run")
     parser.add_argument("--seeds", type=int, default=20, help="evaluation episodes")
     parser.add_argument("--scenarios", nargs="+", default=list(SCENARIOS), help="scenarios")
+    parser.add_argument(
+        "--agents",
+        nargs="+",
+        default=["residual_ppo", "scratch_ppo"],
+        choices=sorted(AGENTS),
+        help="agents to train",
+    )
     args = parser.parse_args(argv)
     runs, results = Path(args.runs), Path(args.results)
     if args.phase == "train":
-        train_runs(runs, args.timesteps, args.train_seeds, args.fleets, args.scenarios)
+        train_runs(runs, args.timesteps, args.train_seeds, args.fleets, args.scenarios, args.agents)
     else:
         evaluate(runs, results, args.seeds, args.scenarios)
     return 0

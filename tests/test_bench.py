@@ -239,6 +239,31 @@ def test_summary_has_the_issue_columns_and_reference_scores():
     )
 
 
+def _picky(scenario):
+    """A stand-in for a trained agent that fits only some observation layouts."""
+    if scenario.name == "bench_switching":
+        raise ValueError("inputs of size 34 do not fit the network")
+    return make_policy("dsc", scenario)
+
+
+def test_a_policy_that_does_not_fit_a_scenario_skips_it_and_says_so(tmp_path):
+    policies = {"nn_dsc": "nn_dsc", "picky": _picky}
+    names = ["bench_mild", "bench_switching"]
+    cells = run_bench(policies, names, seeds=2, steps=5, out=tmp_path, figures=False)
+    assert [(c.policy, c.scenario) for c in cells] == [
+        ("nn_dsc", "bench_mild"),
+        ("nn_dsc", "bench_switching"),
+        ("picky", "bench_mild"),
+    ]
+    summary = (tmp_path / "summary.md").read_text()
+    assert "- picky on bench_switching: inputs of size 34 do not fit the network" in summary
+    with open(tmp_path / "summary.csv") as file:
+        rows = list(csv.DictReader(file))
+    assert {r["policy"] for r in rows if r["scenario"] == "all"} == {"nn_dsc"}
+    with pytest.raises(ValueError, match="do not fit"):
+        run_bench({"picky": _picky}, ["bench_switching"], seeds=1, steps=2)
+
+
 def test_two_policies_with_one_label_are_refused():
     with pytest.raises(ValueError, match="labelled 'nn_dsc'"):
         run_bench(["nn_dsc", "nn_dsc"], ["bench_mild"], seeds=1, steps=2)
@@ -295,7 +320,8 @@ def test_a_trained_agent_goes_through_the_bench_like_a_baseline(trained_agent):
 
 def test_cpf_run_takes_a_trained_agent_path(trained_agent, tmp_path, capsys):
     folder, calls = trained_agent
-    argv = ["--policy", str(folder), "--steps", "10", "--out", str(tmp_path / "out")]
+    argv = ["--policy", str(folder), "--scenario", "wang2014", "--steps", "10"]
+    argv += ["--out", str(tmp_path / "out")]
     assert run_main([*argv, "--no-figures", "--quiet"]) == 0
     assert calls == [(folder, "wang2014")]
     assert (tmp_path / "out" / "wang2014_agent" / "metrics.json").exists()

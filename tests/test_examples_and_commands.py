@@ -25,20 +25,24 @@ def _load_example(name: str):
 def test_reproduce_example_runs_small(tmp_path, capsys):
     example = _load_example("reproduce_wang2014")
     assert example.main(steps=30, out=str(tmp_path), figures=False) == 0
-    metrics = json.loads((tmp_path / "wang2014_nn_dsc" / "metrics.json").read_text())
+    metrics = json.loads((tmp_path / "wang2014_fine_nn_dsc" / "metrics.json").read_text())
     assert metrics["steps"] == 30 and metrics["policy"] == "nn_dsc"
+    assert metrics["policy_options"] == {"leakage": "plain"}
     assert "Claims of Wang, Wang & Peng (2014)" in capsys.readouterr().out
 
 
 def test_speed_measure_reports_every_component():
-    rows = measure("wang2014", fleets=(2,), min_seconds=0.01)
+    rows = measure("wang2014", fleets=(2,), min_seconds=0.01, episode_steps=20)
     components = {row["component"] for row in rows}
     assert components == {
         "FleetSim.step",
         "nn_dsc.act_batch",
         "nn_dsc + FleetSim.step",
         "ParallelEnv.step",
+        "wang2014 episode (20 steps), nn_dsc",
     }
+    episode = rows[-1]
+    assert episode["steps_per_s"] == pytest.approx(20 / episode["seconds"], rel=1e-3)
     for row in rows:
         assert row["vessel_steps_per_s"] == pytest.approx(
             row["steps_per_s"] * row["B"] * 5, rel=1e-4
@@ -47,9 +51,13 @@ def test_speed_measure_reports_every_component():
 
 
 def test_speed_command_prints_json(capsys):
-    assert speed_main(["--fleets", "1", "--seconds", "0.01", "--json"]) == 0
+    argv = ["--fleets", "1", "--seconds", "0.01", "--episode-steps", "5", "--json", "--quiet"]
+    assert speed_main(argv) == 0
     rows = json.loads(capsys.readouterr().out)
     assert {row["B"] for row in rows} == {1}
+    assert [row["component"] for row in rows][-1] == "wang2014 episode (5 steps), nn_dsc"
+    for row in rows:
+        assert {"component", "B", "n", "steps_per_s", "vessel_steps_per_s"} <= set(row)
 
 
 @pytest.mark.slow
@@ -66,11 +74,11 @@ def test_full_episode_of_every_policy_on_every_scenario(name, policy):
     assert max(metrics["path_error_max"]) < 0.05
 
 
-def test_compare_policies_example_prints_one_row_per_pair(capsys):
+def test_compare_policies_example_runs_the_bench_with_a_custom_policy(tmp_path, capsys):
     example = _load_example("compare_policies")
-    rows = example.main(["--scenarios", "wang2014", "lossy_links", "--steps", "20"])
-    assert [(row[0], row[1]) for row in rows] == [
-        (name, policy) for name in ("wang2014", "lossy_links") for policy in POLICIES
-    ]
-    table = capsys.readouterr().out.splitlines()
-    assert len(table) == 2 + len(rows) and table[0].startswith("| scenario | policy |")
+    argv = ["--scenarios", "bench_mild", "--seeds", "2", "--steps", "20", "--out", str(tmp_path)]
+    cells = example.main(argv)
+    assert [cell.policy for cell in cells] == ["nn_dsc", "backstepping", "nn_dsc_soft"]
+    assert cells[0].seeds == cells[2].seeds
+    assert cells[0].metrics["cost"].tolist() != cells[2].metrics["cost"].tolist()
+    assert "| nn_dsc_soft |" in capsys.readouterr().out
