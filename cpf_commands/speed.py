@@ -156,7 +156,7 @@ def measure(
         vec = _training_env(scenario, policy, batch)
         if vec is None:
             continue
-        zero = np.zeros((vec.num_envs, *vec.action_space.shape), dtype=np.float32)
+        zero = np.zeros((vec.num_envs, vec.controller.action_size), dtype=np.float32)
 
         def vec_step(vec: FleetVecEnv = vec, zero: np.ndarray = zero) -> None:
             vec.step(zero)
