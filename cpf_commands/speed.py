@@ -7,6 +7,8 @@ Measures, after a warm-up that triggers numba compilation:
 * the PettingZoo ``ParallelEnv`` (dict API, B = 1), in env-steps per second;
 * the reference policy's ``act_batch`` for the same batch sizes;
 * the closed loop (policy + batched simulator);
+* the training path: ``agents.FleetVecEnv.step`` with a zero residual on the
+  policy, for the same batch sizes (needs the ``rl`` extra; skipped without it);
 * one whole episode of the scenario with the policy (B = 1), in seconds: for
   ``wang2014``, the paper's 150 s simulation.
 
@@ -21,12 +23,16 @@ import argparse
 import json
 import time
 from collections.abc import Callable, Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
 from tqdm.auto import tqdm
 
 import cpf_env
 from cpf_env.sim import FleetSim
+
+if TYPE_CHECKING:
+    from agents import FleetVecEnv
 
 __all__ = ["measure", "speed_main"]
 
@@ -60,6 +66,18 @@ def _episode_seconds(scenario: str, policy: str, steps: int | None) -> tuple[flo
     return time.perf_counter() - start, int(sim.arrays.step[0]), sim.n
 
 
+def _training_env(scenario: str, policy: str, batch: int) -> FleetVecEnv | None:
+    """A reset ``FleetVecEnv`` (residual on ``policy``), or None without the ``rl`` extra."""
+    try:
+        from agents import FleetVecEnv
+    except ImportError:  # stable-baselines3 / torch not installed
+        return None
+    vec = FleetVecEnv(scenario, num_fleets=batch, base_policy=policy)
+    vec.seed(0)
+    vec.reset()
+    return vec
+
+
 def measure(
     scenario: str = "wang2014",
     fleets: Sequence[int] = (1, 1024),
@@ -82,7 +100,7 @@ def measure(
     from baselines import make_policy
 
     rows: list[dict[str, object]] = []
-    bar = tqdm(total=3 * len(fleets) + 2, disable=not progress, desc="cpf-speed")
+    bar = tqdm(total=4 * len(fleets) + 2, disable=not progress, desc="cpf-speed")
 
     def add(component: str, batch: int, n: int, per_second: float) -> None:
         rows.append(
@@ -134,8 +152,18 @@ def measure(
     bar.set_postfix_str("ParallelEnv.step")
     add("ParallelEnv.step", 1, env.scenario.n, _rate(env_step, min_seconds))
     bar.update()
-    # The training path (FleetVecEnv stepping the residual on nn_dsc) is measured here
-    # once agents provides it.
+    for batch in fleets:  # the training path: FleetVecEnv with the residual on the policy
+        vec = _training_env(scenario, policy, batch)
+        if vec is None:
+            continue
+        zero = np.zeros((vec.num_envs, vec.controller.action_size), dtype=np.float32)
+
+        def vec_step(vec: FleetVecEnv = vec, zero: np.ndarray = zero) -> None:
+            vec.step(zero)
+
+        bar.set_postfix_str(f"FleetVecEnv.step, B = {batch}")
+        add(f"FleetVecEnv.step (residual on {policy})", batch, vec.n, _rate(vec_step, min_seconds))
+        bar.update()
     bar.set_postfix_str("whole episode")
     seconds, steps, n = _episode_seconds(scenario, policy, episode_steps)
     add(f"{scenario} episode ({steps} steps), {policy}", 1, n, steps / seconds)

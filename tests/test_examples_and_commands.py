@@ -39,6 +39,7 @@ def test_speed_measure_reports_every_component():
         "nn_dsc.act_batch",
         "nn_dsc + FleetSim.step",
         "ParallelEnv.step",
+        "FleetVecEnv.step (residual on nn_dsc)",
         "wang2014 episode (20 steps), nn_dsc",
     }
     episode = rows[-1]
