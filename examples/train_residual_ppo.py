@@ -100,6 +100,7 @@ def evaluate(runs: Path, results: Path, seeds: int, scenarios: Sequence[str]) ->
             command = f"python examples/train_residual_ppo.py evaluate --seeds {seeds}"
             run_bench(policies, [variant], seeds=seeds, out=out, command=command)  # type: ignore[arg-type]
             print(f"wrote {out}/summary.md", flush=True)
+    (results / "summary.md").write_text(report(results, scenarios, seeds))
     meta = {
         "runs": {
             p.name: json.loads((p / "config.json").read_text())
@@ -108,6 +109,65 @@ def evaluate(runs: Path, results: Path, seeds: int, scenarios: Sequence[str]) ->
         }
     }
     (results / "training_runs.json").write_text(json.dumps(meta, indent=2) + "\n")
+
+
+#: Columns of the report: (metric in summary.csv, reward variant, header, format).
+_COLUMNS = (
+    ("cost", "training_reward", "cost (log reward)", "value"),
+    ("cost", "training_reward", "/ nn_dsc", "ratio"),
+    ("cost", "training_reward", "P(cost < nn_dsc)", "p"),
+    ("cost", "quadratic_reward", "cost / nn_dsc (quadratic reward)", "ratio"),
+    ("path_error_rms_window", "training_reward", "path error RMS, last quarter (m)", "value"),
+    ("coordination_error_end", "training_reward", "coordination error at the end", "value"),
+    ("speed_error_rms_window", "training_reward", "speed error RMS, last quarter (m/s)", "value"),
+    ("cost", "training_reward", "failures", "failures"),
+)
+
+
+def report(results: Path, scenarios: Sequence[str], seeds: int) -> str:
+    """A markdown table per scenario from the bench's summary.csv files: mean [95 % CI]."""
+    import csv
+
+    lines = [
+        "# Residual RL: trained agents against the analytic policies",
+        "",
+        f"Regenerate: `python examples/train_residual_ppo.py evaluate --seeds {seeds}` (after "
+        "the `train` phase). Every policy runs the same evaluation seeds (10,000 and up, never "
+        "used in training). Mean over episodes with its 95 % stratified-bootstrap interval; "
+        "`P(cost < nn_dsc)`: probability of a lower cost than nn_dsc on the same seed. One row "
+        "per training run (`_s<seed>`: training seed). Full tables: the `*/summary.md` files.",
+    ]
+    for scenario in scenarios:
+        rows: dict[tuple[str, str, str], dict[str, str]] = {}
+        for variant in ("training_reward", "quadratic_reward"):
+            with open(results / f"{scenario}_{variant}" / "summary.csv") as handle:
+                for row in csv.DictReader(handle):
+                    rows[(row["policy"], variant, row["metric"])] = row
+        policies = list(dict.fromkeys(policy for policy, _, _ in rows))
+        lines += ["", f"## {scenario} ({seeds} evaluation episodes)", ""]
+        lines.append("| policy | " + " | ".join(c[2] for c in _COLUMNS) + " |")
+        lines.append("|---" * (len(_COLUMNS) + 1) + "|")
+        for policy in policies:
+            cells = []
+            for metric, variant, _, kind in _COLUMNS:
+                cells.append(_cell(rows.get((policy, variant, metric)), kind))
+            lines.append(f"| {policy} | " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def _cell(row: dict[str, str] | None, kind: str) -> str:
+    """One table cell of a summary.csv row."""
+    if row is None:
+        return ""
+    if kind == "failures":
+        return f"{row['failures']}/{row['n_episodes']}"
+    if kind == "p":
+        if not row["p_beats_reference"]:
+            return ""
+        return f"{float(row['p_beats_reference']):.2f}"
+    if kind == "ratio":
+        return f"{float(row['normalized']):.3g}"
+    return f"{float(row['mean']):.3g} [{float(row['ci_low']):.3g}, {float(row['ci_high']):.3g}]"
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -144,6 +144,7 @@ def test_bad_residual_configuration_says_what_to_fix(options: dict, message: str
         ResidualConfig(**options)
 
 
+@pytest.mark.filterwarnings("ignore:reset ignores options")  # api_test passes a dummy option
 def test_wrapper_passes_the_pettingzoo_api_test() -> None:
     parallel_api_test(wrapped(40, extras=("base_action",)), num_cycles=50)
 
