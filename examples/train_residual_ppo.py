@@ -118,6 +118,7 @@ _COLUMNS = (
     ("cost", "training_reward", "P(cost < nn_dsc)", "p"),
     ("cost", "quadratic_reward", "cost / nn_dsc (quadratic reward)", "ratio"),
     ("path_error_rms_window", "training_reward", "path error RMS, last quarter (m)", "value"),
+    ("path_error_max_window", "training_reward", "path error max, last quarter (m)", "value"),
     ("coordination_error_end", "training_reward", "coordination error at the end", "value"),
     ("speed_error_rms_window", "training_reward", "speed error RMS, last quarter (m/s)", "value"),
     ("cost", "training_reward", "failures", "failures"),
@@ -176,7 +177,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         description="Residual PPO vs PPO from scratch vs nn_dsc and backstepping.",
         formatter_class=argparse.ArgumentDefaultsHelpFormatter,
     )
-    parser.add_argument("phase", choices=["train", "evaluate"], help="what to run")
+    parser.add_argument(
+        "phase",
+        choices=["train", "evaluate", "report"],
+        help="train; evaluate (bench + report); report (summary.md from the bench's CSVs)",
+    )
     parser.add_argument("--runs", default="runs/residual_rl", help="training run folders")
     parser.add_argument("--results", default="results/residual_rl", help="evaluation output")
     parser.add_argument("--timesteps", type=int, default=1_500_000, help="per training run")
@@ -195,8 +200,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     runs, results = Path(args.runs), Path(args.results)
     if args.phase == "train":
         train_runs(runs, args.timesteps, args.train_seeds, args.fleets, args.scenarios, args.agents)
-    else:
+    elif args.phase == "evaluate":
         evaluate(runs, results, args.seeds, args.scenarios)
+    else:
+        (results / "summary.md").write_text(report(results, args.scenarios, args.seeds))
     return 0
 
 

@@ -126,12 +126,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--fleets", type=int, default=1024, help="fleets (5 vessels each)")
     parser.add_argument("--rollouts", type=int, default=3, help="timed rollouts per route")
     parser.add_argument("--supersuit-fleets", type=int, default=64, help="fleets, SuperSuit")
+    parser.add_argument("--torch-threads", type=int, default=1, help="torch intra-op threads")
     args = parser.parse_args(argv)
     import torch
 
     from agents import FleetVecEnv
 
-    torch.set_num_threads(1)
+    torch.set_num_threads(args.torch_threads)
     fleet_env = FleetVecEnv("bench_saturation", num_fleets=args.fleets)
     obs_size = fleet_env.observation_space.shape[0]
     routes: dict[str, tuple[Callable[[], VecEnv], int, int | None]] = {
