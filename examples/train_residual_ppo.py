@@ -68,7 +68,11 @@ def train_runs(
                 folders.append(folder)
                 if (folder / "config.json").is_file():
                     continue
-                settings: dict[str, object] = {"batch_size": 2560, **AGENTS[agent]}
+                settings: dict[str, object] = {
+                    "batch_size": 2560,
+                    "torch_threads": 1,
+                    **AGENTS[agent],
+                }
                 config = TrainConfig(
                     scenario=scenario,
                     fleets=fleets,
@@ -97,10 +101,10 @@ def evaluate(runs: Path, results: Path, seeds: int, scenarios: Sequence[str]) ->
         )
         for variant, label in ((task, "training_reward"), (quadratic, "quadratic_reward")):
             out = results / f"{scenario}_{label}"
-            command = f"python examples/train_residual_ppo.py evaluate --seeds {seeds}"
+            command = _evaluate_command(runs, results, seeds)
             run_bench(policies, [variant], seeds=seeds, out=out, command=command)  # type: ignore[arg-type]
             print(f"wrote {out}/summary.md", flush=True)
-    (results / "summary.md").write_text(report(results, scenarios, seeds))
+    (results / "summary.md").write_text(report(results, scenarios, seeds, runs))
     meta = {
         "runs": {
             p.name: json.loads((p / "config.json").read_text())
@@ -125,16 +129,25 @@ _COLUMNS = (
 )
 
 
-def report(results: Path, scenarios: Sequence[str], seeds: int) -> str:
+def _evaluate_command(runs: Path, results: Path, seeds: int) -> str:
+    """The command line of the evaluate phase with these folders."""
+    return (
+        f"python examples/train_residual_ppo.py evaluate --runs {runs} --results {results} "
+        f"--seeds {seeds}"
+    )
+
+
+def report(results: Path, scenarios: Sequence[str], seeds: int, runs: Path) -> str:
     """A markdown table per scenario from the bench's summary.csv files: mean [95 % CI]."""
     import csv
 
     lines = [
         "# Residual RL: trained agents against the analytic policies",
         "",
-        f"Regenerate: `python examples/train_residual_ppo.py evaluate --seeds {seeds}` (after "
-        "the `train` phase). Every policy runs the same evaluation seeds (10,000 and up, never "
-        "used in training). Mean over episodes with its 95 % stratified-bootstrap interval; "
+        f"Regenerate: `{_evaluate_command(runs, results, seeds)}` (after the `train` phase; "
+        "the training commands are in `results/README.md`). Every policy runs the same "
+        "evaluation seeds (10,000 and up, never used in training). Mean over episodes with "
+        "its 95 % stratified-bootstrap interval; "
         "`P(cost < nn_dsc)`: probability of a lower cost than nn_dsc on the same seed. One row "
         "per training run (`_s<seed>`: training seed). Full tables: the `*/summary.md` files.",
     ]
@@ -203,7 +216,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     elif args.phase == "evaluate":
         evaluate(runs, results, args.seeds, args.scenarios)
     else:
-        (results / "summary.md").write_text(report(results, args.scenarios, args.seeds))
+        (results / "summary.md").write_text(report(results, args.scenarios, args.seeds, runs))
     return 0
 
 

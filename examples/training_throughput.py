@@ -75,10 +75,17 @@ class ZeroCostVecEnv(VecEnv):
         return [False] * self.num_envs
 
 
-def timed_ppo(make_env: Callable[[], VecEnv], rollouts: int, seed: int | None = 0) -> float:
+def timed_ppo(
+    make_env: Callable[[], VecEnv],
+    rollouts: int,
+    seed: int | None = 0,
+    n_epochs: int | None = None,
+    batch_size: int | None = None,
+) -> float:
     """Vessel-steps/s of PPO (TrainConfig defaults) over ``rollouts`` rollouts after a warm-up.
 
-    ``seed=None`` for SuperSuit's vector env, which has no ``seed()``.
+    ``seed=None`` for SuperSuit's vector env, which has no ``seed()``; ``n_epochs`` and
+    ``batch_size`` override the defaults.
     """
     from agents.training import TrainConfig
 
@@ -88,8 +95,8 @@ def timed_ppo(make_env: Callable[[], VecEnv], rollouts: int, seed: int | None = 
         "MlpPolicy",
         env,
         n_steps=config.n_steps,
-        batch_size=min(config.batch_size, config.n_steps * env.num_envs),
-        n_epochs=config.n_epochs,
+        batch_size=min(batch_size or config.batch_size, config.n_steps * env.num_envs),
+        n_epochs=n_epochs or config.n_epochs,
         device="cpu",
         policy_kwargs={"net_arch": list(config.net_arch)},
         seed=seed,
@@ -127,6 +134,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--rollouts", type=int, default=3, help="timed rollouts per route")
     parser.add_argument("--supersuit-fleets", type=int, default=64, help="fleets, SuperSuit")
     parser.add_argument("--torch-threads", type=int, default=1, help="torch intra-op threads")
+    parser.add_argument(
+        "--epochs", type=int, default=None, help="PPO epochs (default: TrainConfig)"
+    )
+    parser.add_argument(
+        "--batch-size", type=int, default=None, help="minibatch (default: TrainConfig)"
+    )
     args = parser.parse_args(argv)
     import torch
 
@@ -155,7 +168,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         print("SuperSuit not installed (pip install supersuit): its route is skipped.")
     print(f"{'route':36s} {'fleets':>7s} {'vessel-steps/s':>15s}")
     for name, (factory, fleets, seed) in routes.items():
-        rate = timed_ppo(factory, args.rollouts, seed)
+        rate = timed_ppo(factory, args.rollouts, seed, args.epochs, args.batch_size)
         print(f"{name:36s} {fleets:7d} {rate:15,.0f}", flush=True)
     return 0
 
