@@ -79,7 +79,7 @@ class TrainConfig:
         gamma: Discount per control step.
         net_arch: Hidden layer sizes of policy and value networks.
         n_steps: PPO rollout length per slot.
-        batch_size: Minibatch size.
+        batch_size: Minibatch size (PPO: at most one rollout, n_steps x num_envs).
         n_epochs: PPO epochs per rollout.
         gradient_steps: SAC gradient steps per vector-env step.
         buffer_size: SAC replay buffer size (transitions).
@@ -207,7 +207,7 @@ def _build_model(config: TrainConfig, env: VecNormalize | VecMonitor) -> BaseAlg
             env,
             learning_rate=config.learning_rate,
             n_steps=config.n_steps,
-            batch_size=config.batch_size,
+            batch_size=min(config.batch_size, config.n_steps * env.num_envs),  # <= one rollout
             n_epochs=config.n_epochs,
             gamma=config.gamma,
             seed=config.seed,
@@ -240,18 +240,29 @@ def _build_model(config: TrainConfig, env: VecNormalize | VecMonitor) -> BaseAlg
     return model
 
 
-def train(config: TrainConfig, out: str | Path, progress: bool = True) -> Path:
+def train(
+    config: TrainConfig, out: str | Path, progress: bool = True, overwrite: bool = False
+) -> Path:
     """Train an agent and save it to ``out`` (see the module docstring).
 
     Args:
         config: The run.
-        out: Output folder (created; existing files of a previous run are overwritten).
+        out: Output folder (created).
         progress: Show a progress bar with the episodic cost.
+        overwrite: Replace a trained model already in ``out``.
 
     Returns:
         The output folder.
+
+    Raises:
+        FileExistsError: ``out`` holds a trained model and ``overwrite`` is False.
     """
     folder = Path(out)
+    if (folder / "model.zip").exists() and not overwrite:
+        raise FileExistsError(
+            f"{folder} already holds a trained model; choose another output folder or "
+            "overwrite it (cpf-train --force, train(..., overwrite=True))."
+        )
     folder.mkdir(parents=True, exist_ok=True)
     torch.manual_seed(config.seed)
     if config.torch_threads is not None:
@@ -271,7 +282,9 @@ def train(config: TrainConfig, out: str | Path, progress: bool = True) -> Path:
         pass
     model.set_logger(configure(str(folder), formats))
     start = time.perf_counter()
-    model.learn(config.timesteps, callback=_ProgressBar(config.timesteps, progress))
+    per_call = config.n_steps * env.num_envs if config.algo == "ppo" else env.num_envs
+    total = -(-config.timesteps // per_call) * per_call  # SB3 completes whole rollouts
+    model.learn(config.timesteps, callback=_ProgressBar(total, progress))
     elapsed = time.perf_counter() - start
     model.save(folder / "model.zip")
     if isinstance(env, VecNormalize):

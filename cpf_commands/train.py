@@ -92,6 +92,9 @@ def _parser() -> argparse.ArgumentParser:
         "--epochs", type=_positive, default=defaults.n_epochs, help="PPO epochs per rollout"
     )
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    parser.add_argument(
+        "--force", action="store_true", help="overwrite a trained model already in --out"
+    )
     return parser
 
 
@@ -121,7 +124,10 @@ def train_main(argv: Sequence[str] | None = None) -> int:
         )
     except ValueError as error:
         parser.error(str(error))
-    folder = train(config, args.out, progress=not args.quiet)
+    try:
+        folder = train(config, args.out, progress=not args.quiet, overwrite=args.force)
+    except FileExistsError as error:
+        parser.error(str(error))
     record = json.loads((folder / "config.json").read_text())
     print(
         f"trained {config.algo} on {config.scenario} (base {config.base}) for "

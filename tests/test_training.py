@@ -107,5 +107,23 @@ def test_cpf_train_command(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -
     assert "saved to" in capsys.readouterr().out
     assert (out / "model.zip").is_file()
     with pytest.raises(SystemExit):
+        train_main(argv)  # the folder holds a model: refused, not overwritten
+    assert "already holds a trained model" in capsys.readouterr().err
+    assert train_main([*argv, "--force"]) == 0
+    with pytest.raises(SystemExit):
         train_main(["--out", str(out), "--scale", "0"])
     assert "residual scale" in capsys.readouterr().err
+
+
+def test_the_committed_agent_loads_and_corrects_the_base() -> None:
+    """The agent in results/ (README's benchmark row) loads with today's code and acts."""
+    folder = Path(__file__).parents[1] / "results/residual_rl/agents"
+    policy = load_policy(folder / "residual_ppo_bench_lossy_links_5m_s0")
+    assert policy.scenario.name == "bench_lossy_links"
+    sim = FleetSim(policy.scenario, num_fleets=2)
+    obs = sim.reset(seeds=[0, 1])
+    for _ in range(5):
+        obs = sim.step(policy.act_batch(obs))
+    residual = policy.diagnostics["residual"]
+    assert np.any(residual != 0.0)
+    assert np.all(np.abs(residual) <= 0.2 * np.array([9.2, 4.5, 3.0]) + 1e-9)
