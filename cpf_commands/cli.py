@@ -14,6 +14,7 @@ import time
 from collections.abc import Sequence
 from typing import Any
 
+from cpf_commands.arguments import positive_int
 from cpf_commands.policies import policy_argument
 from cpf_env import scenarios
 
@@ -21,17 +22,6 @@ __all__ = ["run_main"]
 
 #: Claims that need a part of the policy, and what it is.
 _CLAIM_NEEDS = {2: "NN", 5: "speed estimator"}
-
-
-def _positive_int(text: str) -> int:
-    """Parse an integer >= 1 (argparse type)."""
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"must be an integer >= 1, got {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be an integer >= 1, got {value}")
-    return value
 
 
 def _run_parser(prog: str = "cpf-run") -> argparse.ArgumentParser:
@@ -62,7 +52,7 @@ def _run_parser(prog: str = "cpf-run") -> argparse.ArgumentParser:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument(
         "--steps",
-        type=_positive_int,
+        type=positive_int,
         default=None,
         help="control steps, >= 1 (default: the scenario's episode length)",
     )

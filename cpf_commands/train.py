@@ -17,20 +17,10 @@ import argparse
 import json
 from collections.abc import Sequence
 
+from cpf_commands.arguments import positive_int
 from cpf_env import scenarios
 
 __all__ = ["train_main"]
-
-
-def _positive(text: str) -> int:
-    """Argparse type: an integer >= 1 (underscores allowed, e.g. 2_000_000)."""
-    try:
-        value = int(text.replace("_", ""))
-    except ValueError as error:
-        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from error
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be >= 1, got {value}")
-    return value
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -56,10 +46,10 @@ def _parser() -> argparse.ArgumentParser:
         help="base policy the agent corrects; none: the agent commands forces and rate",
     )
     parser.add_argument(
-        "--fleets", type=_positive, default=defaults.fleets, help="fleets simulated together"
+        "--fleets", type=positive_int, default=defaults.fleets, help="fleets simulated together"
     )
     parser.add_argument(
-        "-n", "--timesteps", type=_positive, default=defaults.timesteps, help="vessel-steps"
+        "-n", "--timesteps", type=positive_int, default=defaults.timesteps, help="vessel-steps"
     )
     parser.add_argument("--seed", type=int, default=defaults.seed, help="training seed")
     parser.add_argument("--out", required=True, help="output folder (required)")
@@ -83,13 +73,13 @@ def _parser() -> argparse.ArgumentParser:
         "--learning-rate", type=float, default=defaults.learning_rate, help="Adam step size"
     )
     parser.add_argument(
-        "--n-steps", type=_positive, default=defaults.n_steps, help="PPO rollout length per slot"
+        "--n-steps", type=positive_int, default=defaults.n_steps, help="PPO rollout length per slot"
     )
     parser.add_argument(
-        "--batch-size", type=_positive, default=defaults.batch_size, help="minibatch size"
+        "--batch-size", type=positive_int, default=defaults.batch_size, help="minibatch size"
     )
     parser.add_argument(
-        "--epochs", type=_positive, default=defaults.n_epochs, help="PPO epochs per rollout"
+        "--epochs", type=positive_int, default=defaults.n_epochs, help="PPO epochs per rollout"
     )
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     parser.add_argument(
