@@ -110,11 +110,11 @@ class TrainedPolicy(PolicyInterface):
         )
         self._statistics = statistics
         self._controller: ResidualController | None = None
-        probe = ResidualController(scenario, self._base, 1, self._residual)
+        size = self._residual.input_size(self.layout)
         expected = model.observation_space.shape
-        if expected != (probe.input_size,):
+        if expected != (size,):
             raise ValueError(
-                f"scenario {scenario.name!r} gives inputs of size {probe.input_size} but the "
+                f"scenario {scenario.name!r} gives inputs of size {size} but the "
                 f"network of {name!r} takes {expected}: evaluate it on a scenario with the "
                 f"training scenario's neighbour slots and message size ({config.scenario!r})."
             )

@@ -161,6 +161,10 @@ class ResidualConfig:
         """k, the learner's action length per vessel."""
         return RESIDUAL_MODES[self.mode]
 
+    def input_size(self, layout: ObsLayout) -> int:
+        """The learner's input length per vessel: observation plus extras."""
+        return layout.size + sum(EXTRAS[name] for name in self.extras)
+
 
 class ZeroPolicy:
     """The base of a learner that commands everything itself: all-zero actions.
@@ -233,7 +237,7 @@ class ResidualController:
         self._tau_scale = np.maximum(np.abs(tau_min), np.abs(tau_max))  # (n, 3)
         self._theta_dot_max = float(scenario.theta_dot_max)
         self.action_size = config.action_size
-        self.input_size = self.layout.size + sum(EXTRAS[name] for name in config.extras)
+        self.input_size = config.input_size(self.layout)
         shape = (self.num_fleets, self.n)
         self.base_actions = np.zeros((*shape, self.act_dim))
         self.residual = np.zeros((*shape, self.action_size))
