@@ -191,7 +191,7 @@ def test_render_accepts_the_construction_mode_positionally() -> None:
     env.reset(seed=0)
     frame = env.render("rgb_array")  # RLlib's ParallelPettingZooEnv calls render(mode)
     np.testing.assert_array_equal(frame, env.render())
-    with pytest.raises(ValueError, match="render mode 'human' differs.*render_mode='human'"):
+    with pytest.raises(ValueError, match=r"render mode 'human' differs.*render_mode='human'"):
         env.render("human")
     env.close()
 
