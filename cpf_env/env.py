@@ -330,7 +330,7 @@ class CooperativePathFollowingEnv(ParallelEnv):
         if self.info_level == "none":
             return {agent: {} for agent in self.possible_agents}
         a = self.sim.arrays
-        infos = {}
+        infos: dict[str, dict[str, Any]] = {}
         for i, agent in enumerate(self.possible_agents):
             infos[agent] = {
                 "path_error": float(a.errors[0, i, kernels.ERR_PATH]),
