@@ -216,11 +216,12 @@ def iteration_line(i: int, result: dict[str, Any], seconds: float) -> str:
     runners = result["env_runners"]
     env_steps = int(runners["num_env_steps_sampled"])
     vessel_steps = int(runners["num_module_steps_sampled"][SHARED_MODULE])
-    episode_return = runners.get("episode_return_mean", float("nan"))
+    episode_return = float(runners.get("episode_return_mean", np.nan))
+    shown = "-" if np.isnan(episode_return) else f"{episode_return:.1f}"  # no episode ended
     loss = result["learners"][SHARED_MODULE]["total_loss"]
     return (
         f"{i:4d} {env_steps:9d} {seconds:7.1f} {env_steps / seconds:12,.0f} "
-        f"{vessel_steps / seconds:15,.0f} {episode_return:14.1f} {loss:10.3g}"
+        f"{vessel_steps / seconds:15,.0f} {shown:>14s} {loss:10.3g}"
     )
 
 
