@@ -47,3 +47,7 @@ def precompile_main(argv: Sequence[str] | None = None) -> int:
         f"cache: {report.cache_directory}"
     )
     return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(precompile_main())
