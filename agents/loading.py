@@ -22,6 +22,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import torch
 from numpy.typing import ArrayLike, NDArray
 from stable_baselines3.common.base_class import BaseAlgorithm
 
@@ -74,6 +75,12 @@ def load_policy(path: str | Path, scenario: str | Scenario | None = None) -> Tra
 
 class TrainedPolicy(PolicyInterface):
     """Base policy plus a trained network, with the analytic policies' interface.
+
+    The network runs on one thread: torch's multi-threaded matrix products sum
+    in an order that depends on the thread count, so its outputs would
+    otherwise differ in the last bits between a laptop, a Ray worker (one
+    thread) and a cluster node. For the batch sizes of an evaluation one
+    thread is also the fastest.
 
     Args:
         name: Label (the folder name).
@@ -164,7 +171,12 @@ class TrainedPolicy(PolicyInterface):
             )
         inputs = self._controller.observe(batch)
         rows = inputs.reshape(-1, inputs.shape[-1]).astype(np.float32)
-        action, _ = self.model.predict(self._normalize(rows), deterministic=True)
+        threads = torch.get_num_threads()
+        torch.set_num_threads(1)  # the same bits whatever the process's thread setting
+        try:
+            action, _ = self.model.predict(self._normalize(rows), deterministic=True)
+        finally:
+            torch.set_num_threads(threads)
         command = self._controller.compose(np.asarray(action).reshape(*batch.shape[:2], -1))
         base_diagnostics = getattr(self._base, "diagnostics", {}) if self._base else {}
         self.diagnostics = {**base_diagnostics, "residual": self._controller.residual.copy()}

@@ -127,3 +127,28 @@ def test_the_committed_agent_loads_and_corrects_the_base() -> None:
     residual = policy.diagnostics["residual"]
     assert np.any(residual != 0.0)
     assert np.all(np.abs(residual) <= 0.2 * np.array([9.2, 4.5, 3.0]) + 1e-9)
+
+
+def test_a_trained_policy_acts_the_same_whatever_the_torch_threads() -> None:
+    """Evaluations on Ray workers (one thread) equal local ones (all cores), bit for bit."""
+    import torch
+
+    folder = Path(__file__).parents[1] / "results/residual_rl/agents"
+    policy = load_policy(folder / "residual_ppo_bench_lossy_links_5m_s0")
+    before = torch.get_num_threads()
+    for fleets in (1, 2, 7):  # small batches take torch's thread-dependent paths
+        runs = []
+        for threads in (1, 2, 4):
+            torch.set_num_threads(threads)
+            sim = FleetSim(policy.scenario, num_fleets=fleets)
+            obs = sim.reset(seeds=list(range(fleets)))
+            policy.reset()
+            trajectory = []
+            for _ in range(60):
+                obs = sim.step(policy.act_batch(obs))
+                trajectory.append(obs.copy())
+            assert torch.get_num_threads() == threads  # the caller's setting is restored
+            runs.append(np.stack(trajectory))
+        np.testing.assert_array_equal(runs[0], runs[1])
+        np.testing.assert_array_equal(runs[0], runs[2])
+    torch.set_num_threads(before)

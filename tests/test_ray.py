@@ -1,0 +1,91 @@
+"""Sweeps and the benchmark on local Ray (marker ``ray``; needs ``pip install -e ".[ray]"``).
+
+Run with ``python -m pytest -m ray``. Each test starts and stops its own local
+Ray instance, as the commands do.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+
+pytest.importorskip("ray.tune")
+
+from conftest import ROOT
+
+from agents import load_policy
+from cpf_commands.bench import run_bench
+from cpf_commands.sweep import run_sweep, sweep_main
+from cpf_commands.sweep_spec import SweepSpec, trial_name
+from cpf_commands.sweep_trial import EVALUATION_FILE
+
+pytestmark = pytest.mark.ray
+
+#: A tiny training run: 8 fleets, 2 rollouts.
+TINY = ["timesteps=2000", "fleets=8", "n_steps=16"]
+AGENT = ROOT / "results" / "residual_rl" / "agents" / "residual_ppo_bench_lossy_links_5m_s0"
+
+
+def test_two_seeds_by_two_scenarios_then_a_resume(tmp_path, capsys) -> None:
+    out = tmp_path / "sweep"
+    argv = ["--scenarios", "bench_mild", "bench_lossy_links", "--seeds", "0", "1"]
+    argv += ["--set", *TINY, "--eval-seeds", "2", "--eval-steps", "50", "--out", str(out)]
+    assert sweep_main([*argv, "--quiet"]) == 0
+    printed = capsys.readouterr().out
+    assert "4/4 trials done" in printed and "| bench_lossy_links | 2/2 |" in printed
+    spec = SweepSpec.from_settings(
+        ["bench_mild", "bench_lossy_links"], [0, 1], TINY, eval_seeds=2, eval_steps=50
+    )
+    models = {}
+    for params in spec.trials():
+        folder = out / "trials" / trial_name(params, spec)
+        policy = load_policy(folder)  # every trial is a cpf-train folder
+        assert policy.scenario.name == params["scenario"]
+        models[folder] = (folder / "model.zip").stat().st_mtime_ns
+    assert (out / "summary.md").exists() and (out / "summary.csv").exists()
+    assert sweep_main([*argv, "--quiet"]) == 0  # the same command again: nothing retrained
+    assert {folder: (folder / "model.zip").stat().st_mtime_ns for folder in models} == models
+
+
+def test_an_interrupted_sweep_resumes_keeping_finished_trials(tmp_path) -> None:
+    out = tmp_path / "sweep"
+    argv = [sys.executable, "-c", "from cpf_commands.sweep import sweep_main; sweep_main()"]
+    argv += ["--scenarios", "bench_mild", "--seeds", "0", "1", "2", "--quiet"]
+    argv += ["--set", "timesteps=30000", "fleets=8", "--eval-seeds", "1", "--eval-steps", "20"]
+    argv += ["--cpus-per-trial", "2", "--out", str(out)]  # one trial at a time
+    process = subprocess.Popen(argv, start_new_session=True, stdout=subprocess.DEVNULL)
+    first = out / "trials" / "bench_mild-seed0" / EVALUATION_FILE
+    deadline = time.monotonic() + 300
+    while not first.exists() and time.monotonic() < deadline and process.poll() is None:
+        time.sleep(0.5)
+    assert first.exists(), "the first trial did not finish in time"
+    os.killpg(process.pid, signal.SIGINT)  # as Ctrl-C would
+    process.wait(timeout=120)
+    finished = sorted(path.parent.name for path in out.glob(f"trials/*/{EVALUATION_FILE}"))
+    assert len(finished) < 3, "the sweep ended before it could be interrupted"
+    kept = {name: (out / "trials" / name / "model.zip").stat().st_mtime_ns for name in finished}
+    spec = SweepSpec.from_settings(
+        ["bench_mild"], [0, 1, 2], ["timesteps=30000", "fleets=8"], eval_seeds=1, eval_steps=20
+    )
+    rows = run_sweep(spec, out, cpus_per_trial=2, quiet=True)
+    assert [row["status"] for row in rows] == ["done"] * 3
+    assert {name: (out / "trials" / name / "model.zip").stat().st_mtime_ns for name in kept} == kept
+
+
+def test_the_benchmark_on_ray_equals_the_local_run(tmp_path) -> None:
+    policies = ["nn_dsc", "backstepping", AGENT]
+    names = ["bench_lossy_links", "bench_mild"]
+    local = run_bench(policies, names, seeds=2, steps=60, out=tmp_path / "local", figures=False)
+    remote = run_bench(
+        policies, names, seeds=2, steps=60, out=tmp_path / "ray", figures=False, distribute=True
+    )
+    assert [(c.policy, c.scenario, c.seeds) for c in remote] == [
+        (c.policy, c.scenario, c.seeds) for c in local
+    ]
+    for name in ("episodes.csv", "summary.csv", "summary.md"):
+        assert (tmp_path / "ray" / name).read_bytes() == (tmp_path / "local" / name).read_bytes()

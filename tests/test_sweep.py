@@ -1,0 +1,210 @@
+"""The sweep's specification, summary and command-line checks, and precompilation: no Ray needed.
+
+The runs on Ray itself are in ``test_ray.py`` (marker ``ray``).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+
+import pytest
+
+from cpf_commands import ray_runtime
+from cpf_commands.precompile import precompile_main
+from cpf_commands.sweep import sweep_main
+from cpf_commands.sweep_spec import SweepSpec, parse_setting, trial_name
+from cpf_commands.sweep_trial import EVALUATION_FILE, summary_markdown, summary_rows
+from cpf_env.precompile import kernels_of_package, precompile
+
+# --- --set parsing ---------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("text", "expected"),
+    [
+        ("timesteps=20000", ("timesteps", (20000,))),
+        ("scale=0.1,0.2", ("scale", (0.1, 0.2))),
+        ("mode=force,force_and_rate", ("mode", ("force", "force_and_rate"))),
+        ("hide_residual_from_base=false", ("hide_residual_from_base", (False,))),
+        ("reward_form=none,log", ("reward_form", (None, "log"))),
+        ("torch_threads=2", ("torch_threads", (2,))),
+        ('extras=[[],["base_action"]]', ("extras", ((), ("base_action",)))),
+        ("net_arch=[[64,64],[128]]", ("net_arch", ((64, 64), (128,)))),
+    ],
+)  # fmt: skip
+def test_settings_are_parsed_to_the_field_types(text: str, expected: tuple) -> None:
+    assert parse_setting(text) == expected
+
+
+@pytest.mark.parametrize(
+    ("text", "match"),
+    [
+        ("timesteps", "takes FIELD=VALUE"),
+        ("=3", "takes FIELD=VALUE"),
+        ("bogus=1", "unknown TrainConfig field 'bogus'.*'timesteps'"),
+        ("seed=1,2", "set seed with --seeds"),
+        ("scenario=wang2014", "set scenario with --scenarios"),
+        ("timesteps=many", "'many' is not a valid int"),
+        ("timesteps=1.5", "'1.5' is not a valid int"),
+        ("hide_residual_from_base=maybe", "not a valid bool"),
+        ("extras=[oops", "is not a JSON list"),
+    ],
+)
+def test_bad_settings_say_what_is_wrong(text: str, match: str) -> None:
+    with pytest.raises(ValueError, match=match):
+        parse_setting(text)
+
+
+# --- the grid --------------------------------------------------------------------------------
+
+
+def test_every_combination_is_one_trial_with_its_own_folder_name() -> None:
+    spec = SweepSpec.from_settings(
+        ["bench_mild", "bench_saturation"], [0, 1], ["timesteps=100", "scale=0.1,0.2"]
+    )
+    trials = list(spec.trials())
+    assert len(trials) == 2 * 2 * 2
+    names = [trial_name(params, spec) for params in trials]
+    assert len(set(names)) == len(names)
+    assert names[0] == "bench_mild-seed0-scale0.1"
+    assert spec.fixed == {"timesteps": 100} and spec.grid == {"scale": (0.1, 0.2)}
+    config = spec.config(trials[-1])
+    assert (config.scenario, config.seed, config.scale, config.timesteps) == (
+        "bench_saturation",
+        1,
+        0.2,
+        100,
+    )
+
+
+@pytest.mark.parametrize(
+    ("scenarios", "seeds", "settings", "match"),
+    [
+        (["bench_mild"], [0], ["scale=-1"], "scale"),
+        (["no_such"], [0], [], "unknown scenario 'no_such'"),
+        (["bench_mild"], [0, 0], [], "seeds repeat"),
+        (["bench_mild"], [], [], "at least one scenario and one seed"),
+        (["bench_mild"], [0], ["scale=0.1", "scale=0.2"], "given twice"),
+        (["bench_mild"], [0], ["fleets=0"], "fleets must be an integer >= 1"),
+    ],
+)
+def test_a_bad_sweep_is_refused_before_any_trial_starts(
+    scenarios: list, seeds: list, settings: list, match: str
+) -> None:
+    with pytest.raises(ValueError, match=match):
+        SweepSpec.from_settings(scenarios, seeds, settings)
+
+
+def test_a_folder_keeps_its_sweep_and_refuses_another(tmp_path) -> None:
+    spec = SweepSpec(("bench_mild",), (0, 1), {"scale": (0.1, 0.2)}, {"timesteps": 100})
+    assert spec.save_or_check(tmp_path) is False
+    assert json.loads((tmp_path / "sweep.json").read_text())["seeds"] == [0, 1]
+    assert spec.save_or_check(tmp_path) is True  # the same sweep: a resume
+    other = SweepSpec(("bench_mild",), (0, 1, 2), {"scale": (0.1, 0.2)}, {"timesteps": 100})
+    with pytest.raises(ValueError, match=r"holds a different sweep.*another --out"):
+        other.save_or_check(tmp_path)
+
+
+# --- the summary -----------------------------------------------------------------------------
+
+
+def _finished(out, name: str, ratio: float) -> None:
+    folder = out / "trials" / name
+    folder.mkdir(parents=True)
+    record = {"reference": "nn_dsc", "cost_ratio": ratio, "p_beats_reference": 0.6}
+    (folder / EVALUATION_FILE).write_text(json.dumps(record))
+
+
+def test_the_summary_has_every_trial_and_each_setting_over_seeds(tmp_path) -> None:
+    spec = SweepSpec(("bench_mild",), (0, 1, 2), {"scale": (0.1, 0.2)}, {"timesteps": 100})
+    _finished(tmp_path, "bench_mild-seed0-scale0.1", 0.9)
+    _finished(tmp_path, "bench_mild-seed1-scale0.1", 1.1)
+    _finished(tmp_path, "bench_mild-seed2-scale0.1", 0.8)
+    _finished(tmp_path, "bench_mild-seed0-scale0.2", 0.5)
+    errors = {"bench_mild-seed1-scale0.2": "RuntimeError: diverged"}
+    rows = summary_rows(spec, tmp_path, errors)
+    status = {row["trial"]: row["status"] for row in rows}
+    assert len(rows) == 6
+    assert status["bench_mild-seed1-scale0.2"] == "error: RuntimeError: diverged"
+    assert status["bench_mild-seed2-scale0.2"] == "not finished"
+    assert sum(value == "done" for value in status.values()) == 4
+    text = summary_markdown(spec, rows, "cpf-sweep ...")
+    assert "| bench_mild | 0.1 | 3/3 | 0.9333 | 0.8000 | 1.1000 | 2/3 |" in text
+    assert "| bench_mild | 0.2 | 1/3 | 0.5000 | 0.5000 | 0.5000 | 1/1 |" in text
+    assert "against nn_dsc" in text
+
+
+# --- the command without Ray -----------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("argv", "match"),
+    [
+        (["--seeds", "0", "--out", "x"], "--scenarios"),
+        (["--scenarios", "bench_mild", "--out", "x", "--set", "bogus=1"], "unknown TrainConfig"),
+        (["--scenarios", "bench_mild", "--out", "x", "--cpus-per-trial", "0"], "integer >= 1"),
+        (["--scenarios", "nowhere", "--out", "x"], "invalid choice"),
+    ],
+)
+def test_sweep_command_rejects_bad_arguments_before_starting_ray(argv, match, capsys) -> None:
+    with pytest.raises(SystemExit) as exit_info:
+        sweep_main(argv)
+    assert exit_info.value.code == 2
+    assert match in capsys.readouterr().err
+
+
+def test_without_ray_the_commands_say_how_to_install_it(monkeypatch) -> None:
+    monkeypatch.setitem(sys.modules, "ray", None)  # import ray now raises ImportError
+    with pytest.raises(ImportError, match=r"needs Ray.*pip install -e \"\.\[ray\]\""):
+        ray_runtime.start_ray(None)
+
+
+def test_workers_get_the_kernel_cache_and_one_numba_thread_per_cpu(monkeypatch) -> None:
+    monkeypatch.setenv("NUMBA_CACHE_DIR", "/shared/numba")
+    assert ray_runtime.worker_environment(2) == {
+        "NUMBA_NUM_THREADS": "2",
+        "NUMBA_CACHE_DIR": "/shared/numba",
+    }
+    monkeypatch.delenv("NUMBA_CACHE_DIR")
+    assert ray_runtime.worker_environment(1) == {"NUMBA_NUM_THREADS": "1"}
+
+
+# --- precompilation --------------------------------------------------------------------------
+
+ENTRY_KERNELS = (
+    "cpf_env.kernels.step_fleets_serial",
+    "cpf_env.kernels.step_fleets_parallel",
+    "cpf_env.kernels.observe_fleets_serial",
+    "cpf_env.kernels.observe_fleets_parallel",
+    "cpf_env.kernels.plant_accelerations",
+    "cpf_env.paths.evaluate_paths",
+)
+
+
+def test_precompile_readies_every_entry_kernel(capsys) -> None:
+    report = precompile(["wang2014"])
+    kernels = kernels_of_package()
+    for name in ENTRY_KERNELS:
+        assert kernels[name].signatures, name
+    assert report.scenarios == ("wang2014",)
+    assert precompile_main(["--scenarios", "lossy_links"]) == 0
+    assert "loaded from the cache" in capsys.readouterr().out
+    with pytest.raises(ValueError, match="unknown scenario"):
+        precompile(["nowhere"])
+
+
+@pytest.mark.slow
+def test_a_precompiled_cache_is_loaded_not_compiled(tmp_path) -> None:
+    environment = {"NUMBA_CACHE_DIR": str(tmp_path)}
+    command = [sys.executable, "-m", "cpf_commands.precompile", "--scenarios", "wang2014"]
+    first, second = (
+        subprocess.run(
+            command, env={**os.environ, **environment}, capture_output=True, text=True, check=True
+        ).stdout
+        for _ in range(2)
+    )
+    assert " 0 loaded from the cache" in first and "0 signatures compiled" not in first
+    assert "0 signatures compiled" in second and " 6 loaded from the cache" in second
