@@ -73,6 +73,39 @@ def shared_module_path(checkpoint: str | Path) -> Path:
     return Path(checkpoint) / "learner_group" / "learner" / "rl_module" / SHARED_MODULE
 
 
+def greedy_actions(
+    module: Any, observations: dict[str, np.ndarray], env: ParallelPettingZooEnv
+) -> dict[str, np.ndarray]:
+    """Deterministic actions of the shared module for every vessel, in the env's units.
+
+    What RLlib's EnvRunner does at inference: the module's Gaussian means (the first
+    half of ``action_dist_inputs``; the second half are log standard deviations),
+    which live in [-1, 1] (RLlib's ``normalize_actions``), mapped onto each
+    vessel's action bounds and clipped to them.
+
+    Args:
+        module: The shared RLModule (``RLModule.from_checkpoint(shared_module_path(...))``).
+        observations: Agent -> observation of shape (obs_dim,), as ``env.reset``/``step`` give.
+        env: The wrapped env, for the action bounds.
+
+    Returns:
+        Agent -> action of shape (act_dim,), float32, within ``env.action_space[agent]``.
+    """
+    import torch
+
+    agents = list(observations)
+    batch = {"obs": torch.as_tensor(np.stack([observations[a] for a in agents]))}
+    with torch.no_grad():
+        inputs = module.forward_inference(batch)["action_dist_inputs"].numpy()
+    means = inputs[:, : inputs.shape[1] // 2]
+    actions = {}
+    for agent, mean in zip(agents, means, strict=True):
+        space = env.action_space[agent]
+        unsquashed = space.low + (mean + 1.0) * (space.high - space.low) / 2.0
+        actions[agent] = np.clip(unsquashed, space.low, space.high).astype(np.float32)
+    return actions
+
+
 def build_config(
     scenario: str = "wang2014",
     max_steps: int = 500,
@@ -339,7 +372,7 @@ def report_measurements(
     n = cpf_env.scenarios.get(args.scenario).n
     warm = rates[1:] or rates
     end_to_end = float(np.mean(warm))
-    sampling = sampling_rate(algo, args.train_batch)
+    sampling = sampling_rate(algo, 3 * args.train_batch)
     alone = env_alone_rate(config.env_config, seconds=2.0)
     runners = f"{args.env_runners} runners x {args.envs_per_runner} envs"
     print(f"\nthroughput ({args.scenario}, {runners}, info_level={args.info_level}):")

@@ -116,6 +116,15 @@ def test_checkpoint_reloads_the_shared_module(trained, tmp_path):
         expected = module.forward_inference(batch)["action_dist_inputs"]
         got = reloaded.forward_inference(batch)["action_dist_inputs"]
     assert torch.equal(expected, got)
+    env = example.make_rllib_env({"scenario": "lossy_links", "max_steps": 20})
+    observations, _ = env.reset(seed=1)
+    for _ in range(3):
+        actions = example.greedy_actions(reloaded, observations, env)
+        assert sorted(actions) == sorted(observations)
+        assert all(env.action_space[a].contains(actions[a]) for a in actions)
+        again = example.greedy_actions(module, observations, env)
+        assert all(np.array_equal(actions[a], again[a]) for a in actions)
+        observations, *_ = env.step(actions)
 
 
 def test_example_main_with_a_remote_runner_measures_and_checkpoints(local_ray, tmp_path, capsys):
