@@ -80,8 +80,8 @@ def greedy_actions(
 
     What RLlib's EnvRunner does at inference: the module's Gaussian means (the first
     half of ``action_dist_inputs``; the second half are log standard deviations),
-    which live in [-1, 1] (RLlib's ``normalize_actions``), mapped onto each
-    vessel's action bounds and clipped to them.
+    in RLlib's normalized units (``normalize_actions``: [-1, 1] spans the bounds),
+    mapped onto each vessel's action bounds and clipped to them.
 
     Args:
         module: The shared RLModule (``RLModule.from_checkpoint(shared_module_path(...))``).

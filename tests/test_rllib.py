@@ -8,7 +8,6 @@ from __future__ import annotations
 import importlib.util
 import math
 import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -18,9 +17,9 @@ pytest.importorskip("ray.rllib")
 
 import ray  # noqa: E402
 import torch  # noqa: E402
+from conftest import ROOT  # noqa: E402
 from ray.rllib.core.rl_module.rl_module import RLModule  # noqa: E402
-
-ROOT = Path(__file__).resolve().parents[1]
+from ray.rllib.utils.spaces.space_utils import unsquash_action  # noqa: E402
 
 
 def _load_example():
@@ -125,6 +124,20 @@ def test_checkpoint_reloads_the_shared_module(trained, tmp_path):
         again = example.greedy_actions(module, observations, env)
         assert all(np.array_equal(actions[a], again[a]) for a in actions)
         observations, *_ = env.step(actions)
+
+
+def test_greedy_actions_are_rllibs_deterministic_actions(trained):
+    algo, _, _ = trained
+    module = algo.get_module(example.SHARED_MODULE)
+    env = example.make_rllib_env({"scenario": "lossy_links", "max_steps": 50})
+    (episode, *_) = algo.env_runner.sample(num_timesteps=4, explore=False)
+    for t in range(3):
+        observations = episode.get_observations(indices=t)
+        normalized = episode.get_actions(indices=t)  # RLlib's own, in [-1, 1] units
+        actions = example.greedy_actions(module, observations, env)
+        for agent, action in actions.items():
+            expected = unsquash_action(normalized[agent], env.action_space[agent])
+            np.testing.assert_allclose(action, expected, rtol=1e-5, atol=1e-6)
 
 
 def test_example_main_with_a_remote_runner_measures_and_checkpoints(local_ray, tmp_path, capsys):
