@@ -54,7 +54,9 @@ def parallel_env(
             ``wang2014`` is the paper's simulation) or a ``Scenario`` object.
         **kwargs: ``render_mode`` (``"human"``, ``"rgb_array"`` or None);
             ``max_cycles`` (PettingZoo's name for the episode length in control
-            steps, the same as ``max_steps``; give one of the two); and any
+            steps, the same as ``max_steps``; give one of the two);
+            ``info_level`` (``"full"``, ``"minimal"`` or ``"none"``: how much the
+            per-step infos carry, see ``docs/environment.md``); and any
             ``Scenario`` field as an override, e.g. ``max_steps=500``, ``v0=0.2``,
             ``dt=0.02``, ``substeps=2``, ``links=LinkImpairments(0.1, 2)``,
             ``reward=RewardWeights(team=True)``. Unknown names raise ``ValueError``

@@ -29,12 +29,19 @@ from cpf_env.sim import FleetSim, as_real_actions
 from cpf_env.views import FleetViews, check_render_mode
 
 __all__ = [
+    "INFO_LEVELS",
     "CooperativePathFollowingEnv",
     "as_seed",
     "check_reset_options",
     "make_scenario",
     "warn_reset_options",
 ]
+
+
+#: Detail levels of the per-step infos, most to least: every diagnostic, the
+#: four errors, nothing. Wrappers that convert every info entry to a tensor each
+#: step (TorchRL's, RLlib's) spend much of their time there; take less for speed.
+INFO_LEVELS = ("full", "minimal", "none")
 
 
 def make_scenario(scenario: str | Scenario = "wang2014", **overrides: Any) -> Scenario:
@@ -138,8 +145,12 @@ class CooperativePathFollowingEnv(ParallelEnv):
 
     ``scenario`` (name or ``Scenario``), ``render_mode`` (``"human"`` or
     ``"rgb_array"``), ``max_cycles`` (PettingZoo's name for the episode
-    length: sets ``max_steps``; give one of the two) and any ``Scenario``
-    field as an override. ``reset`` takes a seed (python or numpy int); it has
+    length: sets ``max_steps``; give one of the two), ``info_level``
+    (``"full"``, the default: every diagnostic; ``"minimal"``: the four
+    errors; ``"none"``: empty dicts, for wrappers that convert infos to
+    tensors each step) and any ``Scenario`` field as an override. ``render``
+    also accepts RLlib's positional mode if it equals ``render_mode``.
+    ``reset`` takes a seed (python or numpy int); it has
     no options and warns if given some.
 
     ## Example
@@ -167,9 +178,16 @@ class CooperativePathFollowingEnv(ParallelEnv):
         scenario: str | Scenario = "wang2014",
         render_mode: str | None = None,
         max_cycles: int | None = None,
+        info_level: str = "full",
         **overrides: Any,
     ) -> None:
         check_render_mode(render_mode, self.metadata["render_modes"])
+        if info_level not in INFO_LEVELS:
+            raise ValueError(
+                f"info_level must be one of {INFO_LEVELS}, got {info_level!r}: 'full' "
+                "for all diagnostics, 'minimal' for the four errors, 'none' for empty infos."
+            )
+        self.info_level = info_level
         if max_cycles is not None:
             if "max_steps" in overrides:
                 raise ValueError(
@@ -308,14 +326,21 @@ class CooperativePathFollowingEnv(ParallelEnv):
         return {agent: obs[0, i].copy() for i, agent in enumerate(self.possible_agents)}
 
     def _infos(self) -> dict[str, dict[str, Any]]:
+        """Per-agent infos at the detail level ``self.info_level``."""
+        if self.info_level == "none":
+            return {agent: {} for agent in self.possible_agents}
         a = self.sim.arrays
-        infos = {}
+        infos: dict[str, dict[str, Any]] = {}
         for i, agent in enumerate(self.possible_agents):
             infos[agent] = {
                 "path_error": float(a.errors[0, i, kernels.ERR_PATH]),
                 "heading_error": float(a.errors[0, i, kernels.ERR_HEADING]),
                 "sync_error": float(a.errors[0, i, kernels.ERR_SYNC]),
                 "speed_error": float(a.errors[0, i, kernels.ERR_SPEED]),
+            }
+            if self.info_level == "minimal":
+                continue
+            infos[agent] |= {
                 "tau_command": a.tau_command[0, i].copy(),
                 "tau_applied": a.tau_applied[0, i].copy(),
                 "saturated": a.tau_command[0, i] != a.tau_applied[0, i],
@@ -334,12 +359,25 @@ class CooperativePathFollowingEnv(ParallelEnv):
         )
         return per_vessel.reshape(-1).astype(np.float32)
 
-    def render(self) -> NDArray[np.uint8] | None:
+    def render(self, mode: str | None = None) -> NDArray[np.uint8] | None:
         """Top-down view: paths, vessels, virtual targets; see ``cpf_env.render``.
 
+        Args:
+            mode: Accepted for wrappers that still pass the pre-Gymnasium-0.26
+                render mode (RLlib's ``ParallelPettingZooEnv`` calls
+                ``render(self.render_mode)``); it must equal ``render_mode`` or be
+                None. The mode is fixed at construction, as Gymnasium prescribes.
+
         Raises:
+            ValueError: ``mode`` differs from the construction-time ``render_mode``.
             RuntimeError: Before the first ``reset()`` (there is no fleet to draw).
         """
+        if mode is not None and mode != self.render_mode:
+            raise ValueError(
+                f"render mode {mode!r} differs from this env's render_mode "
+                f"{self.render_mode!r}; the mode is fixed at construction: make the env "
+                f"with render_mode={mode!r}."
+            )
         return self._views.draw(self.sim, fleet=0)
 
     def close(self) -> None:

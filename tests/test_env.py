@@ -19,7 +19,7 @@ from pettingzoo.test import api_test, parallel_api_test, parallel_seed_test, see
 
 import cpf_env
 from cpf_env import scenarios
-from cpf_env.env import CooperativePathFollowingEnv
+from cpf_env.env import INFO_LEVELS, CooperativePathFollowingEnv
 from cpf_env.graph import LinkImpairments
 from cpf_env.reward import REWARD_TERMS, RewardWeights
 from cpf_env.scenarios import Scenario, SpeedSchedule
@@ -95,6 +95,7 @@ def test_metadata_and_factories() -> None:
         (("no_such_scenario",), {}, ValueError, "unknown scenario 'no_such_scenario'.*wang2014"),
         ((42,), {}, TypeError, "scenario must be a name"),
         ((), {"render_mode": "ansi"}, ValueError, "render_mode must be one of"),
+        ((), {"info_level": "some"}, ValueError, "info_level must be one of.*'minimal'"),
     ],
 )
 def test_bad_factory_arguments(args: tuple, kwargs: dict, error: type, match: str) -> None:
@@ -164,6 +165,35 @@ def test_infos_report_command_saturation_and_state() -> None:
             np.testing.assert_array_equal(info["eta"], a.eta[0, i])
             np.testing.assert_array_equal(info["nu"], a.nu[0, i])
             assert info["theta"] == a.theta[0, i]
+
+
+def test_info_levels_carry_less_but_the_same_values() -> None:
+    envs = {level: cpf_env.parallel_env("lossy_links", info_level=level) for level in INFO_LEVELS}
+    rng = np.random.default_rng(5)
+    first = {level: env.reset(seed=2) for level, env in envs.items()}
+    for step in range(30):
+        if step:
+            batch = random_actions(rng, envs["full"].sim)
+            first = {level: env.step(as_dict(env, batch)) for level, env in envs.items()}
+        observations = {level: out[0] for level, out in first.items()}
+        infos = {level: out[-1] for level, out in first.items()}
+        for agent in envs["full"].possible_agents:
+            np.testing.assert_array_equal(observations["none"][agent], observations["full"][agent])
+            assert infos["none"][agent] == {}
+            errors = ("path_error", "heading_error", "sync_error", "speed_error")
+            assert set(infos["minimal"][agent]) == set(errors)
+            for key in errors:
+                assert infos["minimal"][agent][key] == infos["full"][agent][key]
+
+
+def test_render_accepts_the_construction_mode_positionally() -> None:
+    env = cpf_env.parallel_env("wang2014", render_mode="rgb_array")
+    env.reset(seed=0)
+    frame = env.render("rgb_array")  # RLlib's ParallelPettingZooEnv calls render(mode)
+    np.testing.assert_array_equal(frame, env.render())
+    with pytest.raises(ValueError, match=r"render mode 'human' differs.*render_mode='human'"):
+        env.render("human")
+    env.close()
 
 
 # --- episode end --------------------------------------------------------------------------
