@@ -5,6 +5,7 @@ from __future__ import annotations
 import doctest
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -22,6 +23,8 @@ from cpf_env.observation import observation_box
 from cpf_env.torchrl_env import ERROR_KEYS, GROUP, TorchRLFleetEnv
 
 pytestmark = pytest.mark.torchrl
+
+EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 
 #: Random models and initial poses, lossy links: every reset draws from the generator.
 SCENARIO = "heterogeneous"
@@ -230,3 +233,27 @@ def test_module_example_runs() -> None:
     results = doctest.testmod(torchrl_env)
     assert results.attempted > 0
     assert results.failed == 0
+
+
+def run_example(name: str, *args: str) -> str:
+    command = [sys.executable, str(EXAMPLES / name), *args]
+    return subprocess.run(command, capture_output=True, text=True, check=True).stdout
+
+
+def test_pettingzoo_example_runs() -> None:
+    out = run_example(
+        "torchrl_pettingzoo.py", "--steps", "5", "--fleets", "2", "--info-level", "minimal"
+    )
+    assert "wrapper rollout: batch [5], reward [5, 5, 1]" in out
+    assert "native rollout: batch [2, 5], reward [2, 5, 5, 1]" in out
+    assert "fleet 1 == ParallelEnv reset(seed + 1): True" in out
+
+
+def test_throughput_example_prints_its_table() -> None:
+    out = run_example(
+        "torchrl_throughput.py", "--seconds", "0.3", "--fleets", "2", "256", "--rollout-steps", "0"
+    )
+    assert "PettingZooWrapper, info_level=none" in out
+    assert "native B = 256 / PettingZooWrapper, info_level=none:" in out
+    rows = [line for line in out.splitlines() if line.startswith("TorchRLFleetEnv")]
+    assert [line.split()[1] for line in rows] == ["2", "256"]
