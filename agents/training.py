@@ -30,6 +30,7 @@ import dataclasses
 import json
 import platform
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, cast
@@ -241,7 +242,11 @@ def _build_model(config: TrainConfig, env: VecNormalize | VecMonitor) -> BaseAlg
 
 
 def train(
-    config: TrainConfig, out: str | Path, progress: bool = True, overwrite: bool = False
+    config: TrainConfig,
+    out: str | Path,
+    progress: bool = True,
+    overwrite: bool = False,
+    callbacks: Sequence[BaseCallback] = (),
 ) -> Path:
     """Train an agent and save it to ``out`` (see the module docstring).
 
@@ -250,6 +255,7 @@ def train(
         out: Output folder (created).
         progress: Show a progress bar with the episodic cost.
         overwrite: Replace a trained model already in ``out``.
+        callbacks: More SB3 callbacks (a sweep's reporting to Ray Tune, say).
 
     Returns:
         The output folder.
@@ -284,7 +290,7 @@ def train(
     start = time.perf_counter()
     per_call = config.n_steps * env.num_envs if config.algo == "ppo" else env.num_envs
     total = -(-config.timesteps // per_call) * per_call  # SB3 completes whole rollouts
-    model.learn(config.timesteps, callback=_ProgressBar(total, progress))
+    model.learn(config.timesteps, callback=[_ProgressBar(total, progress), *callbacks])
     elapsed = time.perf_counter() - start
     model.save(folder / "model.zip")
     if isinstance(env, VecNormalize):

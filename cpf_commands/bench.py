@@ -36,12 +36,13 @@ from cpf_commands.policies import (
     policy_label,
     resolve_policy,
 )
+from cpf_commands.ray_runtime import add_address_argument, start_ray
 from cpf_env import scenarios
 from cpf_env.env import make_scenario
 from cpf_env.scenarios import Scenario
 from cpf_env.suite import is_deterministic, list_suite
 
-__all__ = ["BASE_SEED", "bench_main", "run_bench", "write_outputs"]
+__all__ = ["BASE_SEED", "bench_main", "run_bench", "run_cell", "write_outputs"]
 
 #: First evaluation seed (kept apart from the small seeds training runs use).
 BASE_SEED = 10_000
@@ -121,6 +122,79 @@ def _build(
     return built, skipped
 
 
+def _episode_seeds(task: Scenario, seeds: int, base_seed: int) -> tuple[int, ...]:
+    """Evaluation seeds of a scenario: one episode if nothing in it is random."""
+    return tuple(base_seed + k for k in range(1 if is_deterministic(task) else seeds))
+
+
+#: One cell to run: policy label, its specification, the scenario, the seeds.
+_Job = tuple[str, PolicySpec, Scenario, tuple[int, ...]]
+
+
+def run_cell(
+    label: str, spec: PolicySpec, task: Scenario, seeds: tuple[int, ...], steps: int | None
+) -> CellResult:
+    """One (policy, scenario) cell: build the policy, run its episodes, measure them."""
+    return _measure(label, resolve_policy(spec, task), task, seeds, steps)
+
+
+def _measure(
+    label: str,
+    policy: BenchPolicy,
+    task: Scenario,
+    seeds: tuple[int, ...],
+    steps: int | None,
+    progress: tqdm | None = None,
+) -> CellResult:
+    """Run a built policy's episodes on ``task`` and measure them."""
+    metrics = run_episodes(policy, task, seeds, steps=steps, progress=progress)
+    return CellResult(label, task.name, seeds, is_deterministic(task), metrics)
+
+
+def _run_here(
+    jobs: Sequence[_Job],
+    built: dict[tuple[str, str], BenchPolicy],
+    steps: int | None,
+    progress: bool,
+) -> list[CellResult]:
+    """The cells one after the other in this process, with a progress bar over steps."""
+    total = sum(task.max_steps if steps is None else int(steps) for *_, task, _ in jobs)
+    cells = []
+    with tqdm(total=total, disable=not progress, unit="step", desc="cpf-bench") as bar:
+        for label, _, task, seeds in jobs:
+            bar.set_postfix_str(f"{label} on {task.name}")
+            metrics = run_episodes(
+                built[(label, task.name)], task, seeds, steps=steps, progress=bar
+            )
+            cells.append(CellResult(label, task.name, seeds, is_deterministic(task), metrics))
+    return cells
+
+
+def _run_on_ray(
+    jobs: Sequence[_Job], steps: int | None, address: str | None, progress: bool
+) -> list[CellResult]:
+    """The cells as Ray tasks (one CPU each), on local Ray or the cluster at ``address``.
+
+    Each task builds its policy from the specification and runs the same
+    ``run_cell`` as a local run, so the results are identical. A trained
+    agent's folder must be readable at the same path on every node.
+    """
+    ray = start_ray(address, cpus_per_task=1, quiet=True)
+    try:
+        remote = ray.remote(num_cpus=1)(run_cell)
+        futures = [
+            remote.remote(label, spec, task, seeds, steps) for label, spec, task, seeds in jobs
+        ]
+        pending = list(futures)
+        with tqdm(total=len(futures), disable=not progress, unit="cell", desc="cpf-bench") as bar:
+            while pending:
+                ready, pending = ray.wait(pending, num_returns=1)
+                bar.update(len(ready))
+        return list(ray.get(futures))
+    finally:
+        ray.shutdown()
+
+
 def run_bench(
     policies: Sequence[PolicySpec] | Mapping[str, PolicySpec],
     scenario_names: Sequence[str | Scenario],
@@ -131,6 +205,8 @@ def run_bench(
     command: str = "",
     progress: bool = False,
     figures: bool = True,
+    distribute: bool = False,
+    address: str | None = None,
 ) -> list[CellResult]:
     """Run every policy on every scenario for ``seeds`` paired seeds, and write the outputs.
 
@@ -145,6 +221,9 @@ def run_bench(
         command: The command line recorded in summary.md.
         progress: Show a progress bar (stderr).
         figures: Write the PNG figures.
+        distribute: Run the (policy, scenario) cells as Ray tasks (needs the
+            ``ray`` extra); the results are identical to a local run.
+        address: Ray address for ``distribute`` (None: a local Ray instance).
 
     Returns:
         One ``CellResult`` per (policy, scenario), policies outermost. A policy
@@ -162,21 +241,16 @@ def run_bench(
     tasks = [make_scenario(name) for name in scenario_names]
     labelled = _labelled(policies)
     built, skipped = _build(labelled, tasks)
-    horizon = {task.name: task.max_steps if steps is None else int(steps) for task in tasks}
-    total = sum(horizon[scenario] for _, scenario in built)
-    cells = []
-    with tqdm(total=total, disable=not progress, unit="step", desc="cpf-bench") as bar:
-        for label in labelled:
-            for task in tasks:
-                if (label, task.name) not in built:
-                    continue
-                bar.set_postfix_str(f"{label} on {task.name}")
-                deterministic = is_deterministic(task)
-                episode_seeds = tuple(base_seed + k for k in range(1 if deterministic else seeds))
-                metrics = run_episodes(
-                    built[(label, task.name)], task, episode_seeds, steps=steps, progress=bar
-                )
-                cells.append(CellResult(label, task.name, episode_seeds, deterministic, metrics))
+    jobs = [
+        (label, labelled[label], task, _episode_seeds(task, seeds, base_seed))
+        for label in labelled
+        for task in tasks
+        if (label, task.name) in built
+    ]
+    if distribute:
+        cells = _run_on_ray(jobs, steps, address, progress)
+    else:
+        cells = _run_here(jobs, built, steps, progress)
     if out is not None:
         write_outputs(cells, out, command, skipped=skipped, figures=figures)
     return cells
@@ -226,6 +300,13 @@ def _parser() -> argparse.ArgumentParser:
         "--out", default="outputs/bench", help="output folder (default: outputs/bench)"
     )
     parser.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
+    parser.add_argument(
+        "--ray",
+        action="store_true",
+        help="run the (policy, scenario) cells as Ray tasks, on local Ray or at --address "
+        "(results identical to a local run; needs the ray extra)",
+    )
+    add_address_argument(parser)
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     return parser
 
@@ -257,8 +338,10 @@ def bench_main(argv: Sequence[str] | None = None) -> int:
             command=_command(args),
             progress=not args.quiet,
             figures=not args.no_figures,
+            distribute=args.ray or args.address is not None,
+            address=args.address,
         )
-    except (ValueError, FileNotFoundError) as error:
+    except (ValueError, FileNotFoundError, ImportError) as error:
         parser.error(str(error))
     elapsed = time.perf_counter() - start
     print(

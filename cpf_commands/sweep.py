@@ -1,0 +1,216 @@
+"""``cpf-sweep``: train agents over scenarios x seeds x settings with Ray Tune.
+
+Every trial runs ``cpf-train``'s training function on its own batched
+simulator (``--set fleets=...`` fleets per trial, so Ray's per-trial start-up
+is spread over many vessels), writes an agent folder that
+``agents.load_policy`` loads, and is evaluated against its base policy on
+paired seeds. Ray runs on this machine by default (a local instance, nothing to
+set up) or on a cluster with ``--address``. Running the same command again
+resumes the sweep: finished trials are kept, unfinished and failed ones run
+again. The summary (``summary.md``, ``summary.csv``) is printed at the end.
+
+Folder layout::
+
+    OUT/sweep.json              the sweep (grid, fixed fields, evaluation)
+    OUT/trials/<trial>/         one agent: model.zip, config.json, evaluation.json, ...
+    OUT/tune/                   Ray Tune's experiment state (used to resume)
+    OUT/summary.md, summary.csv
+
+Example::
+
+    cpf-sweep --scenarios bench_mild bench_saturation --seeds 0 1 --set timesteps=20000 --out sweep
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import io
+import shlex
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from cpf_commands.arguments import positive_int
+from cpf_commands.ray_runtime import add_address_argument, start_ray
+from cpf_env import scenarios
+
+__all__ = ["run_sweep", "sweep_main"]
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="cpf-sweep",
+        description="Train residual (or from-scratch) agents over scenarios x seeds x settings "
+        "with Ray Tune, one batched simulator per trial, and summarize them against their "
+        "base policy. Resumes when rerun with the same arguments and --out.",
+        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+    )
+    parser.add_argument(
+        "--scenarios",
+        nargs="+",
+        required=True,
+        choices=scenarios.list_scenarios(),
+        metavar="SCENARIO",
+        help="scenarios to train on (registered names)",
+    )
+    parser.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2], help="training seeds")
+    parser.add_argument(
+        "--set",
+        nargs="+",
+        default=[],
+        dest="settings",
+        metavar="FIELD=VALUES",
+        help="TrainConfig fields (cpf-train's options): FIELD=VALUE fixes one, FIELD=V1,V2 "
+        "sweeps it, FIELD=[JSON list] for values with commas; e.g. timesteps=200000 "
+        "fleets=64 scale=0.1,0.2",
+    )
+    parser.add_argument("--out", required=True, help="sweep folder (resumed if it exists)")
+    add_address_argument(parser)
+    parser.add_argument(
+        "--cpus-per-trial",
+        type=positive_int,
+        default=1,
+        help="CPUs each trial reserves (torch threads)",
+    )
+    parser.add_argument(
+        "--max-concurrent",
+        type=positive_int,
+        default=None,
+        help="trials at once (default: as CPUs allow)",
+    )
+    parser.add_argument(
+        "--eval-seeds", type=int, default=5, help="paired evaluation episodes per trial (0: none)"
+    )
+    parser.add_argument(
+        "--eval-steps",
+        type=positive_int,
+        default=None,
+        help="evaluation horizon (default: max_steps)",
+    )
+    parser.add_argument("--quiet", action="store_true", help="no Ray Tune status tables")
+    return parser
+
+
+def _csv(rows: Sequence[dict[str, Any]]) -> str:
+    columns: list[str] = []
+    for row in rows:
+        columns += [key for key in row if key not in columns]
+    buffer = io.StringIO()
+    writer = csv.DictWriter(buffer, columns, lineterminator="\n")
+    writer.writeheader()
+    writer.writerows(rows)
+    return buffer.getvalue()
+
+
+def run_sweep(
+    spec: Any,
+    out: str | Path,
+    address: str | None = None,
+    cpus_per_trial: int = 1,
+    max_concurrent: int | None = None,
+    command: str = "",
+    quiet: bool = False,
+) -> list[dict[str, Any]]:
+    """Run (or resume) a sweep and write its summary.
+
+    Args:
+        spec: The ``SweepSpec``.
+        out: The sweep's folder; on a cluster, a path every node sees (shared storage).
+        address: Ray address; None starts a local Ray instance.
+        cpus_per_trial: CPUs each trial reserves.
+        max_concurrent: Trials at once (None: as many as the CPUs allow).
+        command: The command line recorded in summary.md.
+        quiet: No Ray Tune status output.
+
+    Returns:
+        The summary rows, one per trial (``status`` "done", "error: ..." or
+        "not finished").
+
+    Raises:
+        ValueError: ``out`` holds a different sweep.
+        ImportError: Ray is not installed.
+    """
+    from cpf_commands.sweep_spec import trial_name
+    from cpf_commands.sweep_trial import run_trial, summary_markdown, summary_rows
+
+    folder = Path(out).resolve()
+    resuming = spec.save_or_check(folder)
+    if address is None:  # workers share this machine's kernel cache: fill it once, here
+        from cpf_env.precompile import precompile
+
+        precompile(spec.scenarios)
+    ray = start_ray(address, cpus_per_trial, quiet=quiet)
+    from ray import tune
+
+    try:
+        trainable = tune.with_resources(
+            tune.with_parameters(run_trial, spec=spec, out=str(folder), cpus=cpus_per_trial),
+            {"cpu": cpus_per_trial},
+        )
+        state = folder / "tune"
+        if resuming and tune.Tuner.can_restore(str(state)):
+            tuner = tune.Tuner.restore(
+                str(state), trainable, resume_unfinished=True, restart_errored=True
+            )
+        else:
+            tuner = tune.Tuner(
+                trainable,
+                param_space=spec.param_space(tune),
+                tune_config=tune.TuneConfig(
+                    max_concurrent_trials=max_concurrent,
+                    trial_name_creator=lambda trial: trial_name(trial.config, spec),
+                    trial_dirname_creator=lambda trial: trial_name(trial.config, spec),
+                ),
+                run_config=tune.RunConfig(
+                    name="tune", storage_path=str(folder), verbose=0 if quiet else 1
+                ),
+            )
+        results = tuner.fit()
+        errors = {
+            trial_name(result.config, spec): str(result.error).strip().splitlines()[-1]
+            for result in (results[k] for k in range(len(results)))
+            if result.error is not None and result.config is not None
+        }
+    finally:
+        ray.shutdown()
+    rows = summary_rows(spec, folder, errors)
+    (folder / "summary.md").write_text(summary_markdown(spec, rows, command))
+    (folder / "summary.csv").write_text(_csv(rows))
+    return rows
+
+
+def sweep_main(argv: Sequence[str] | None = None) -> int:
+    """``cpf-sweep``: see ``cpf-sweep --help``."""
+    parser = _parser()
+    args = parser.parse_args(argv)
+    from cpf_commands.sweep_spec import SweepSpec
+
+    try:
+        spec = SweepSpec.from_settings(
+            args.scenarios,
+            args.seeds,
+            args.settings,
+            eval_seeds=args.eval_seeds,
+            eval_steps=args.eval_steps,
+        )
+    except ValueError as error:
+        parser.error(str(error))
+    command = shlex.join(["cpf-sweep", *(sys.argv[1:] if argv is None else argv)])
+    try:
+        rows = run_sweep(
+            spec,
+            args.out,
+            address=args.address,
+            cpus_per_trial=args.cpus_per_trial,
+            max_concurrent=args.max_concurrent,
+            command=command,
+            quiet=args.quiet,
+        )
+    except (ValueError, ImportError) as error:
+        parser.error(str(error))
+    print((Path(args.out) / "summary.md").read_text())
+    failed = sum(1 for row in rows if row["status"] != "done")
+    print(f"cpf-sweep: {len(rows) - failed}/{len(rows)} trials done; results in {args.out}/")
+    return 1 if failed else 0

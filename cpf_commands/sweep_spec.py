@@ -1,0 +1,204 @@
+"""What a sweep runs: scenarios x seeds x settings of ``agents.TrainConfig``.
+
+A ``SweepSpec`` is the grid (every combination is one trial), the fields held
+fixed, and how each trained agent is evaluated. It is saved as ``sweep.json``
+in the sweep's folder; running the same command again resumes that sweep,
+and a different grid in the same folder is refused.
+
+``--set`` values on the command line: ``FIELD=VALUE`` fixes a field,
+``FIELD=V1,V2,...`` sweeps it, and ``FIELD=[...]`` (JSON) gives values that
+contain commas themselves, e.g. ``extras=[[],["base_action"]]``.
+
+Example:
+    >>> spec = SweepSpec(("bench_mild",), (0, 1), grid={"scale": (0.1, 0.2)})
+    >>> [trial_name(p, spec) for p in spec.trials()][:2]
+    ['bench_mild-seed0-scale0.1', 'bench_mild-seed0-scale0.2']
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+import json
+import re
+import typing
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from agents.training import TrainConfig
+
+__all__ = ["SweepSpec", "parse_setting", "trial_name"]
+
+#: TrainConfig fields a sweep sets through its own flags, not ``--set``.
+_OWN_FLAGS = ("scenario", "seed")
+
+
+def _field_types() -> dict[str, Any]:
+    """TrainConfig field name -> its annotated type."""
+    return typing.get_type_hints(TrainConfig)
+
+
+def _convert(name: str, value: Any, kind: Any) -> Any:
+    """``value`` (parsed JSON or a string) converted to the field's type, or ValueError."""
+    origin, args = typing.get_origin(kind), typing.get_args(kind)
+    if type(None) in args:  # X | None
+        if value in (None, "none", "None", "null"):
+            return None
+        kind = next(a for a in args if a is not type(None))
+        origin, args = typing.get_origin(kind), typing.get_args(kind)
+    try:
+        if origin is tuple:
+            items = value if isinstance(value, list) else [] if value == "" else [value]
+            return tuple(_convert(name, item, args[0]) for item in items)
+        if kind is bool:
+            if isinstance(value, bool):
+                return value
+            if str(value).lower() in ("true", "false"):
+                return str(value).lower() == "true"
+            raise ValueError
+        if kind is int and isinstance(value, float):
+            raise ValueError
+        return kind(value)
+    except (TypeError, ValueError):
+        raise ValueError(
+            f"--set {name}: {value!r} is not a valid {getattr(kind, '__name__', kind)}."
+        ) from None
+
+
+def parse_setting(text: str) -> tuple[str, tuple[Any, ...]]:
+    """Parse one ``FIELD=VALUE[,VALUE...]`` or ``FIELD=[JSON list]`` into (field, values).
+
+    Raises:
+        ValueError: Not ``FIELD=VALUES``, an unknown field, a field with its own
+            flag, or a value of the wrong type.
+    """
+    name, sep, raw = text.partition("=")
+    types = _field_types()
+    if not sep or not name:
+        raise ValueError(f"--set takes FIELD=VALUE or FIELD=V1,V2; got {text!r}.")
+    if name in _OWN_FLAGS:
+        raise ValueError(f"set {name} with --{name}s, not --set.")
+    if name not in types:
+        choices = sorted(set(types) - set(_OWN_FLAGS))
+        raise ValueError(f"--set: unknown TrainConfig field {name!r}; fields are {choices}.")
+    if raw.startswith("["):
+        try:
+            values = json.loads(raw)
+        except json.JSONDecodeError as error:
+            raise ValueError(f"--set {name}: {raw!r} is not a JSON list ({error}).") from None
+    else:
+        values = raw.split(",")
+    if not values:
+        raise ValueError(f"--set {name}: give at least one value.")
+    return name, tuple(_convert(name, value, types[name]) for value in values)
+
+
+def _slug(value: Any) -> str:
+    """A short, filesystem-safe rendering of a setting's value."""
+    text = "-".join(map(str, value)) if isinstance(value, tuple) else str(value)
+    return re.sub(r"[^A-Za-z0-9_.+-]", "_", text) or "none"
+
+
+@dataclass(frozen=True)
+class SweepSpec:
+    """A sweep: every combination of scenarios x seeds x ``grid`` is one trial.
+
+    Attributes:
+        scenarios: Registered scenario names to train on.
+        seeds: Training seeds.
+        grid: TrainConfig field -> the values it takes (two or more).
+        fixed: TrainConfig field -> the value it keeps in every trial.
+        eval_seeds: Evaluation episodes per trial (paired with the base policy);
+            0 skips the evaluation.
+        eval_steps: Evaluation horizon (None: each scenario's ``max_steps``).
+    """
+
+    scenarios: tuple[str, ...]
+    seeds: tuple[int, ...]
+    grid: dict[str, tuple[Any, ...]] = field(default_factory=dict)
+    fixed: dict[str, Any] = field(default_factory=dict)
+    eval_seeds: int = 5
+    eval_steps: int | None = None
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "scenarios", tuple(self.scenarios))
+        object.__setattr__(self, "seeds", tuple(int(seed) for seed in self.seeds))
+        object.__setattr__(self, "grid", {k: tuple(v) for k, v in self.grid.items()})
+        if not self.scenarios or not self.seeds:
+            raise ValueError("a sweep needs at least one scenario and one seed.")
+        for name, count in (("scenarios", self.scenarios), ("seeds", self.seeds)):
+            if len(set(count)) != len(count):
+                raise ValueError(f"{name} repeat: {list(count)}; give each once.")
+        if self.eval_seeds < 0:
+            raise ValueError(f"eval seeds must be >= 0, got {self.eval_seeds}.")
+        for params in self.trials():
+            self.config(params)  # every trial's TrainConfig is valid before any starts
+
+    @classmethod
+    def from_settings(
+        cls, scenarios: Sequence[str], seeds: Sequence[int], settings: Sequence[str], **kwargs: Any
+    ) -> SweepSpec:
+        """Build from ``--set`` texts: one value fixes a field, several sweep it."""
+        grid: dict[str, tuple[Any, ...]] = {}
+        fixed: dict[str, Any] = {}
+        for text in settings:
+            name, values = parse_setting(text)
+            if name in grid or name in fixed:
+                raise ValueError(f"--set {name} is given twice; give all its values at once.")
+            if len(values) == 1:
+                fixed[name] = values[0]
+            else:
+                grid[name] = values
+        return cls(tuple(scenarios), tuple(seeds), grid, fixed, **kwargs)
+
+    def trials(self) -> Iterator[dict[str, Any]]:
+        """Each trial's varying parameters: scenario, seed and one value per grid field."""
+        names = ("scenario", "seed", *self.grid)
+        for values in itertools.product(self.scenarios, self.seeds, *self.grid.values()):
+            yield dict(zip(names, values, strict=True))
+
+    def config(self, params: dict[str, Any]) -> TrainConfig:
+        """The ``TrainConfig`` of the trial with varying parameters ``params``."""
+        return TrainConfig(**{**self.fixed, **params})
+
+    def param_space(self, tune: Any) -> dict[str, Any]:
+        """Ray Tune's parameter space: a grid search over every varying parameter."""
+        space = {"scenario": tune.grid_search(list(self.scenarios))}
+        space["seed"] = tune.grid_search(list(self.seeds))
+        space.update({name: tune.grid_search(list(v)) for name, v in self.grid.items()})
+        return space
+
+    def to_json(self) -> dict[str, Any]:
+        """A JSON-ready dict (tuples become lists)."""
+        return json.loads(json.dumps(dataclasses.asdict(self)))
+
+    def save_or_check(self, folder: Path) -> bool:
+        """Write ``sweep.json`` to ``folder``, or check that the one there is this sweep.
+
+        Returns:
+            True if the folder already held this sweep (a resume).
+
+        Raises:
+            ValueError: The folder holds a different sweep.
+        """
+        path = folder / "sweep.json"
+        if path.exists():
+            saved = json.loads(path.read_text())
+            if saved != self.to_json():
+                raise ValueError(
+                    f"{folder} holds a different sweep ({path}); rerun with its exact "
+                    "arguments to resume it, or choose another --out."
+                )
+            return True
+        folder.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps(self.to_json(), indent=2) + "\n")
+        return False
+
+
+def trial_name(params: dict[str, Any], spec: SweepSpec) -> str:
+    """Folder name of a trial: scenario, seed and the grid fields' values."""
+    parts = [params["scenario"], f"seed{params['seed']}"]
+    parts += [f"{name}{_slug(params[name])}" for name in spec.grid]
+    return "-".join(parts)
