@@ -10,8 +10,9 @@ k of the native env seeded s reproduces the ParallelEnv seeded s + k.
 
 ``info_level="none"`` drops the per-step infos (the fastest wrapper route);
 ``"minimal"`` keeps the four errors per vessel, as ``("vessel", "info", ...)``
-on both routes. The ParallelEnv's default ``"full"`` infos hold a nested dict
-(``reward_terms``) that ``PettingZooWrapper`` cannot turn into a tensor.
+on both routes. The ParallelEnv's default, ``"full"``, also wraps, but costs
+the wrapper a tensor per entry per vessel per step; the native env offers
+only the two cheap levels.
 
 Needs the ``torchrl`` extra (``pip install -e ".[torchrl]"``). Usage::
 

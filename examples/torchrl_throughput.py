@@ -11,8 +11,8 @@ one extra row times ``env.rollout``, which stacks the trajectory.
 Routes:
 
 1. ``PettingZooWrapper(cpf_env.parallel_env(info_level=...))``, one group of
-   vessels, one fleet; ``info_level="full"`` fails on TorchRL 0.14 (the nested
-   ``reward_terms`` dict has no tensor form) and is reported as such;
+   vessels, one fleet, at the three info levels (a route that fails is
+   reported with its error);
 2. ``cpf_env.torchrl_env.TorchRLFleetEnv`` at several batch sizes B.
 
 Prints vessel-steps per second and the ratio native / wrapper at B = 256
