@@ -23,7 +23,6 @@ from pettingzoo import ParallelEnv
 
 from cpf_env import kernels, scenarios
 from cpf_env.observation import ObsLayout, observation_box
-from cpf_env.reward import REWARD_TERMS
 from cpf_env.scenarios import Scenario
 from cpf_env.sim import FleetSim, as_real_actions
 from cpf_env.views import FleetViews, check_render_mode
@@ -347,7 +346,7 @@ class CooperativePathFollowingEnv(ParallelEnv):
                 "eta": a.eta[0, i].copy(),
                 "nu": a.nu[0, i].copy(),
                 "theta": float(a.theta[0, i]),
-                "reward_terms": dict(zip(REWARD_TERMS, a.reward_terms[0, i].tolist(), strict=True)),
+                "reward_terms": a.reward_terms[0, i].copy(),
             }
         return infos
 

@@ -386,7 +386,8 @@ def test_reward_equals_the_documented_formula(name: str) -> None:
             effort = np.sqrt(np.sum((info["tau_applied"] / tau_scale[i]) ** 2))
             terms = expected_terms(w, dt, (np.hypot(z1[0], z1[1]), z1[2], sync, speed, effort))
             assert rewards[agent] == pytest.approx(terms.sum(), rel=1e-12, abs=1e-15)
-            reported = np.array([info["reward_terms"][term] for term in REWARD_TERMS])
+            reported = info["reward_terms"]
+            assert reported.shape == (len(REWARD_TERMS),)
             np.testing.assert_allclose(reported, terms, rtol=1e-11, atol=1e-15)
             assert rewards[agent] == pytest.approx(reported.sum(), rel=1e-14, abs=1e-16)
             assert info["path_error"] == pytest.approx(np.hypot(z1[0], z1[1]), rel=1e-12)
