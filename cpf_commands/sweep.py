@@ -160,6 +160,7 @@ def run_sweep(
                 param_space=spec.param_space(tune),
                 tune_config=tune.TuneConfig(
                     max_concurrent_trials=max_concurrent,
+                    reuse_actors=True,
                     trial_name_creator=lambda trial: trial_name(trial.config, spec),
                     trial_dirname_creator=lambda trial: trial_name(trial.config, spec),
                 ),

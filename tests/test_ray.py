@@ -6,6 +6,7 @@ Ray instance, as the commands do.
 
 from __future__ import annotations
 
+import json
 import os
 import signal
 import subprocess
@@ -89,3 +90,26 @@ def test_the_benchmark_on_ray_equals_the_local_run(tmp_path) -> None:
     ]
     for name in ("episodes.csv", "summary.csv", "summary.md"):
         assert (tmp_path / "ray" / name).read_bytes() == (tmp_path / "local" / name).read_bytes()
+
+
+def test_a_trial_trains_exactly_as_train_does(tmp_path) -> None:
+    """Trials run cpf-train's function; the second reuses the first's worker process (Tune's
+    reuse_actors) and must still give the bits of a fresh in-process run."""
+    import torch
+    from stable_baselines3 import PPO
+
+    from agents import train
+
+    fixed = {"timesteps": 3000, "fleets": 4, "n_steps": 16}
+    spec = SweepSpec(("bench_mild",), (3, 4), fixed=fixed, eval_seeds=0)
+    run_sweep(spec, tmp_path / "sweep", cpus_per_trial=2, quiet=True)  # one trial at a time
+    results = tmp_path.glob("sweep/tune/bench_mild-seed*/result.json")
+    pids = {json.loads(path.read_text().splitlines()[-1])["pid"] for path in results}
+    assert len(pids) == 1, "the second trial should have reused the first one's process"
+    for seed in (3, 4):
+        config = spec.config({"scenario": "bench_mild", "seed": seed, "torch_threads": 2})
+        train(config, tmp_path / f"here{seed}", progress=False)
+        swept = PPO.load(tmp_path / "sweep" / "trials" / f"bench_mild-seed{seed}" / "model.zip")
+        here = PPO.load(tmp_path / f"here{seed}" / "model.zip")
+        for name, value in here.policy.state_dict().items():
+            assert torch.equal(swept.policy.state_dict()[name], value), (seed, name)
