@@ -78,7 +78,7 @@ def start_ray(address: str | None, cpus_per_task: int = 1, quiet: bool = False) 
     options: dict[str, Any] = {
         "runtime_env": {"env_vars": worker_environment(cpus_per_task)},
         "log_to_driver": not quiet,
-        "logging_level": "warning",
+        "logging_level": "error" if quiet else "warning",
     }
     if address is None:
         options["include_dashboard"] = False

@@ -26,6 +26,7 @@ from __future__ import annotations
 import argparse
 import csv
 import io
+import os
 import shlex
 import sys
 from collections.abc import Sequence
@@ -37,6 +38,9 @@ from cpf_commands.ray_runtime import add_address_argument, start_ray
 from cpf_env import scenarios
 
 __all__ = ["run_sweep", "sweep_main"]
+
+#: Ray's switch between its console output engines (the older one is silent at verbose=0).
+_OUTPUT_ENGINE = "RAY_AIR_NEW_OUTPUT"
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -144,6 +148,9 @@ def run_sweep(
     ray = start_ray(address, cpus_per_trial, quiet=quiet)
     from ray import tune
 
+    output = os.environ.get(_OUTPUT_ENGINE)
+    if quiet:  # Tune's newer console output prints its banners even at verbose=0
+        os.environ[_OUTPUT_ENGINE] = "0"
     try:
         trainable = tune.with_resources(
             tune.with_parameters(run_trial, spec=spec, out=str(folder), cpus=cpus_per_trial),
@@ -176,6 +183,10 @@ def run_sweep(
         }
     finally:
         ray.shutdown()
+        if output is None:
+            os.environ.pop(_OUTPUT_ENGINE, None)
+        else:
+            os.environ[_OUTPUT_ENGINE] = output
     rows = summary_rows(spec, folder, errors)
     (folder / "summary.md").write_text(summary_markdown(spec, rows, command))
     (folder / "summary.csv").write_text(_csv(rows))

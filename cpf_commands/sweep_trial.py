@@ -179,11 +179,14 @@ def summary_markdown(spec: SweepSpec, rows: Sequence[dict[str, Any]], command: s
     """The sweep's summary: trials, then each scenario x setting over seeds."""
     lines = ["# Sweep summary", "", f"Command: `{command}`", ""]
     reference = next((row["reference"] for row in rows if "reference" in row), "the base")
-    lines += [
-        f"Evaluation: {spec.eval_seeds} paired episodes per trial against {reference} "
-        f"(seeds from {BASE_SEED}); cost_ratio < 1 means the agent's cost is lower.",
-        "",
-    ]
+    if spec.eval_seeds:
+        lines.append(
+            f"Evaluation: {spec.eval_seeds} paired episodes per trial against {reference} "
+            f"(seeds from {BASE_SEED}); cost_ratio < 1 means the agent's cost is lower."
+        )
+    else:
+        lines.append("Evaluation: none (--eval-seeds 0).")
+    lines.append("")
     lines += _table(_TRIAL_COLUMNS, [[row.get(c) for c in _TRIAL_COLUMNS] for row in rows])
     groups: dict[tuple[Any, ...], list[dict[str, Any]]] = {}
     for row in rows:
