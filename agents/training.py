@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
 import platform
 import time
 from collections.abc import Sequence
@@ -54,6 +55,11 @@ __all__ = ["ALGORITHMS", "TrainConfig", "make_env", "train"]
 
 #: SB3 algorithms by name.
 ALGORITHMS: dict[str, type[BaseAlgorithm]] = {"ppo": PPO, "sac": SAC}
+
+
+def _is_real(value: Any) -> bool:
+    """Whether ``value`` is a finite int or float (not a bool)."""
+    return isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
 
 
 @dataclass(frozen=True)
@@ -130,11 +136,30 @@ class TrainConfig:
             raise ValueError(
                 f"reward_form must be one of {REWARD_FORMS} or None, got {self.reward_form!r}."
             )
-        integers = ("fleets", "timesteps", "n_steps", "batch_size", "n_epochs", "gradient_steps")
+        integers = (
+            "fleets",
+            "timesteps",
+            "n_steps",
+            "batch_size",
+            "n_epochs",
+            "gradient_steps",
+            "buffer_size",
+        )
         for name in integers if self.torch_threads is None else (*integers, "torch_threads"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                 raise ValueError(f"{name} must be an integer >= 1, got {value!r}.")
+        if not self.net_arch or min(self.net_arch) < 1:
+            raise ValueError(f"net_arch must list layer sizes >= 1, got {list(self.net_arch)}.")
+        if not (_is_real(self.learning_rate) and self.learning_rate > 0):
+            raise ValueError(f"learning_rate must be a number > 0, got {self.learning_rate!r}.")
+        if not (_is_real(self.gamma) and 0 < self.gamma <= 1):
+            raise ValueError(f"gamma must be in (0, 1], got {self.gamma!r}.")
+        if not _is_real(self.log_std_init):
+            raise ValueError(f"log_std_init must be a finite number, got {self.log_std_init!r}.")
+        for name in ("hide_residual_from_base", "normalize_observations"):
+            if not isinstance(getattr(self, name), bool):
+                raise ValueError(f"{name} must be true or false, got {getattr(self, name)!r}.")
         if self.base != "none":
             self.residual_config()  # validates mode, scale and extras
 

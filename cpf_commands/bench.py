@@ -341,7 +341,7 @@ def bench_main(argv: Sequence[str] | None = None) -> int:
             distribute=args.ray or args.address is not None,
             address=args.address,
         )
-    except (ValueError, FileNotFoundError, ImportError) as error:
+    except (ValueError, FileNotFoundError, ImportError, ConnectionError) as error:
         parser.error(str(error))
     elapsed = time.perf_counter() - start
     print(

@@ -7,7 +7,7 @@ each compiling them (15-30 s). See ``cpf_env.precompile`` and ``docs/scaling.md`
 
 Example::
 
-    NUMBA_CACHE_DIR=/shared/numba cpf-precompile
+    NUMBA_CACHE_DIR=/shared/numba-cache cpf-precompile
 """
 
 from __future__ import annotations
@@ -39,7 +39,15 @@ def precompile_main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     from cpf_env.precompile import precompile
 
-    report = precompile(args.scenarios)
+    print(
+        "cpf-precompile: loading the kernels, or compiling them if the cache is cold "
+        "(about a minute on 2 cores)...",
+        flush=True,
+    )
+    try:
+        report = precompile(args.scenarios)
+    except ValueError as error:
+        parser.error(str(error))
     print(
         f"cpf-precompile: {report.compiled} signatures compiled and cached, "
         f"{report.loaded} loaded from the cache, over {len(report.scenarios)} scenarios "

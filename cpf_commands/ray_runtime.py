@@ -1,11 +1,14 @@
 """Starting or joining Ray for the commands that distribute work (``cpf-sweep``, ``cpf-bench``).
 
 Ray is an optional dependency (``pip install -e ".[ray]"``). Without an
-address the commands start a local Ray instance on this machine (nothing to
-set up; it stops when the command ends). With ``--address auto`` they join the
-cluster this machine belongs to (``ray start`` ran here), with
-``--address ray://HOST:10001`` they connect through Ray Client; Ray's own
-``RAY_ADDRESS`` variable works as usual.
+address the commands start a new local Ray instance on this machine (nothing
+to set up; it stops when the command ends), even if this machine already runs
+a Ray cluster, unless Ray's own ``RAY_ADDRESS`` variable names one. With
+``--address auto`` they join the cluster this machine belongs to (``ray start``
+ran here), with ``--address HOST:6379`` a cluster's head node, with
+``--address ray://HOST:10001`` they connect through Ray Client. An address
+that does not answer is an error, reported after a few seconds rather than
+waited on.
 
 Workers inherit two settings from the command's environment: ``NUMBA_CACHE_DIR``
 (where the compiled kernels are cached; see ``cpf_env.precompile``) and the
@@ -17,12 +20,18 @@ from __future__ import annotations
 
 import argparse
 import os
+import socket
 from types import ModuleType
 from typing import Any
 
 __all__ = ["add_address_argument", "require_ray", "start_ray", "worker_environment"]
 
-_INSTALL = 'install the optional Ray extra: pip install -e ".[ray]" (or pip install "ray[tune]")'
+_INSTALL = (
+    'install the optional Ray extra: pip install -e ".[ray]" (or pip install "ray[tune,client]")'
+)
+
+#: Seconds to wait for a cluster's address to accept a connection.
+PROBE_SECONDS = 5.0
 
 
 def require_ray() -> ModuleType:
@@ -60,27 +69,68 @@ def worker_environment(cpus_per_task: int) -> dict[str, str]:
     return variables
 
 
+def _host_and_port(address: str) -> tuple[str, int] | None:
+    """(host, port) of 'HOST:PORT' or 'ray://HOST:PORT'; None for 'auto' and 'local'."""
+    location = address.removeprefix("ray://")
+    host, colon, port = location.rpartition(":")
+    if not colon or not host:
+        return None
+    if not port.isdigit():
+        raise ValueError(f"Ray address {address!r} has no valid port; use HOST:PORT or 'auto'.")
+    return host.strip("[]"), int(port)
+
+
+def _probe(address: str) -> None:
+    """Raise ConnectionError if a HOST:PORT address does not accept a TCP connection."""
+    location = _host_and_port(address)
+    if location is None:
+        return
+    try:
+        with socket.create_connection(location, timeout=PROBE_SECONDS):
+            pass
+    except OSError as error:
+        raise ConnectionError(
+            f"no Ray cluster answers at --address {address} ({error}); start one there with "
+            "`ray start --head`, or fix --address (leave it out to run on this machine)."
+        ) from error
+
+
 def start_ray(address: str | None, cpus_per_task: int = 1, quiet: bool = False) -> ModuleType:
     """Start a local Ray instance (``address`` None) or join a cluster, and return ``ray``.
 
     Args:
-        address: None for a local instance, else a Ray address ('auto', 'ray://...').
+        address: None for a new local instance (or the cluster ``RAY_ADDRESS``
+            names), else a Ray address ('auto', 'HOST:PORT', 'ray://HOST:PORT').
         cpus_per_task: CPUs each task reserves (sets the workers' numba threads).
         quiet: Keep Ray's start-up and worker log lines off the terminal.
 
     Raises:
-        ImportError: Ray is not installed (the message says how to install it).
-        ValueError: ``cpus_per_task`` is below 1.
+        ImportError: Ray is not installed, or Ray Client (for 'ray://') is not
+            (the message says how to install it).
+        ValueError: ``cpus_per_task`` is below 1, or the address is malformed.
+        ConnectionError: No Ray cluster answers at the address.
     """
     if cpus_per_task < 1:
         raise ValueError(f"CPUs per task must be >= 1, got {cpus_per_task}.")
     ray = require_ray()
+    if address is None:
+        address = os.environ.get("RAY_ADDRESS") or "local"
+    _probe(address)
     options: dict[str, Any] = {
         "runtime_env": {"env_vars": worker_environment(cpus_per_task)},
         "log_to_driver": not quiet,
         "logging_level": "error" if quiet else "warning",
     }
-    if address is None:
+    if address == "local":
         options["include_dashboard"] = False
-    ray.init(address=address, **options)
+    try:
+        ray.init(address=address, **options)
+    except ConnectionError as error:
+        reason = str(error).strip().rstrip(".")
+        raise ConnectionError(
+            f"could not join a Ray cluster at --address {address} ({reason}); start one with "
+            "`ray start --head`, or leave --address out to run on this machine."
+        ) from error
+    except ModuleNotFoundError as error:  # Ray Client's gRPC dependency
+        raise ImportError(f"--address {address} needs Ray Client; {_INSTALL}.") from error
     return ray

@@ -133,19 +133,27 @@ def run_sweep(
         "not finished").
 
     Raises:
-        ValueError: ``out`` holds a different sweep.
+        ValueError: ``out`` is a file or holds a different sweep; a malformed address.
         ImportError: Ray is not installed.
+        ConnectionError: No Ray cluster answers at ``address``.
     """
     from cpf_commands.sweep_spec import trial_name
     from cpf_commands.sweep_trial import run_trial, summary_markdown, summary_rows
 
     folder = Path(out).resolve()
-    resuming = spec.save_or_check(folder)
+    resuming = spec.check_folder(folder)
     if address is None:  # workers share this machine's kernel cache: fill it once, here
         from cpf_env.precompile import precompile
 
+        if not quiet:
+            print(
+                "cpf-sweep: loading the simulator's kernels (compiling them takes about a "
+                "minute the first time on a machine)...",
+                flush=True,
+            )
         precompile(spec.scenarios)
     ray = start_ray(address, cpus_per_trial, quiet=quiet)
+    spec.save(folder)
     from ray import tune
 
     output = os.environ.get(_OUTPUT_ENGINE)
@@ -220,7 +228,7 @@ def sweep_main(argv: Sequence[str] | None = None) -> int:
             command=command,
             quiet=args.quiet,
         )
-    except (ValueError, ImportError) as error:
+    except (ValueError, ImportError, ConnectionError) as error:
         parser.error(str(error))
     print((Path(args.out) / "summary.md").read_text())
     failed = sum(1 for row in rows if row["status"] != "done")

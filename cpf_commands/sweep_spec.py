@@ -174,27 +174,33 @@ class SweepSpec:
         """A JSON-ready dict (tuples become lists)."""
         return json.loads(json.dumps(dataclasses.asdict(self)))
 
-    def save_or_check(self, folder: Path) -> bool:
-        """Write ``sweep.json`` to ``folder``, or check that the one there is this sweep.
+    def check_folder(self, folder: Path) -> bool:
+        """Check that ``folder`` can hold this sweep, without writing anything.
 
         Returns:
-            True if the folder already held this sweep (a resume).
+            True if the folder already holds this sweep (a resume), False if
+            it is new or holds no sweep yet.
 
         Raises:
-            ValueError: The folder holds a different sweep.
+            ValueError: ``folder`` is a file, or holds a different sweep.
         """
+        if folder.exists() and not folder.is_dir():
+            raise ValueError(f"--out {folder} is a file; give a folder (new or of this sweep).")
         path = folder / "sweep.json"
-        if path.exists():
-            saved = json.loads(path.read_text())
-            if saved != self.to_json():
-                raise ValueError(
-                    f"{folder} holds a different sweep ({path}); rerun with its exact "
-                    "arguments to resume it, or choose another --out."
-                )
-            return True
+        if not path.exists():
+            return False
+        saved = json.loads(path.read_text())
+        if saved != self.to_json():
+            raise ValueError(
+                f"{folder} holds a different sweep ({path}); rerun with its exact "
+                "arguments to resume it, or choose another --out."
+            )
+        return True
+
+    def save(self, folder: Path) -> None:
+        """Write ``sweep.json`` to ``folder`` (created if needed)."""
         folder.mkdir(parents=True, exist_ok=True)
-        path.write_text(json.dumps(self.to_json(), indent=2) + "\n")
-        return False
+        (folder / "sweep.json").write_text(json.dumps(self.to_json(), indent=2) + "\n")
 
 
 def trial_name(params: dict[str, Any], spec: SweepSpec) -> str:

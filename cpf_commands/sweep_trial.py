@@ -123,7 +123,9 @@ def run_trial(params: dict[str, Any], spec: SweepSpec, out: str, cpus: int) -> N
         "vessel_steps_per_second": record["vessel_steps_per_second"],
     }
     if spec.eval_seeds:
+        start = time.perf_counter()
         result |= evaluate_agent(folder, config, spec.eval_seeds, spec.eval_steps)
+        result["eval_seconds"] = time.perf_counter() - start
     done.write_text(json.dumps(result, indent=2) + "\n")
     tune.report(result)
 

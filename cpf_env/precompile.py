@@ -28,6 +28,7 @@ import time
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 from numba.core.registry import CPUDispatcher
 
@@ -62,13 +63,32 @@ class PrecompileReport:
 def cache_directory() -> str:
     """The directory numba caches this package's kernels in.
 
-    ``NUMBA_CACHE_DIR`` if set, else the package's ``__pycache__`` folders (numba
-    falls back to a per-user directory when those are not writable).
+    numba's ``CACHE_DIR`` (read from ``NUMBA_CACHE_DIR`` when numba was
+    imported) if set, else the package's ``__pycache__`` folders (numba falls
+    back to a per-user directory when those are not writable).
     """
-    configured = os.environ.get("NUMBA_CACHE_DIR", "")
+    configured = str(numba.config.CACHE_DIR or "")
     if configured:
         return configured
     return os.path.join(os.path.dirname(cpf_env.__file__), "__pycache__")
+
+
+def _require_writable_cache() -> None:
+    """Create numba's configured cache directory, or raise ValueError if it cannot be written."""
+    configured = str(numba.config.CACHE_DIR or "")
+    if not configured:
+        return
+    try:
+        os.makedirs(configured, exist_ok=True)
+        writable = os.access(configured, os.W_OK | os.X_OK)
+    except OSError:
+        writable = False
+    if not writable:
+        raise ValueError(
+            f"NUMBA_CACHE_DIR={configured} is not a directory this user can write, so no "
+            "kernel would be cached; point it at a writable directory (shared by the "
+            "workers), or unset it to cache next to the sources."
+        )
 
 
 def kernels_of_package() -> dict[str, CPUDispatcher]:
@@ -109,11 +129,13 @@ def precompile(scenario_names: Sequence[str] | None = None) -> PrecompileReport:
         A ``PrecompileReport``.
 
     Raises:
-        ValueError: An unknown scenario name.
+        ValueError: An unknown scenario name, or ``NUMBA_CACHE_DIR`` names a
+            directory that cannot be written.
     """
     names = tuple(scenarios.list_scenarios() if scenario_names is None else scenario_names)
     for name in names:
         scenarios.get(name)  # unknown names raise before any work
+    _require_writable_cache()
     start = time.perf_counter()
     for name in names:
         _exercise(name)

@@ -31,13 +31,20 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import ray
-from ray.rllib.algorithms.ppo import PPOConfig
-from ray.rllib.core.rl_module.default_model_config import DefaultModelConfig
-from ray.rllib.core.rl_module.multi_rl_module import MultiRLModuleSpec
-from ray.rllib.core.rl_module.rl_module import RLModuleSpec
-from ray.rllib.env.wrappers.pettingzoo_env import ParallelPettingZooEnv
-from ray.tune.registry import register_env
+
+try:
+    import ray
+    from ray.rllib.algorithms.ppo import PPOConfig
+    from ray.rllib.core.rl_module.default_model_config import DefaultModelConfig
+    from ray.rllib.core.rl_module.multi_rl_module import MultiRLModuleSpec
+    from ray.rllib.core.rl_module.rl_module import RLModuleSpec
+    from ray.rllib.env.wrappers.pettingzoo_env import ParallelPettingZooEnv
+    from ray.tune.registry import register_env
+except ImportError as error:  # an optional stack: say which extra brings it
+    raise SystemExit(
+        f"{error}; this example needs the rl and rllib extras: "
+        f'pip install -e ".[rl,rllib]" (your PyTorch build first)'
+    ) from error
 
 import cpf_env
 from cpf_commands.arguments import positive_int

@@ -24,9 +24,15 @@ from __future__ import annotations
 import argparse
 import warnings
 
-import torch
-from torchrl.envs import PettingZooWrapper
-from torchrl.envs.utils import check_env_specs
+try:
+    import torch
+    from torchrl.envs import PettingZooWrapper
+    from torchrl.envs.utils import check_env_specs
+except ImportError as error:  # an optional stack: say which extra brings it
+    raise SystemExit(
+        f"{error}; this example needs the torchrl extra: "
+        f'pip install -e ".[torchrl]" (your PyTorch build first)'
+    ) from error
 
 import cpf_env
 from cpf_env.torchrl_env import GROUP, TorchRLFleetEnv

@@ -29,8 +29,14 @@ import platform
 import time
 import warnings
 
-import torch
-from torchrl.envs import EnvBase, PettingZooWrapper
+try:
+    import torch
+    from torchrl.envs import EnvBase, PettingZooWrapper
+except ImportError as error:  # an optional stack: say which extra brings it
+    raise SystemExit(
+        f"{error}; this example needs the torchrl extra: "
+        f'pip install -e ".[torchrl]" (your PyTorch build first)'
+    ) from error
 
 import cpf_env
 from cpf_env.torchrl_env import TorchRLFleetEnv

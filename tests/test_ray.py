@@ -43,6 +43,8 @@ def test_two_seeds_by_two_scenarios_then_a_resume(tmp_path, capsys) -> None:
         ["bench_mild", "bench_lossy_links"], [0, 1], TINY, eval_seeds=2, eval_steps=50
     )
     models = {}
+    evaluation = json.loads(next(out.glob(f"trials/*/{EVALUATION_FILE}")).read_text())
+    assert evaluation["episodes"] == 2 and evaluation["eval_seconds"] > 0
     for params in spec.trials():
         folder = out / "trials" / trial_name(params, spec)
         policy = load_policy(folder)  # every trial is a cpf-train folder
@@ -76,6 +78,17 @@ def test_an_interrupted_sweep_resumes_keeping_finished_trials(tmp_path) -> None:
     rows = run_sweep(spec, out, cpus_per_trial=2, quiet=True)
     assert [row["status"] for row in rows] == ["done"] * 3
     assert {name: (out / "trials" / name / "model.zip").stat().st_mtime_ns for name in kept} == kept
+
+
+def test_auto_without_a_cluster_is_a_clear_error(tmp_path, monkeypatch, capsys) -> None:
+    monkeypatch.delenv("RAY_ADDRESS", raising=False)
+    monkeypatch.setenv("RAY_TMPDIR", str(tmp_path / "ray"))  # no cluster of this machine's
+    out = tmp_path / "sweep"
+    with pytest.raises(SystemExit) as exit_info:
+        sweep_main(["--scenarios", "bench_mild", "--out", str(out), "--address", "auto"])
+    assert exit_info.value.code == 2
+    assert "could not join a Ray cluster at --address auto" in capsys.readouterr().err
+    assert not out.exists()
 
 
 def test_the_benchmark_on_ray_equals_the_local_run(tmp_path) -> None:

@@ -7,9 +7,12 @@ from __future__ import annotations
 
 import json
 import os
+import socket
 import subprocess
 import sys
+import types
 
+import numba
 import pytest
 
 from cpf_commands import ray_runtime
@@ -100,12 +103,17 @@ def test_a_bad_sweep_is_refused_before_any_trial_starts(
 
 def test_a_folder_keeps_its_sweep_and_refuses_another(tmp_path) -> None:
     spec = SweepSpec(("bench_mild",), (0, 1), {"scale": (0.1, 0.2)}, {"timesteps": 100})
-    assert spec.save_or_check(tmp_path) is False
+    assert spec.check_folder(tmp_path / "new") is False
+    assert not (tmp_path / "new").exists()  # checking writes nothing
+    spec.save(tmp_path)
     assert json.loads((tmp_path / "sweep.json").read_text())["seeds"] == [0, 1]
-    assert spec.save_or_check(tmp_path) is True  # the same sweep: a resume
+    assert spec.check_folder(tmp_path) is True  # the same sweep: a resume
     other = SweepSpec(("bench_mild",), (0, 1, 2), {"scale": (0.1, 0.2)}, {"timesteps": 100})
     with pytest.raises(ValueError, match=r"holds a different sweep.*another --out"):
-        other.save_or_check(tmp_path)
+        other.check_folder(tmp_path)
+    (tmp_path / "file").write_text("")
+    with pytest.raises(ValueError, match="is a file; give a folder"):
+        spec.check_folder(tmp_path / "file")
 
 
 # --- the summary -----------------------------------------------------------------------------
@@ -162,6 +170,46 @@ def test_without_ray_the_commands_say_how_to_install_it(monkeypatch) -> None:
         ray_runtime.start_ray(None)
 
 
+def test_an_out_that_is_a_file_is_refused(tmp_path, capsys) -> None:
+    taken = tmp_path / "taken"
+    taken.write_text("")
+    with pytest.raises(SystemExit) as exit_info:
+        sweep_main(["--scenarios", "bench_mild", "--out", str(taken)])
+    assert exit_info.value.code == 2
+    assert "is a file; give a folder" in capsys.readouterr().err
+
+
+def _closed_port() -> int:
+    """A local TCP port nothing listens on."""
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        return int(probe.getsockname()[1])
+
+
+class _RayThatMustNotStart(types.ModuleType):
+    """Stands in for ``ray``: the address check must fail before ``ray.init``."""
+
+    def init(self, *args, **kwargs) -> None:
+        raise AssertionError("ray.init was called for an address nobody answers at")
+
+
+def test_an_address_nobody_answers_at_is_an_error_not_a_hang(tmp_path, monkeypatch, capsys):
+    monkeypatch.setitem(sys.modules, "ray", _RayThatMustNotStart("ray"))
+    address = f"127.0.0.1:{_closed_port()}"
+    for spelled in (address, f"ray://{address}"):
+        expected = rf"no Ray cluster answers at --address {spelled}"
+        with pytest.raises(ConnectionError, match=expected):
+            ray_runtime.start_ray(spelled)
+    out = tmp_path / "sweep"
+    with pytest.raises(SystemExit) as exit_info:
+        sweep_main(["--scenarios", "bench_mild", "--out", str(out), "--address", address])
+    assert exit_info.value.code == 2
+    assert "ray start --head" in capsys.readouterr().err
+    assert not out.exists()  # nothing written for a sweep that never started
+    with pytest.raises(ValueError, match="no valid port"):
+        ray_runtime.start_ray("head-node:http")
+
+
 def test_workers_get_the_kernel_cache_and_one_numba_thread_per_cpu(monkeypatch) -> None:
     monkeypatch.setenv("NUMBA_CACHE_DIR", "/shared/numba")
     assert ray_runtime.worker_environment(2) == {
@@ -194,6 +242,16 @@ def test_precompile_readies_every_entry_kernel(capsys) -> None:
     assert "loaded from the cache" in capsys.readouterr().out
     with pytest.raises(ValueError, match="unknown scenario"):
         precompile(["nowhere"])
+
+
+def test_an_unwritable_kernel_cache_is_reported(monkeypatch, capsys) -> None:
+    monkeypatch.setattr(numba.config, "CACHE_DIR", "/proc/no-such-cache")
+    with pytest.raises(ValueError, match="NUMBA_CACHE_DIR=/proc/no-such-cache is not a directory"):
+        precompile(["wang2014"])
+    with pytest.raises(SystemExit) as exit_info:
+        precompile_main(["--scenarios", "wang2014"])
+    assert exit_info.value.code == 2
+    assert "point it at a writable directory" in capsys.readouterr().err
 
 
 @pytest.mark.slow

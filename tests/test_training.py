@@ -152,3 +152,27 @@ def test_a_trained_policy_acts_the_same_whatever_the_torch_threads() -> None:
         np.testing.assert_array_equal(runs[0], runs[1])
         np.testing.assert_array_equal(runs[0], runs[2])
     torch.set_num_threads(before)
+
+
+@pytest.mark.parametrize(
+    ("field", "value", "message"),
+    [
+        ("learning_rate", -1.0, "learning_rate must be a number > 0"),
+        ("learning_rate", float("nan"), "learning_rate must be a number > 0"),
+        ("gamma", 0.0, "gamma must be in"),
+        ("gamma", 1.5, "gamma must be in"),
+        ("log_std_init", float("inf"), "log_std_init must be a finite number"),
+        ("net_arch", (), "net_arch must list layer sizes"),
+        ("net_arch", (64, 0), "net_arch must list layer sizes"),
+        ("buffer_size", 0, "buffer_size must be an integer >= 1"),
+        ("normalize_observations", "yes", "normalize_observations must be true or false"),
+        ("scale", -0.1, "scale"),
+        ("fleets", 0, "fleets must be an integer >= 1"),
+    ],
+)
+def test_train_config_rejects_bad_settings_before_any_training(
+    field: str, value: object, message: str
+) -> None:
+    """A bad setting is refused when the config is built (a sweep checks it before Ray starts)."""
+    with pytest.raises(ValueError, match=message):
+        TrainConfig(scenario="bench_mild", **{field: value})  # type: ignore[arg-type]
