@@ -147,6 +147,11 @@ class TrainedPolicy(PolicyInterface):
     def act_batch(self, obs: ArrayLike, fleets: ArrayLike | None = None) -> Array:
         """Base action plus the trained correction, (B, n, 4 + m) float64.
 
+        The network runs with one torch thread, so that the actions have the
+        same bits whatever the caller's thread setting; torch's thread count is
+        process-wide, so this sets it and restores it around the forward pass,
+        and calling it from several Python threads at once is not safe.
+
         Args:
             obs: (B, n, obs_dim) local observations.
             fleets: Must be None (a trained policy acts on whole batches).

@@ -51,7 +51,7 @@ from cpf_env import scenarios
 from cpf_env.residual import ResidualConfig
 from cpf_env.reward import REWARD_FORMS
 
-__all__ = ["ALGORITHMS", "TrainConfig", "make_env", "train"]
+__all__ = ["ALGORITHMS", "TrainConfig", "build_model", "make_env", "train"]
 
 #: SB3 algorithms by name.
 ALGORITHMS: dict[str, type[BaseAlgorithm]] = {"ppo": PPO, "sac": SAC}
@@ -149,6 +149,8 @@ class TrainConfig:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                 raise ValueError(f"{name} must be an integer >= 1, got {value!r}.")
+        if isinstance(self.seed, bool) or not isinstance(self.seed, int) or self.seed < 0:
+            raise ValueError(f"seed must be an integer >= 0, got {self.seed!r}.")
         if not self.net_arch or min(self.net_arch) < 1:
             raise ValueError(f"net_arch must list layer sizes >= 1, got {list(self.net_arch)}.")
         if not (_is_real(self.learning_rate) and self.learning_rate > 0):
@@ -224,8 +226,13 @@ class _ProgressBar(BaseCallback):
         self._bar.close()
 
 
-def _build_model(config: TrainConfig, env: VecNormalize | VecMonitor) -> BaseAlgorithm:
-    """PPO or SAC with the residual-learning defaults; the mean action starts at zero."""
+def build_model(config: TrainConfig, env: VecNormalize | VecMonitor) -> BaseAlgorithm:
+    """The untrained PPO or SAC model ``train`` uses, on ``env``; the mean action starts at zero.
+
+    Args:
+        config: The run (algorithm, network, learning settings, seed).
+        env: The (monitored, maybe normalized) ``FleetVecEnv`` from ``make_env``.
+    """
     arch = list(config.net_arch)
     if config.algo == "ppo":
         model: BaseAlgorithm = PPO(
@@ -303,7 +310,7 @@ def train(
     env: VecNormalize | VecMonitor = VecMonitor(venv)
     if config.normalize_observations:
         env = VecNormalize(env, norm_obs=True, norm_reward=False, gamma=config.gamma)
-    model = _build_model(config, env)
+    model = build_model(config, env)
     formats = ["csv"]
     try:
         import tensorboard  # noqa: F401

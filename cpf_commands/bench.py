@@ -27,6 +27,7 @@ from pathlib import Path
 from tqdm.auto import tqdm
 
 from cpf_commands import bench_views
+from cpf_commands.arguments import add_scenarios_argument
 from cpf_commands.bench_report import HEADLINE, CellResult, episodes_csv, summarize, summary_csv
 from cpf_commands.episodes import run_episodes
 from cpf_commands.policies import (
@@ -37,7 +38,6 @@ from cpf_commands.policies import (
     resolve_policy,
 )
 from cpf_commands.ray_runtime import add_address_argument, start_ray
-from cpf_env import scenarios
 from cpf_env.env import make_scenario
 from cpf_env.scenarios import Scenario
 from cpf_env.suite import is_deterministic, list_suite
@@ -163,11 +163,17 @@ def _run_here(
     with tqdm(total=total, disable=not progress, unit="step", desc="cpf-bench") as bar:
         for label, _, task, seeds in jobs:
             bar.set_postfix_str(f"{label} on {task.name}")
-            metrics = run_episodes(
-                built[(label, task.name)], task, seeds, steps=steps, progress=bar
-            )
-            cells.append(CellResult(label, task.name, seeds, is_deterministic(task), metrics))
+            cells.append(_measure(label, built[(label, task.name)], task, seeds, steps, bar))
     return cells
+
+
+def _absolute(spec: PolicySpec) -> PolicySpec:
+    """An agent folder given by a relative path made absolute (Ray workers run elsewhere)."""
+    from baselines import POLICIES
+
+    if isinstance(spec, Path) or (isinstance(spec, str) and spec not in POLICIES):
+        return Path(spec).resolve()
+    return spec
 
 
 def _run_on_ray(
@@ -177,13 +183,15 @@ def _run_on_ray(
 
     Each task builds its policy from the specification and runs the same
     ``run_cell`` as a local run, so the results are identical. A trained
-    agent's folder must be readable at the same path on every node.
+    agent's folder is passed as an absolute path (relative to this process's
+    working directory) and must be readable at that path on every node.
     """
     ray = start_ray(address, cpus_per_task=1, quiet=True)
     try:
         remote = ray.remote(num_cpus=1)(run_cell)
         futures = [
-            remote.remote(label, spec, task, seeds, steps) for label, spec, task, seeds in jobs
+            remote.remote(label, _absolute(spec), task, seeds, steps)
+            for label, spec, task, seeds in jobs
         ]
         pending = list(futures)
         with tqdm(total=len(futures), disable=not progress, unit="cell", desc="cpf-bench") as bar:
@@ -273,13 +281,10 @@ def _parser() -> argparse.ArgumentParser:
         metavar="POLICY",
         help="baseline names or cpf-train --out folders (default: every baseline)",
     )
-    parser.add_argument(
-        "--scenarios",
-        nargs="+",
+    add_scenarios_argument(
+        parser,
+        "registered scenario names (default: the benchmark suite, bench_*)",
         default=list_suite(),
-        choices=scenarios.list_scenarios(),
-        metavar="SCENARIO",
-        help="registered scenario names (default: the benchmark suite, bench_*)",
     )
     parser.add_argument(
         "--seeds", type=int, default=10, help="episodes per policy and scenario (default: 10)"

@@ -15,7 +15,7 @@ from __future__ import annotations
 import argparse
 from collections.abc import Sequence
 
-from cpf_env import scenarios
+from cpf_commands.arguments import add_scenarios_argument
 
 __all__ = ["precompile_main"]
 
@@ -28,14 +28,7 @@ def precompile_main(argv: Sequence[str] | None = None) -> int:
         "so that later processes start without compiling. Set NUMBA_CACHE_DIR to the "
         "directory your workers share; by default numba caches next to the sources.",
     )
-    parser.add_argument(
-        "--scenarios",
-        nargs="+",
-        default=None,
-        choices=scenarios.list_scenarios(),
-        metavar="SCENARIO",
-        help="scenarios to exercise (default: all registered ones)",
-    )
+    add_scenarios_argument(parser, "scenarios to exercise (default: all registered ones)")
     args = parser.parse_args(argv)
     from cpf_env.precompile import precompile
 

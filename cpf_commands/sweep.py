@@ -33,9 +33,8 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from cpf_commands.arguments import positive_int
-from cpf_commands.ray_runtime import add_address_argument, start_ray
-from cpf_env import scenarios
+from cpf_commands.arguments import add_scenarios_argument, positive_int
+from cpf_commands.ray_runtime import add_address_argument, require_ray, start_ray
 
 __all__ = ["run_sweep", "sweep_main"]
 
@@ -51,14 +50,7 @@ def _parser() -> argparse.ArgumentParser:
         "base policy. Resumes when rerun with the same arguments and --out.",
         formatter_class=argparse.ArgumentDefaultsHelpFormatter,
     )
-    parser.add_argument(
-        "--scenarios",
-        nargs="+",
-        required=True,
-        choices=scenarios.list_scenarios(),
-        metavar="SCENARIO",
-        help="scenarios to train on (registered names)",
-    )
+    add_scenarios_argument(parser, "scenarios to train on (registered names)", required=True)
     parser.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2], help="training seeds")
     parser.add_argument(
         "--set",
@@ -112,7 +104,6 @@ def run_sweep(
     spec: Any,
     out: str | Path,
     address: str | None = None,
-    cpus_per_trial: int = 1,
     max_concurrent: int | None = None,
     command: str = "",
     quiet: bool = False,
@@ -120,10 +111,9 @@ def run_sweep(
     """Run (or resume) a sweep and write its summary.
 
     Args:
-        spec: The ``SweepSpec``.
+        spec: The ``SweepSpec`` (it also says how many CPUs each trial reserves).
         out: The sweep's folder; on a cluster, a path every node sees (shared storage).
         address: Ray address; None starts a local Ray instance.
-        cpus_per_trial: CPUs each trial reserves.
         max_concurrent: Trials at once (None: as many as the CPUs allow).
         command: The command line recorded in summary.md.
         quiet: No Ray Tune status output.
@@ -142,6 +132,7 @@ def run_sweep(
 
     folder = Path(out).resolve()
     resuming = spec.check_folder(folder)
+    require_ray()  # before a minute of compiling, not after
     if address is None:  # workers share this machine's kernel cache: fill it once, here
         from cpf_env.precompile import precompile
 
@@ -152,7 +143,7 @@ def run_sweep(
                 flush=True,
             )
         precompile(spec.scenarios)
-    ray = start_ray(address, cpus_per_trial, quiet=quiet)
+    ray = start_ray(address, spec.cpus_per_trial, quiet=quiet)
     spec.save(folder)
     from ray import tune
 
@@ -161,8 +152,8 @@ def run_sweep(
         os.environ[_OUTPUT_ENGINE] = "0"
     try:
         trainable = tune.with_resources(
-            tune.with_parameters(run_trial, spec=spec, out=str(folder), cpus=cpus_per_trial),
-            {"cpu": cpus_per_trial},
+            tune.with_parameters(run_trial, spec=spec, out=str(folder)),
+            {"cpu": spec.cpus_per_trial},
         )
         state = folder / "tune"
         if resuming and tune.Tuner.can_restore(str(state)):
@@ -205,8 +196,16 @@ def sweep_main(argv: Sequence[str] | None = None) -> int:
     """``cpf-sweep``: see ``cpf-sweep --help``."""
     parser = _parser()
     args = parser.parse_args(argv)
-    from cpf_commands.sweep_spec import SweepSpec
-
+    try:
+        require_ray()
+        from cpf_commands.sweep_spec import SweepSpec
+    except ImportError as error:
+        if error.name in ("torch", "stable_baselines3"):
+            parser.error(
+                f"cpf-sweep trains agents, which needs {error.name} (not installed); install "
+                'the learning and Ray extras: pip install -e ".[rl,ray]".'
+            )
+        parser.error(str(error))
     try:
         spec = SweepSpec.from_settings(
             args.scenarios,
@@ -214,6 +213,7 @@ def sweep_main(argv: Sequence[str] | None = None) -> int:
             args.settings,
             eval_seeds=args.eval_seeds,
             eval_steps=args.eval_steps,
+            cpus_per_trial=args.cpus_per_trial,
         )
     except ValueError as error:
         parser.error(str(error))
@@ -223,7 +223,6 @@ def sweep_main(argv: Sequence[str] | None = None) -> int:
             spec,
             args.out,
             address=args.address,
-            cpus_per_trial=args.cpus_per_trial,
             max_concurrent=args.max_concurrent,
             command=command,
             quiet=args.quiet,

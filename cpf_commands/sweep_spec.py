@@ -113,6 +113,10 @@ class SweepSpec:
         eval_seeds: Evaluation episodes per trial (paired with the base policy);
             0 skips the evaluation.
         eval_steps: Evaluation horizon (None: each scenario's ``max_steps``).
+        cpus_per_trial: CPUs each trial reserves, and its torch threads unless
+            ``torch_threads`` is set. Part of the sweep because the thread
+            count changes floating-point results: a resume with another count
+            is refused rather than mixing the two.
     """
 
     scenarios: tuple[str, ...]
@@ -121,6 +125,7 @@ class SweepSpec:
     fixed: dict[str, Any] = field(default_factory=dict)
     eval_seeds: int = 5
     eval_steps: int | None = None
+    cpus_per_trial: int = 1
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "scenarios", tuple(self.scenarios))
@@ -133,6 +138,19 @@ class SweepSpec:
                 raise ValueError(f"{name} repeat: {list(count)}; give each once.")
         if self.eval_seeds < 0:
             raise ValueError(f"eval seeds must be >= 0, got {self.eval_seeds}.")
+        if self.cpus_per_trial < 1:
+            raise ValueError(f"CPUs per trial must be >= 1, got {self.cpus_per_trial}.")
+        fields = _field_types()
+        for name in [*self.grid, *self.fixed]:
+            if name in _OWN_FLAGS or name not in fields:
+                choices = sorted(set(fields) - set(_OWN_FLAGS))
+                raise ValueError(f"{name!r} is not a field a sweep can set; fields are {choices}.")
+        for name, values in self.grid.items():
+            if len(set(map(_slug, values))) != len(values):
+                raise ValueError(
+                    f"--set {name}: values repeat ({list(values)}); give each once. A single "
+                    f"value with commas is a JSON list: {name}=[[64,64]]."
+                )
         for params in self.trials():
             self.config(params)  # every trial's TrainConfig is valid before any starts
 
@@ -189,11 +207,16 @@ class SweepSpec:
         path = folder / "sweep.json"
         if not path.exists():
             return False
-        saved = json.loads(path.read_text())
-        if saved != self.to_json():
+        saved, wanted = json.loads(path.read_text()), self.to_json()
+        if saved != wanted:
+            differ = ", ".join(
+                f"{key} (saved {saved.get(key)!r}, now {wanted.get(key)!r})"
+                for key in sorted(set(saved) | set(wanted))
+                if saved.get(key) != wanted.get(key)
+            )
             raise ValueError(
-                f"{folder} holds a different sweep ({path}); rerun with its exact "
-                "arguments to resume it, or choose another --out."
+                f"{folder} holds a different sweep ({path}): it differs in {differ}. Rerun "
+                "with its exact arguments to resume it, or choose another --out."
             )
         return True
 

@@ -95,14 +95,13 @@ def evaluate_agent(
     }
 
 
-def run_trial(params: dict[str, Any], spec: SweepSpec, out: str, cpus: int) -> None:
+def run_trial(params: dict[str, Any], spec: SweepSpec, out: str) -> None:
     """Ray Tune trainable: train one trial's agent, evaluate it, report.
 
     Args:
         params: The trial's varying parameters (from the sweep's grid).
         spec: The sweep.
         out: The sweep's folder (absolute; shared by every node on a cluster).
-        cpus: CPUs the trial reserved (torch threads, unless the sweep sets them).
     """
     from ray import tune
 
@@ -113,7 +112,7 @@ def run_trial(params: dict[str, Any], spec: SweepSpec, out: str, cpus: int) -> N
         return
     config = spec.config(params)
     if "torch_threads" not in spec.fixed and "torch_threads" not in spec.grid:
-        config = spec.config({**params, "torch_threads": cpus})
+        config = spec.config({**params, "torch_threads": spec.cpus_per_trial})
     train(config, folder, progress=False, overwrite=True, callbacks=[_TuneReport()])
     record = json.loads((folder / "config.json").read_text())
     result: dict[str, Any] = {
@@ -135,6 +134,7 @@ _TRIAL_COLUMNS = (
     "status",
     "train_seconds",
     "vessel_steps_per_second",
+    "episodes",
     "cost_ratio",
     "p_beats_reference",
     "failures",
@@ -184,7 +184,8 @@ def summary_markdown(spec: SweepSpec, rows: Sequence[dict[str, Any]], command: s
     if spec.eval_seeds:
         lines.append(
             f"Evaluation: {spec.eval_seeds} paired episodes per trial against {reference} "
-            f"(seeds from {BASE_SEED}); cost_ratio < 1 means the agent's cost is lower."
+            f"(seeds from {BASE_SEED}; one where nothing in the scenario is random, see "
+            "`episodes`); cost_ratio < 1 means the agent's cost is lower."
         )
     else:
         lines.append("Evaluation: none (--eval-seeds 0).")

@@ -333,6 +333,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.env_runners < 0:
         parser.error(f"--env-runners must be >= 0, got {args.env_runners}")
+    if args.minibatch > args.train_batch:
+        parser.error(
+            f"--minibatch {args.minibatch} is larger than --train-batch {args.train_batch}; "
+            "RLlib needs minibatch <= train batch: lower --minibatch or raise --train-batch."
+        )
     import torch
 
     torch.set_num_threads(args.torch_threads)

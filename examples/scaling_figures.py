@@ -22,7 +22,7 @@ with ``waves = ceil(trials / concurrent trials)``.
 
 Linux only (reads ``/proc``). Needs the ``ray`` and ``rl`` extras. Usage::
 
-    python examples/scaling_figures.py                   # about 4 minutes
+    python examples/scaling_figures.py                   # about 80 s (warm kernel cache)
     python examples/scaling_figures.py --skip-ray        # memory only
 """
 
@@ -70,14 +70,14 @@ def _tree(root: int) -> list[int]:
 
 def _training_process_rss(fleets: int, scenario: str, queue: multiprocessing.Queue) -> None:
     """In a fresh process: build FleetVecEnv + PPO, collect and learn one rollout, report RSS."""
-    from agents.training import TrainConfig, _build_model, make_env
+    from agents.training import TrainConfig, build_model, make_env
 
     config = TrainConfig(scenario=scenario, fleets=fleets, timesteps=1, torch_threads=1)
     venv = make_env(config)
     venv.seed(0)
     from stable_baselines3.common.vec_env import VecMonitor
 
-    model = _build_model(config, VecMonitor(venv))
+    model = build_model(config, VecMonitor(venv))
     model.learn(1)  # one rollout of n_steps x num_envs and one update
     queue.put(_rss(os.getpid()))
 

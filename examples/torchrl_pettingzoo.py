@@ -35,17 +35,26 @@ except ImportError as error:  # an optional stack: say which extra brings it
     ) from error
 
 import cpf_env
+from cpf_commands.arguments import positive_int
 from cpf_env.torchrl_env import GROUP, TorchRLFleetEnv
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--scenario", default="wang2014")
-    parser.add_argument("--steps", type=int, default=50, help="rollout length (control steps)")
-    parser.add_argument("--fleets", type=int, default=8, help="B of the native env")
+    parser.add_argument(
+        "--scenario", default="wang2014", choices=cpf_env.scenarios.list_scenarios()
+    )
+    parser.add_argument(
+        "--steps", type=positive_int, default=50, help="rollout length (control steps)"
+    )
+    parser.add_argument(
+        "--fleets", type=positive_int, default=8, help="B of the native env (at least 2)"
+    )
     parser.add_argument("--info-level", choices=["none", "minimal"], default="none")
     parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args()
+    if args.fleets < 2:
+        parser.error("--fleets must be at least 2: the script compares fleet 1 with a ParallelEnv")
     warnings.filterwarnings("ignore", message="PettingZoo in TorchRL is tested")
 
     # Route 1: TorchRL's wrapper over the PettingZoo ParallelEnv (one fleet).

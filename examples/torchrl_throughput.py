@@ -39,6 +39,7 @@ except ImportError as error:  # an optional stack: say which extra brings it
     ) from error
 
 import cpf_env
+from cpf_commands.arguments import positive_int
 from cpf_env.torchrl_env import TorchRLFleetEnv
 
 
@@ -81,18 +82,22 @@ def rollout_vessel_steps_per_second(env: EnvBase, vessels: int, steps: int) -> f
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--scenario", default="wang2014")
+    parser.add_argument(
+        "--scenario", default="wang2014", choices=cpf_env.scenarios.list_scenarios()
+    )
     parser.add_argument("--seconds", type=float, default=4.0, help="budget per row (s)")
-    parser.add_argument("--fleets", type=int, nargs="+", default=[1, 16, 256, 1024])
+    parser.add_argument("--fleets", type=positive_int, nargs="+", default=[1, 16, 256, 1024])
     parser.add_argument("--rollout-steps", type=int, default=100, help="0 skips the rollout row")
     parser.add_argument(
         "--torch-threads",
-        type=int,
+        type=positive_int,
         default=1,
         help="torch intra-op threads (1: the tensors per step are small, and torch's thread "
         "pool stalls on a loaded machine; the simulator's numba threads are separate)",
     )
     args = parser.parse_args()
+    if args.seconds <= 0 or args.rollout_steps < 0:
+        parser.error("--seconds must be > 0 and --rollout-steps >= 0")
     torch.set_num_threads(args.torch_threads)
     warnings.filterwarnings("ignore")  # TorchRL's deprecation notices would hide the table
     n = cpf_env.scenarios.get(args.scenario).n

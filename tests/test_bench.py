@@ -9,7 +9,7 @@ import pytest
 
 import agents
 from baselines import POLICIES, make_policy
-from cpf_commands import bench_report
+from cpf_commands import bench, bench_report
 from cpf_commands.bench import BASE_SEED, bench_main, run_bench
 from cpf_commands.cli import run_main
 from cpf_commands.episodes import METRICS, run_episodes
@@ -325,6 +325,70 @@ def test_cpf_run_takes_a_trained_agent_path(trained_agent, tmp_path, capsys):
     assert run_main([*argv, "--no-figures", "--quiet"]) == 0
     assert calls == [(folder, "wang2014")]
     assert (tmp_path / "out" / "wang2014_agent" / "metrics.json").exists()
+
+
+class _InlineRay:
+    """Stands in for Ray: each remote call runs at once, here, and its arguments are kept."""
+
+    def __init__(self):
+        self.calls = []
+        self.shut_down = False
+
+    def remote(self, num_cpus):
+        assert num_cpus == 1
+
+        def wrap(function):
+            calls = self.calls
+
+            class Remote:
+                @staticmethod
+                def remote(*args):
+                    calls.append(args)
+                    return function(*args)
+
+            return Remote
+
+        return wrap
+
+    def wait(self, pending, num_returns):
+        return pending[:num_returns], pending[num_returns:]
+
+    def get(self, futures):
+        return futures
+
+    def shutdown(self):
+        self.shut_down = True
+
+
+def test_bench_ray_sends_each_cell_to_ray_with_agent_folders_made_absolute(
+    trained_agent, tmp_path, monkeypatch
+):
+    folder, _ = trained_agent
+    ray, started = _InlineRay(), []
+
+    def start_ray(address, cpus_per_task, quiet):
+        started.append((address, cpus_per_task))
+        return ray
+
+    monkeypatch.setattr(bench, "start_ray", start_ray)
+    monkeypatch.chdir(folder.parent)  # the agent is given relative to here
+    argv = ["--policies", "nn_dsc", folder.name, "--scenarios", "bench_mild", "bench_saturation"]
+    argv += ["--seeds", "2", "--steps", "20", "--no-figures", "--quiet"]
+    assert bench_main([*argv, "--out", "here"]) == 0
+    assert not started
+    assert bench_main([*argv, "--out", "cluster", "--address", "10.0.0.7:6379"]) == 0
+    assert started == [("10.0.0.7:6379", 1)] and ray.shut_down
+    sent = [(args[0], args[1], args[2].name) for args in ray.calls]
+    assert sent == [
+        ("nn_dsc", "nn_dsc", "bench_mild"),
+        ("nn_dsc", "nn_dsc", "bench_saturation"),
+        (folder.name, folder, "bench_mild"),  # absolute: a worker's directory may differ
+        (folder.name, folder, "bench_saturation"),
+    ]
+    for name in ("episodes.csv", "summary.csv"):
+        assert (tmp_path / "cluster" / name).read_bytes() == (tmp_path / "here" / name).read_bytes()
+    assert bench_main([*argv, "--out", "local_ray", "--ray"]) == 0
+    assert started[-1] == (None, 1)
 
 
 def test_commands_reject_an_unknown_policy(capsys):

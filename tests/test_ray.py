@@ -73,9 +73,14 @@ def test_an_interrupted_sweep_resumes_keeping_finished_trials(tmp_path) -> None:
     assert len(finished) < 3, "the sweep ended before it could be interrupted"
     kept = {name: (out / "trials" / name / "model.zip").stat().st_mtime_ns for name in finished}
     spec = SweepSpec.from_settings(
-        ["bench_mild"], [0, 1, 2], ["timesteps=30000", "fleets=8"], eval_seeds=1, eval_steps=20
+        ["bench_mild"],
+        [0, 1, 2],
+        ["timesteps=30000", "fleets=8"],
+        eval_seeds=1,
+        eval_steps=20,
+        cpus_per_trial=2,
     )
-    rows = run_sweep(spec, out, cpus_per_trial=2, quiet=True)
+    rows = run_sweep(spec, out, quiet=True)
     assert [row["status"] for row in rows] == ["done"] * 3
     assert {name: (out / "trials" / name / "model.zip").stat().st_mtime_ns for name in kept} == kept
 
@@ -114,8 +119,8 @@ def test_a_trial_trains_exactly_as_train_does(tmp_path) -> None:
     from agents import train
 
     fixed = {"timesteps": 3000, "fleets": 4, "n_steps": 16}
-    spec = SweepSpec(("bench_mild",), (3, 4), fixed=fixed, eval_seeds=0)
-    run_sweep(spec, tmp_path / "sweep", cpus_per_trial=2, quiet=True)  # one trial at a time
+    spec = SweepSpec(("bench_mild",), (3, 4), fixed=fixed, eval_seeds=0, cpus_per_trial=2)
+    run_sweep(spec, tmp_path / "sweep", quiet=True)  # one trial at a time
     results = tmp_path.glob("sweep/tune/bench_mild-seed*/result.json")
     pids = {json.loads(path.read_text().splitlines()[-1])["pid"] for path in results}
     assert len(pids) == 1, "the second trial should have reused the first one's process"

@@ -5,8 +5,11 @@ The runs on Ray itself are in ``test_ray.py`` (marker ``ray``).
 
 from __future__ import annotations
 
+import importlib
 import json
 import os
+import pkgutil
+import re
 import socket
 import subprocess
 import sys
@@ -14,13 +17,15 @@ import types
 
 import numba
 import pytest
+from numba.core.registry import CPUDispatcher
 
+import cpf_env
 from cpf_commands import ray_runtime
 from cpf_commands.precompile import precompile_main
 from cpf_commands.sweep import sweep_main
 from cpf_commands.sweep_spec import SweepSpec, parse_setting, trial_name
 from cpf_commands.sweep_trial import EVALUATION_FILE, summary_markdown, summary_rows
-from cpf_env.precompile import kernels_of_package, precompile
+from cpf_env.precompile import KERNEL_MODULES, kernels_of_package, precompile
 
 # --- --set parsing ---------------------------------------------------------------------------
 
@@ -92,6 +97,9 @@ def test_every_combination_is_one_trial_with_its_own_folder_name() -> None:
         (["bench_mild"], [], [], "at least one scenario and one seed"),
         (["bench_mild"], [0], ["scale=0.1", "scale=0.2"], "given twice"),
         (["bench_mild"], [0], ["fleets=0"], "fleets must be an integer >= 1"),
+        (["bench_mild"], [0], ["scale=0.1,0.10"], r"scale: values repeat \(\[0.1, 0.1\]\)"),
+        (["bench_mild"], [0], ["net_arch=64,64"], r"values repeat.*net_arch=\[\[64,64\]\]"),
+        (["bench_mild"], [-1], [], "seed must be an integer >= 0"),
     ],
 )
 def test_a_bad_sweep_is_refused_before_any_trial_starts(
@@ -99,6 +107,19 @@ def test_a_bad_sweep_is_refused_before_any_trial_starts(
 ) -> None:
     with pytest.raises(ValueError, match=match):
         SweepSpec.from_settings(scenarios, seeds, settings)
+
+
+@pytest.mark.parametrize(
+    ("arguments", "match"),
+    [
+        ({"grid": {"no_such": (1, 2)}}, "'no_such' is not a field a sweep can set"),
+        ({"fixed": {"seed": 3}}, "'seed' is not a field a sweep can set"),
+        ({"cpus_per_trial": 0}, "CPUs per trial must be >= 1"),
+    ],
+)
+def test_a_sweep_built_in_python_is_checked_too(arguments: dict, match: str) -> None:
+    with pytest.raises(ValueError, match=match):
+        SweepSpec(("bench_mild",), (0,), **arguments)
 
 
 def test_a_folder_keeps_its_sweep_and_refuses_another(tmp_path) -> None:
@@ -109,8 +130,11 @@ def test_a_folder_keeps_its_sweep_and_refuses_another(tmp_path) -> None:
     assert json.loads((tmp_path / "sweep.json").read_text())["seeds"] == [0, 1]
     assert spec.check_folder(tmp_path) is True  # the same sweep: a resume
     other = SweepSpec(("bench_mild",), (0, 1, 2), {"scale": (0.1, 0.2)}, {"timesteps": 100})
-    with pytest.raises(ValueError, match=r"holds a different sweep.*another --out"):
+    with pytest.raises(ValueError, match=r"differs in seeds \(saved \[0, 1\], now \[0, 1, 2\]\)"):
         other.check_folder(tmp_path)
+    threads = SweepSpec(("bench_mild",), (0, 1), spec.grid, spec.fixed, cpus_per_trial=2)
+    with pytest.raises(ValueError, match=r"differs in cpus_per_trial.*another --out"):
+        threads.check_folder(tmp_path)  # torch threads change the results: no mixing
     (tmp_path / "file").write_text("")
     with pytest.raises(ValueError, match="is a file; give a folder"):
         spec.check_folder(tmp_path / "file")
@@ -168,6 +192,26 @@ def test_without_ray_the_commands_say_how_to_install_it(monkeypatch) -> None:
     monkeypatch.setitem(sys.modules, "ray", None)  # import ray now raises ImportError
     with pytest.raises(ImportError, match=r"needs Ray.*pip install -e \"\.\[ray\]\""):
         ray_runtime.start_ray(None)
+
+
+def test_without_ray_or_the_learning_extra_cpf_sweep_says_what_to_install(
+    tmp_path, monkeypatch, capsys
+) -> None:
+    argv = ["--scenarios", "bench_mild", "--out", str(tmp_path / "sweep")]
+    with monkeypatch.context() as patch:
+        patch.setitem(sys.modules, "ray", None)
+        with pytest.raises(SystemExit):
+            sweep_main(argv)
+    assert 'pip install -e ".[ray]"' in capsys.readouterr().err
+    for name in ("cpf_commands.sweep_spec", "agents.training", "agents"):
+        monkeypatch.delitem(sys.modules, name)  # imported again, without stable_baselines3
+    monkeypatch.setitem(sys.modules, "stable_baselines3", None)
+    with pytest.raises(SystemExit):
+        sweep_main(argv)
+    message = capsys.readouterr().err
+    assert "needs stable_baselines3 (not installed)" in message
+    assert 'install the learning and Ray extras: pip install -e ".[rl,ray]"' in message
+    assert not (tmp_path / "sweep").exists()
 
 
 def test_an_out_that_is_a_file_is_refused(tmp_path, capsys) -> None:
@@ -232,6 +276,31 @@ ENTRY_KERNELS = (
 )
 
 
+def _counts(output: str) -> tuple[int, int]:
+    """(compiled, loaded) from cpf-precompile's report line."""
+    found = re.search(
+        r": (\d+) signatures compiled and cached, (\d+) loaded from the cache", output
+    )
+    assert found, output
+    return int(found[1]), int(found[2])
+
+
+def test_every_module_with_kernels_is_precompiled() -> None:
+    optional = {"torchrl_env"}  # needs TorchRL; it has no kernels of its own
+    with_kernels = set()
+    for info in pkgutil.iter_modules(cpf_env.__path__):
+        if info.name not in optional:
+            module = importlib.import_module(f"cpf_env.{info.name}")
+            defined = (
+                value
+                for value in vars(module).values()
+                if isinstance(value, CPUDispatcher) and value.py_func.__module__ == module.__name__
+            )
+            if any(True for _ in defined):
+                with_kernels.add(info.name)
+    assert with_kernels == set(KERNEL_MODULES)
+
+
 def test_precompile_readies_every_entry_kernel(capsys) -> None:
     report = precompile(["wang2014"])
     kernels = kernels_of_package()
@@ -239,7 +308,8 @@ def test_precompile_readies_every_entry_kernel(capsys) -> None:
         assert kernels[name].signatures, name
     assert report.scenarios == ("wang2014",)
     assert precompile_main(["--scenarios", "lossy_links"]) == 0
-    assert "loaded from the cache" in capsys.readouterr().out
+    compiled, loaded = _counts(capsys.readouterr().out)
+    assert compiled == 0 and loaded == 0  # this process already holds every kernel
     with pytest.raises(ValueError, match="unknown scenario"):
         precompile(["nowhere"])
 
@@ -264,5 +334,6 @@ def test_a_precompiled_cache_is_loaded_not_compiled(tmp_path) -> None:
         ).stdout
         for _ in range(2)
     )
-    assert " 0 loaded from the cache" in first and "0 signatures compiled" not in first
-    assert "0 signatures compiled" in second and " 6 loaded from the cache" in second
+    compiled, loaded = _counts(first)
+    assert compiled >= len(ENTRY_KERNELS) and loaded == 0
+    assert _counts(second) == (0, len(ENTRY_KERNELS))

@@ -12,7 +12,7 @@ from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 
 from agents import TrainConfig, load_policy, train
-from agents.training import ALGORITHMS, _build_model, make_env
+from agents.training import ALGORITHMS, build_model, make_env
 from baselines import make_policy
 from cpf_commands.train import train_main
 from cpf_env import FleetSim, scenarios
@@ -76,7 +76,7 @@ def test_a_fresh_residual_agent_is_exactly_the_base_policy() -> None:
     for algo in ("ppo", "sac"):
         config = TrainConfig(algo=algo, scenario="bench_mild", **TINY)  # type: ignore[arg-type]
         env = make_env(config)
-        model = _build_model(config, VecMonitor(env))
+        model = build_model(config, VecMonitor(env))
         obs = env.reset()
         action, _ = model.predict(obs, deterministic=True)
         assert np.all(action == 0.0), algo
@@ -136,22 +136,24 @@ def test_a_trained_policy_acts_the_same_whatever_the_torch_threads() -> None:
     folder = Path(__file__).parents[1] / "results/residual_rl/agents"
     policy = load_policy(folder / "residual_ppo_bench_lossy_links_5m_s0")
     before = torch.get_num_threads()
-    for fleets in (1, 2, 7):  # small batches take torch's thread-dependent paths
-        runs = []
-        for threads in (1, 2, 4):
-            torch.set_num_threads(threads)
-            sim = FleetSim(policy.scenario, num_fleets=fleets)
-            obs = sim.reset(seeds=list(range(fleets)))
-            policy.reset()
-            trajectory = []
-            for _ in range(60):
-                obs = sim.step(policy.act_batch(obs))
-                trajectory.append(obs.copy())
-            assert torch.get_num_threads() == threads  # the caller's setting is restored
-            runs.append(np.stack(trajectory))
-        np.testing.assert_array_equal(runs[0], runs[1])
-        np.testing.assert_array_equal(runs[0], runs[2])
-    torch.set_num_threads(before)
+    try:
+        for fleets in (1, 2, 7):  # small batches take torch's thread-dependent paths
+            runs = []
+            for threads in (1, 2, 4):
+                torch.set_num_threads(threads)
+                sim = FleetSim(policy.scenario, num_fleets=fleets)
+                obs = sim.reset(seeds=list(range(fleets)))
+                policy.reset()
+                trajectory = []
+                for _ in range(60):
+                    obs = sim.step(policy.act_batch(obs))
+                    trajectory.append(obs.copy())
+                assert torch.get_num_threads() == threads  # the caller's setting is restored
+                runs.append(np.stack(trajectory))
+            np.testing.assert_array_equal(runs[0], runs[1])
+            np.testing.assert_array_equal(runs[0], runs[2])
+    finally:
+        torch.set_num_threads(before)
 
 
 @pytest.mark.parametrize(
@@ -168,6 +170,7 @@ def test_a_trained_policy_acts_the_same_whatever_the_torch_threads() -> None:
         ("normalize_observations", "yes", "normalize_observations must be true or false"),
         ("scale", -0.1, "scale"),
         ("fleets", 0, "fleets must be an integer >= 1"),
+        ("seed", -1, "seed must be an integer >= 0"),
     ],
 )
 def test_train_config_rejects_bad_settings_before_any_training(
