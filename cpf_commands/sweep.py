@@ -197,15 +197,12 @@ def sweep_main(argv: Sequence[str] | None = None) -> int:
     parser = _parser()
     args = parser.parse_args(argv)
     try:
-        require_ray()
         from cpf_commands.sweep_spec import SweepSpec
-    except ImportError as error:
-        if error.name in ("torch", "stable_baselines3"):
-            parser.error(
-                f"cpf-sweep trains agents, which needs {error.name} (not installed); install "
-                'the learning and Ray extras: pip install -e ".[rl,ray]".'
-            )
-        parser.error(str(error))
+    except ImportError as error:  # Ray itself is checked after the arguments
+        parser.error(
+            f"cpf-sweep trains agents, which needs {error.name} (not installed); install "
+            'the learning and Ray extras: pip install -e ".[rl,ray]".'
+        )
     try:
         spec = SweepSpec.from_settings(
             args.scenarios,
