@@ -186,7 +186,7 @@ def _run_on_ray(
     agent's folder is passed as an absolute path (relative to this process's
     working directory) and must be readable at that path on every node.
     """
-    ray = start_ray(address, cpus_per_task=1, quiet=True)
+    ray = start_ray(address, cpus_per_task=1, quiet=not progress)
     try:
         remote = ray.remote(num_cpus=1)(run_cell)
         futures = [
@@ -198,7 +198,12 @@ def _run_on_ray(
             while pending:
                 ready, pending = ray.wait(pending, num_returns=1)
                 bar.update(len(ready))
-        return list(ray.get(futures))
+        try:
+            return list(ray.get(futures))
+        except ray.exceptions.RayTaskError as error:  # a worker's own error, not Ray's wrapper
+            if isinstance(error.cause, ValueError | FileNotFoundError):
+                raise error.cause from None
+            raise
     finally:
         ray.shutdown()
 

@@ -24,7 +24,13 @@ import socket
 from types import ModuleType
 from typing import Any
 
-__all__ = ["add_address_argument", "require_ray", "start_ray", "worker_environment"]
+__all__ = [
+    "add_address_argument",
+    "require_ray",
+    "resolve_address",
+    "start_ray",
+    "worker_environment",
+]
 
 _INSTALL = (
     'install the optional Ray extra: pip install -e ".[ray]" (or pip install "ray[tune,client]")'
@@ -95,6 +101,11 @@ def _probe(address: str) -> None:
         ) from error
 
 
+def resolve_address(address: str | None) -> str:
+    """The Ray address a command uses: ``address``, else ``RAY_ADDRESS``, else 'local'."""
+    return address if address is not None else os.environ.get("RAY_ADDRESS") or "local"
+
+
 def start_ray(address: str | None, cpus_per_task: int = 1, quiet: bool = False) -> ModuleType:
     """Start a local Ray instance (``address`` None) or join a cluster, and return ``ray``.
 
@@ -113,8 +124,7 @@ def start_ray(address: str | None, cpus_per_task: int = 1, quiet: bool = False) 
     if cpus_per_task < 1:
         raise ValueError(f"CPUs per task must be >= 1, got {cpus_per_task}.")
     ray = require_ray()
-    if address is None:
-        address = os.environ.get("RAY_ADDRESS") or "local"
+    address = resolve_address(address)
     _probe(address)
     options: dict[str, Any] = {
         "runtime_env": {"env_vars": worker_environment(cpus_per_task)},

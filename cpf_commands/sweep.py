@@ -24,17 +24,23 @@ Example::
 from __future__ import annotations
 
 import argparse
-import csv
-import io
 import os
 import shlex
 import sys
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from cpf_commands.arguments import add_scenarios_argument, positive_int
-from cpf_commands.ray_runtime import add_address_argument, require_ray, start_ray
+from cpf_commands.ray_runtime import (
+    add_address_argument,
+    require_ray,
+    resolve_address,
+    start_ray,
+)
+
+if TYPE_CHECKING:  # the learning extra is imported only when a sweep runs
+    from cpf_commands.sweep_spec import SweepSpec
 
 __all__ = ["run_sweep", "sweep_main"]
 
@@ -89,19 +95,8 @@ def _parser() -> argparse.ArgumentParser:
     return parser
 
 
-def _csv(rows: Sequence[dict[str, Any]]) -> str:
-    columns: list[str] = []
-    for row in rows:
-        columns += [key for key in row if key not in columns]
-    buffer = io.StringIO()
-    writer = csv.DictWriter(buffer, columns, lineterminator="\n")
-    writer.writeheader()
-    writer.writerows(rows)
-    return buffer.getvalue()
-
-
 def run_sweep(
-    spec: Any,
+    spec: SweepSpec,
     out: str | Path,
     address: str | None = None,
     max_concurrent: int | None = None,
@@ -112,28 +107,37 @@ def run_sweep(
 
     Args:
         spec: The ``SweepSpec`` (it also says how many CPUs each trial reserves).
-        out: The sweep's folder; on a cluster, a path every node sees (shared storage).
-        address: Ray address; None starts a local Ray instance.
+        out: The sweep's folder; on a cluster, a path every node and this
+            machine see (shared storage).
+        address: Ray address; None starts a local Ray instance (or joins the
+            cluster ``RAY_ADDRESS`` names).
         max_concurrent: Trials at once (None: as many as the CPUs allow).
         command: The command line recorded in summary.md.
         quiet: No Ray Tune status output.
 
     Returns:
-        The summary rows, one per trial (``status`` "done", "error: ..." or
-        "not finished").
+        The summary rows, one per trial (``status`` "done", "error: ...",
+        "stale: ..." or "not finished").
 
     Raises:
         ValueError: ``out`` is a file or holds a different sweep; a malformed address.
         ImportError: Ray is not installed.
         ConnectionError: No Ray cluster answers at ``address``.
     """
+    from cpf_commands.sweep_report import (
+        EVALUATION_FILE,
+        summary_csv,
+        summary_markdown,
+        summary_rows,
+    )
     from cpf_commands.sweep_spec import trial_name
-    from cpf_commands.sweep_trial import run_trial, summary_markdown, summary_rows
+    from cpf_commands.sweep_trial import run_trial
 
     folder = Path(out).resolve()
     resuming = spec.check_folder(folder)
     require_ray()  # before a minute of compiling, not after
-    if address is None:  # workers share this machine's kernel cache: fill it once, here
+    address = resolve_address(address)
+    if address == "local":  # workers share this machine's kernel cache: fill it once, here
         from cpf_env.precompile import precompile
 
         if not quiet:
@@ -174,12 +178,24 @@ def run_sweep(
                     name="tune", storage_path=str(folder), verbose=0 if quiet else 1
                 ),
             )
-        results = tuner.fit()
-        errors = {
-            trial_name(result.config, spec): str(result.error).strip().splitlines()[-1]
-            for result in (results[k] for k in range(len(results)))
-            if result.error is not None and result.config is not None
+        grid = tuner.fit()
+        results = {
+            trial_name(result.config, spec): result
+            for result in (grid[k] for k in range(len(grid)))
+            if result.config is not None
         }
+        errors = {
+            name: str(result.error).strip().splitlines()[-1]
+            for name, result in results.items()
+            if result.error is not None
+        }
+        for name, result in results.items():  # finished on a node, its folder not seen here
+            finished = (result.metrics or {}).get("trial") == name  # its last report
+            if finished and not (folder / "trials" / name / EVALUATION_FILE).exists():
+                errors[name] = (
+                    f"it finished, but its folder is not at {folder} on this machine: give "
+                    "--out a path that this machine and every node share"
+                )
     finally:
         ray.shutdown()
         if output is None:
@@ -188,7 +204,7 @@ def run_sweep(
             os.environ[_OUTPUT_ENGINE] = output
     rows = summary_rows(spec, folder, errors)
     (folder / "summary.md").write_text(summary_markdown(spec, rows, command))
-    (folder / "summary.csv").write_text(_csv(rows))
+    (folder / "summary.csv").write_text(summary_csv(rows))
     return rows
 
 

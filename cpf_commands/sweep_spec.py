@@ -1,9 +1,11 @@
 """What a sweep runs: scenarios x seeds x settings of ``agents.TrainConfig``.
 
 A ``SweepSpec`` is the grid (every combination is one trial), the fields held
-fixed, and how each trained agent is evaluated. It is saved as ``sweep.json``
-in the sweep's folder; running the same command again resumes that sweep,
-and a different grid in the same folder is refused.
+fixed, how each trained agent is evaluated and the CPUs per trial. It is
+saved as ``sweep.json`` in the sweep's folder, with the package's version;
+running the same command again resumes that sweep, and a different sweep (or
+package version) in the same folder is refused. The grid's fields are kept
+in name order, so the order of ``--set`` does not change the sweep.
 
 ``--set`` values on the command line: ``FIELD=VALUE`` fixes a field,
 ``FIELD=V1,V2,...`` sweeps it, and ``FIELD=[...]`` (JSON) gives values that
@@ -27,6 +29,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import cpf_env
 from agents.training import TrainConfig
 
 __all__ = ["SweepSpec", "parse_setting", "trial_name"]
@@ -130,7 +133,7 @@ class SweepSpec:
     def __post_init__(self) -> None:
         object.__setattr__(self, "scenarios", tuple(self.scenarios))
         object.__setattr__(self, "seeds", tuple(int(seed) for seed in self.seeds))
-        object.__setattr__(self, "grid", {k: tuple(v) for k, v in self.grid.items()})
+        object.__setattr__(self, "grid", {k: tuple(self.grid[k]) for k in sorted(self.grid)})
         if not self.scenarios or not self.seeds:
             raise ValueError("a sweep needs at least one scenario and one seed.")
         for name, count in (("scenarios", self.scenarios), ("seeds", self.seeds)):
@@ -151,6 +154,13 @@ class SweepSpec:
                     f"--set {name}: values repeat ({list(values)}); give each once. A single "
                     f"value with commas is a JSON list: {name}=[[64,64]]."
                 )
+        threads = [self.fixed.get("torch_threads"), *self.grid.get("torch_threads", ())]
+        if any(value is not None and value > self.cpus_per_trial for value in threads):
+            raise ValueError(
+                f"torch_threads {max(v for v in threads if v is not None)} is more than the "
+                f"{self.cpus_per_trial} CPU(s) each trial reserves: trials would crowd each "
+                "other's cores; raise --cpus-per-trial or lower torch_threads."
+            )
         for params in self.trials():
             self.config(params)  # every trial's TrainConfig is valid before any starts
 
@@ -178,8 +188,11 @@ class SweepSpec:
             yield dict(zip(names, values, strict=True))
 
     def config(self, params: dict[str, Any]) -> TrainConfig:
-        """The ``TrainConfig`` of the trial with varying parameters ``params``."""
-        return TrainConfig(**{**self.fixed, **params})
+        """The ``TrainConfig`` a trial with varying parameters ``params`` trains with.
+
+        ``torch_threads`` is the CPUs per trial unless the sweep sets it.
+        """
+        return TrainConfig(**{"torch_threads": self.cpus_per_trial, **self.fixed, **params})
 
     def param_space(self, tune: Any) -> dict[str, Any]:
         """Ray Tune's parameter space: a grid search over every varying parameter."""
@@ -189,8 +202,9 @@ class SweepSpec:
         return space
 
     def to_json(self) -> dict[str, Any]:
-        """A JSON-ready dict (tuples become lists)."""
-        return json.loads(json.dumps(dataclasses.asdict(self)))
+        """A JSON-ready dict (tuples become lists), with ``cpf_env``'s version."""
+        record = dataclasses.asdict(self) | {"cpf_env_version": cpf_env.__version__}
+        return json.loads(json.dumps(record))
 
     def check_folder(self, folder: Path) -> bool:
         """Check that ``folder`` can hold this sweep, without writing anything.

@@ -7,8 +7,10 @@ Measures, on this machine:
    its rollout buffer, after one rollout) at two fleet counts: the slope is
    the memory per extra fleet, the intercept the fixed cost of the process.
 2. **Ray**: the resident memory of an idle local Ray instance (the process
-   tree this script starts), the start-up time, and the fixed cost per trial
-   (a sweep of tiny trials: wall time per trial minus their training time),
+   tree this script starts), the start-up time, and the overhead per trial
+   (a sweep of tiny trials: wall time per trial minus their training time,
+   amortised over the trials; workers are reused between trials, so the
+   first trial of a worker costs more and later ones less),
    and the time of a trial's evaluation (as the trial records it).
 3. **Training throughput per trial** with one CPU per trial, as many trials
    at once as there are cores (a short sweep; vessel-steps/s per trial).
@@ -107,7 +109,7 @@ def memory(scenario: str, fleet_counts: tuple[int, int]) -> dict[str, float]:
 
 
 def ray_figures(scenario: str, tiny_trials: int, steps: int, fleets: int) -> dict[str, float]:
-    """Idle Ray memory and start-up; fixed cost per trial; training throughput per trial."""
+    """Idle Ray memory and start-up; overhead per trial; training throughput per trial."""
     import ray
 
     from cpf_commands.sweep import run_sweep
@@ -158,7 +160,7 @@ def sweep_cost(figures: dict[str, float], trials: int, trial_steps: int) -> list
     )
     rows = ["| nodes | trials at once | waves | wall time | CPU-hours |", "|---|---|---|---|---|"]
     for nodes in (1, 10, 100):
-        at_once = int(nodes * figures["cores"])
+        at_once = min(trials, int(nodes * figures["cores"]))
         waves = math.ceil(trials / at_once)
         wall = figures["ray_startup_s"] + waves * per_trial
         hours = trials * per_trial / 3600
@@ -167,7 +169,7 @@ def sweep_cost(figures: dict[str, float], trials: int, trial_steps: int) -> list
         )
     rows.append("")
     rows.append(
-        f"One trial: {figures['trial_overhead_s']:.1f} s fixed + {trial_steps:,} steps at "
+        f"One trial: {figures['trial_overhead_s']:.1f} s overhead + {trial_steps:,} steps at "
         f"{figures['trial_steps_per_s']:,.0f} vessel-steps/s + {figures['trial_eval_s']:.1f} s "
         f"evaluation = {per_trial:.0f} s."
     )
@@ -179,7 +181,7 @@ def main() -> None:
     parser.add_argument("--scenario", default="bench_lossy_links")
     parser.add_argument("--fleets", nargs=2, type=int, default=[256, 2048], help="RSS at these")
     parser.add_argument("--skip-ray", action="store_true", help="memory figures only")
-    parser.add_argument("--tiny-trials", type=int, default=6, help="trials for the fixed cost")
+    parser.add_argument("--tiny-trials", type=int, default=6, help="trials for the overhead")
     parser.add_argument("--steps", type=int, default=200_000, help="steps of the timed trials")
     parser.add_argument("--trial-fleets", type=int, default=64, help="fleets per timed trial")
     parser.add_argument("--trials", type=int, default=100, help="sweep size of the cost table")
@@ -204,7 +206,7 @@ def main() -> None:
     idle = fig["ray_idle_bytes"] / 2**20
     print(f"local Ray: start-up {fig['ray_startup_s']:.1f} s, idle {idle:.0f} MiB")
     print(
-        f"per trial: {fig['trial_overhead_s']:.1f} s fixed cost; "
+        f"per trial: {fig['trial_overhead_s']:.1f} s overhead ({args.tiny_trials} tiny trials); "
         f"{fig['trial_steps_per_s']:,.0f} vessel-steps/s training with 1 CPU "
         f"({args.trial_fleets} fleets, {int(fig['cores'])} trials at once); "
         f"{fig['trial_eval_s']:.1f} s evaluation (10 seeds)"

@@ -22,8 +22,8 @@ from conftest import ROOT
 from agents import load_policy
 from cpf_commands.bench import run_bench
 from cpf_commands.sweep import run_sweep, sweep_main
+from cpf_commands.sweep_report import EVALUATION_FILE
 from cpf_commands.sweep_spec import SweepSpec, trial_name
-from cpf_commands.sweep_trial import EVALUATION_FILE
 
 pytestmark = pytest.mark.ray
 
@@ -125,7 +125,8 @@ def test_a_trial_trains_exactly_as_train_does(tmp_path) -> None:
     pids = {json.loads(path.read_text().splitlines()[-1])["pid"] for path in results}
     assert len(pids) == 1, "the second trial should have reused the first one's process"
     for seed in (3, 4):
-        config = spec.config({"scenario": "bench_mild", "seed": seed, "torch_threads": 2})
+        config = spec.config({"scenario": "bench_mild", "seed": seed})
+        assert config.torch_threads == 2  # the CPUs each trial reserves
         train(config, tmp_path / f"here{seed}", progress=False)
         swept = PPO.load(tmp_path / "sweep" / "trials" / f"bench_mild-seed{seed}" / "model.zip")
         here = PPO.load(tmp_path / f"here{seed}" / "model.zip")

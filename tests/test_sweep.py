@@ -23,8 +23,14 @@ import cpf_env
 from cpf_commands import ray_runtime
 from cpf_commands.precompile import precompile_main
 from cpf_commands.sweep import sweep_main
+from cpf_commands.sweep_report import (
+    EVALUATION_FILE,
+    summary_markdown,
+    summary_rows,
+    trial_state,
+    write_evaluation,
+)
 from cpf_commands.sweep_spec import SweepSpec, parse_setting, trial_name
-from cpf_commands.sweep_trial import EVALUATION_FILE, summary_markdown, summary_rows
 from cpf_env.precompile import KERNEL_MODULES, kernels_of_package, precompile
 
 # --- --set parsing ---------------------------------------------------------------------------
@@ -115,6 +121,8 @@ def test_a_bad_sweep_is_refused_before_any_trial_starts(
         ({"grid": {"no_such": (1, 2)}}, "'no_such' is not a field a sweep can set"),
         ({"fixed": {"seed": 3}}, "'seed' is not a field a sweep can set"),
         ({"cpus_per_trial": 0}, "CPUs per trial must be >= 1"),
+        ({"fixed": {"torch_threads": 2}}, "torch_threads 2 is more than the 1 CPU"),
+        ({"grid": {"torch_threads": (1, 4)}, "cpus_per_trial": 2}, "torch_threads 4 is more"),
     ],
 )
 def test_a_sweep_built_in_python_is_checked_too(arguments: dict, match: str) -> None:
@@ -138,24 +146,40 @@ def test_a_folder_keeps_its_sweep_and_refuses_another(tmp_path) -> None:
     (tmp_path / "file").write_text("")
     with pytest.raises(ValueError, match="is a file; give a folder"):
         spec.check_folder(tmp_path / "file")
+    saved = json.loads((tmp_path / "sweep.json").read_text())
+    (tmp_path / "sweep.json").write_text(json.dumps(saved | {"cpf_env_version": "0.0.1"}))
+    with pytest.raises(ValueError, match=r"differs in cpf_env_version \(saved '0.0.1', now"):
+        spec.check_folder(tmp_path)  # an upgraded package does not resume an old sweep
+
+
+def test_the_order_of_set_does_not_change_the_sweep(tmp_path) -> None:
+    first = SweepSpec.from_settings(["bench_mild"], [0], ["scale=0.1,0.2", "n_epochs=2,4"])
+    second = SweepSpec.from_settings(["bench_mild"], [0], ["n_epochs=2,4", "scale=0.1,0.2"])
+    names = [trial_name(params, first) for params in first.trials()]
+    assert names == [trial_name(params, second) for params in second.trials()]
+    assert names[0] == "bench_mild-seed0-n_epochs2-scale0.1"
+    first.save(tmp_path)
+    assert second.check_folder(tmp_path) is True
 
 
 # --- the summary -----------------------------------------------------------------------------
 
 
-def _finished(out, name: str, ratio: float) -> None:
-    folder = out / "trials" / name
+def _finished(out, spec: SweepSpec, params: dict, ratio: float, reference="nn_dsc") -> str:
+    """Write the files a trial leaves when it finishes (config.json as agents.train writes it)."""
+    folder = out / "trials" / trial_name(params, spec)
     folder.mkdir(parents=True)
-    record = {"reference": "nn_dsc", "cost_ratio": ratio, "p_beats_reference": 0.6}
-    (folder / EVALUATION_FILE).write_text(json.dumps(record))
+    config = {"config": json.loads(json.dumps(spec.config(params).to_json()))}
+    (folder / "config.json").write_text(json.dumps(config))
+    record = {"reference": reference, "cost_ratio": ratio, "p_beats_reference": 0.6}
+    write_evaluation(folder, record)
+    return folder.name
 
 
 def test_the_summary_has_every_trial_and_each_setting_over_seeds(tmp_path) -> None:
     spec = SweepSpec(("bench_mild",), (0, 1, 2), {"scale": (0.1, 0.2)}, {"timesteps": 100})
-    _finished(tmp_path, "bench_mild-seed0-scale0.1", 0.9)
-    _finished(tmp_path, "bench_mild-seed1-scale0.1", 1.1)
-    _finished(tmp_path, "bench_mild-seed2-scale0.1", 0.8)
-    _finished(tmp_path, "bench_mild-seed0-scale0.2", 0.5)
+    for seed, scale, ratio in ((0, 0.1, 0.9), (1, 0.1, 1.1), (2, 0.1, 0.8), (0, 0.2, 0.5)):
+        _finished(tmp_path, spec, {"scenario": "bench_mild", "seed": seed, "scale": scale}, ratio)
     errors = {"bench_mild-seed1-scale0.2": "RuntimeError: diverged"}
     rows = summary_rows(spec, tmp_path, errors)
     status = {row["trial"]: row["status"] for row in rows}
@@ -166,10 +190,53 @@ def test_the_summary_has_every_trial_and_each_setting_over_seeds(tmp_path) -> No
     text = summary_markdown(spec, rows, "cpf-sweep ...")
     assert "| bench_mild | 0.1 | 3/3 | 0.9333 | 0.8000 | 1.1000 | 2/3 |" in text
     assert "| bench_mild | 0.2 | 1/3 | 0.5000 | 0.5000 | 0.5000 | 1/1 |" in text
-    assert "against nn_dsc" in text
+    assert "base policy (nn_dsc;" in text
+
+
+def test_a_trial_counts_only_if_it_finished_with_this_configuration(tmp_path) -> None:
+    spec = SweepSpec(("bench_mild",), (0, 1, 2), fixed={"timesteps": 100})
+    params = [{"scenario": "bench_mild", "seed": seed} for seed in (0, 1, 2)]
+    done, stale, cut = (_finished(tmp_path, spec, p, 0.9) for p in params)
+    other = SweepSpec(("bench_mild",), (1,), fixed={"timesteps": 200})  # what trained seed 1
+    config = {"config": json.loads(json.dumps(other.config(params[1]).to_json()))}
+    (tmp_path / "trials" / stale / "config.json").write_text(json.dumps(config))
+    (tmp_path / "trials" / cut / EVALUATION_FILE).write_text('{"reference": "nn_')  # cut off
+    status = {row["trial"]: row["status"] for row in summary_rows(spec, tmp_path, {})}
+    assert status[done] == "done"
+    assert status[stale].startswith("stale: trained with another configuration")
+    assert status[cut] == "not finished"
+    assert trial_state(tmp_path / "trials" / cut, spec.config(params[2])) == ("missing", {})
+    assert not list(tmp_path.glob("trials/*/.*partial"))  # the atomic write left nothing
+
+
+def test_the_summary_names_each_base_and_shows_none_settings(tmp_path) -> None:
+    spec = SweepSpec(
+        ("bench_mild",), (0,), {"base": ("nn_dsc", "backstepping"), "reward_form": (None, "log")}
+    )
+    for base in ("nn_dsc", "backstepping"):
+        for form in (None, "log"):
+            params = {"scenario": "bench_mild", "seed": 0, "base": base, "reward_form": form}
+            _finished(tmp_path, spec, params, 0.5, reference=base)
+    text = summary_markdown(spec, summary_rows(spec, tmp_path, {}), "cpf-sweep ...")
+    assert "base policy (backstepping, nn_dsc;" in text
+    assert "| bench_mild | backstepping | none | 1/1 |" in text
 
 
 # --- the command without Ray -----------------------------------------------------------------
+
+
+def _closed_port() -> int:
+    """A local TCP port nothing listens on."""
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        return int(probe.getsockname()[1])
+
+
+class _RayThatMustNotStart(types.ModuleType):
+    """Stands in for ``ray``: the address check must fail before ``ray.init``."""
+
+    def init(self, *args, **kwargs) -> None:
+        raise AssertionError("ray.init was called for an address nobody answers at")
 
 
 @pytest.mark.parametrize(
@@ -181,7 +248,10 @@ def test_the_summary_has_every_trial_and_each_setting_over_seeds(tmp_path) -> No
         (["--scenarios", "nowhere", "--out", "x"], "invalid choice"),
     ],
 )
-def test_sweep_command_rejects_bad_arguments_before_starting_ray(argv, match, capsys) -> None:
+def test_sweep_command_rejects_bad_arguments_before_starting_ray(
+    argv, match, monkeypatch, capsys
+) -> None:
+    monkeypatch.setitem(sys.modules, "ray", _RayThatMustNotStart("ray"))
     with pytest.raises(SystemExit) as exit_info:
         sweep_main(argv)
     assert exit_info.value.code == 2
@@ -221,20 +291,6 @@ def test_an_out_that_is_a_file_is_refused(tmp_path, capsys) -> None:
         sweep_main(["--scenarios", "bench_mild", "--out", str(taken)])
     assert exit_info.value.code == 2
     assert "is a file; give a folder" in capsys.readouterr().err
-
-
-def _closed_port() -> int:
-    """A local TCP port nothing listens on."""
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        return int(probe.getsockname()[1])
-
-
-class _RayThatMustNotStart(types.ModuleType):
-    """Stands in for ``ray``: the address check must fail before ``ray.init``."""
-
-    def init(self, *args, **kwargs) -> None:
-        raise AssertionError("ray.init was called for an address nobody answers at")
 
 
 def test_an_address_nobody_answers_at_is_an_error_not_a_hang(tmp_path, monkeypatch, capsys):
