@@ -245,12 +245,14 @@ def run_bench(
 
     Raises:
         ValueError: Unknown scenario or policy, a policy that fits none of the
-            scenarios, fewer than one seed, or a bad horizon.
+            scenarios, fewer than one seed, a bad horizon, or ``out`` is a file.
     """
     if int(seeds) < 1:
         raise ValueError(f"seeds must be >= 1, got {seeds}.")
     if steps is not None and int(steps) < 1:
         raise ValueError(f"steps must be >= 1, got {steps}.")
+    if out is not None and Path(out).exists() and not Path(out).is_dir():
+        raise ValueError(f"--out {out} is a file; give a folder (it is created if needed).")
     tasks = [make_scenario(name) for name in scenario_names]
     labelled = _labelled(policies)
     built, skipped = _build(labelled, tasks)
@@ -314,7 +316,8 @@ def _parser() -> argparse.ArgumentParser:
         "--ray",
         action="store_true",
         help="run the (policy, scenario) cells as Ray tasks, on local Ray or at --address "
-        "(results identical to a local run; needs the ray extra)",
+        "(giving --address implies --ray; results identical to a local run; needs the ray "
+        "extra)",
     )
     add_address_argument(parser)
     parser.add_argument("--quiet", action="store_true", help="no progress bar")

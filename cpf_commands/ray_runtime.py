@@ -55,8 +55,9 @@ def add_address_argument(parser: argparse.ArgumentParser) -> None:
         "--address",
         default=None,
         metavar="ADDRESS",
-        help="Ray cluster to use: 'auto' (the cluster this machine joined with `ray start`) "
-        "or ray://HOST:10001 (Ray Client); default: a local Ray instance on this machine",
+        help="Ray cluster to use: 'auto' (the cluster this machine joined with `ray start`), "
+        "HOST:6379 (its head) or ray://HOST:10001 (Ray Client); default: a local Ray "
+        "instance on this machine (or the cluster RAY_ADDRESS names)",
     )
 
 
@@ -77,10 +78,15 @@ def worker_environment(cpus_per_task: int) -> dict[str, str]:
 
 def _host_and_port(address: str) -> tuple[str, int] | None:
     """(host, port) of 'HOST:PORT' or 'ray://HOST:PORT'; None for 'auto' and 'local'."""
+    if address in ("auto", "local"):
+        return None
     location = address.removeprefix("ray://")
     host, colon, port = location.rpartition(":")
     if not colon or not host:
-        return None
+        raise ValueError(
+            f"Ray address {address!r} has no port; use HOST:PORT (a cluster's head, e.g. "
+            f"{location or 'HEAD'}:6379), ray://HOST:10001 (Ray Client) or 'auto'."
+        )
     if not port.isdigit():
         raise ValueError(f"Ray address {address!r} has no valid port; use HOST:PORT or 'auto'.")
     return host.strip("[]"), int(port)

@@ -80,7 +80,7 @@ def _parser() -> argparse.ArgumentParser:
         "--max-concurrent",
         type=positive_int,
         default=None,
-        help="trials at once (default: as CPUs allow)",
+        help="trials at once (None: as many as the CPUs allow)",
     )
     parser.add_argument(
         "--eval-seeds", type=int, default=5, help="paired evaluation episodes per trial (0: none)"
@@ -89,7 +89,7 @@ def _parser() -> argparse.ArgumentParser:
         "--eval-steps",
         type=positive_int,
         default=None,
-        help="evaluation horizon (default: max_steps)",
+        help="evaluation horizon in control steps (None: the scenario's max_steps)",
     )
     parser.add_argument("--quiet", action="store_true", help="no Ray Tune status tables")
     return parser
@@ -137,6 +137,13 @@ def run_sweep(
     resuming = spec.check_folder(folder)
     require_ray()  # before a minute of compiling, not after
     address = resolve_address(address)
+    cpus = os.cpu_count() or 1
+    if address == "local" and spec.cpus_per_trial > cpus:
+        raise ValueError(
+            f"--cpus-per-trial {spec.cpus_per_trial} is more than this machine's {cpus} "
+            f"CPUs: no trial could start. Lower it to at most {cpus}, or run on a cluster "
+            "with larger nodes (--address)."
+        )
     if address == "local":  # workers share this machine's kernel cache: fill it once, here
         from cpf_env.precompile import precompile
 
@@ -164,6 +171,9 @@ def run_sweep(
             tuner = tune.Tuner.restore(
                 str(state), trainable, resume_unfinished=True, restart_errored=True
             )
+            local = getattr(tuner, "_local_tuner", None)  # None with Ray Client
+            if local is not None:  # the saved verbosity is the first run's: use this run's
+                local.get_run_config().verbose = 0 if quiet else 1
         else:
             tuner = tune.Tuner(
                 trainable,

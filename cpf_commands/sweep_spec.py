@@ -150,9 +150,10 @@ class SweepSpec:
                 raise ValueError(f"{name!r} is not a field a sweep can set; fields are {choices}.")
         for name, values in self.grid.items():
             if len(set(map(_slug, values))) != len(values):
+                listed = typing.get_origin(fields[name]) is tuple
+                hint = f" One list value is written in JSON: {name}=[[64,64]]." if listed else ""
                 raise ValueError(
-                    f"--set {name}: values repeat ({list(values)}); give each once. A single "
-                    f"value with commas is a JSON list: {name}=[[64,64]]."
+                    f"--set {name}: values repeat ({list(values)}); give each once.{hint}"
                 )
         threads = [self.fixed.get("torch_threads"), *self.grid.get("torch_threads", ())]
         if any(value is not None and value > self.cpus_per_trial for value in threads):
@@ -161,8 +162,11 @@ class SweepSpec:
                 f"{self.cpus_per_trial} CPU(s) each trial reserves: trials would crowd each "
                 "other's cores; raise --cpus-per-trial or lower torch_threads."
             )
-        for params in self.trials():
-            self.config(params)  # every trial's TrainConfig is valid before any starts
+        for params in self.trials():  # every trial's TrainConfig is valid before any starts
+            try:
+                self.config(params)
+            except ValueError as error:
+                raise ValueError(f"trial {trial_name(params, self)}: {error}") from None
 
     @classmethod
     def from_settings(

@@ -76,8 +76,12 @@ def map_to_shared(agent_id: str, episode: Any, **kwargs: Any) -> str:
 
 
 def shared_module_path(checkpoint: str | Path) -> Path:
-    """Folder of the shared module inside an algorithm checkpoint (``RLModule.from_checkpoint``)."""
-    return Path(checkpoint) / "learner_group" / "learner" / "rl_module" / SHARED_MODULE
+    """Folder of the shared module inside an algorithm checkpoint (``RLModule.from_checkpoint``).
+
+    Absolute: RLlib reads checkpoints through pyarrow's file systems, which
+    refuse a relative path ("URI has empty scheme").
+    """
+    return Path(checkpoint).resolve() / "learner_group" / "learner" / "rl_module" / SHARED_MODULE
 
 
 def greedy_actions(

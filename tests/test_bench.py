@@ -391,6 +391,15 @@ def test_bench_ray_sends_each_cell_to_ray_with_agent_folders_made_absolute(
     assert started[-1] == (None, 1)
 
 
+def test_bench_refuses_an_out_that_is_a_file_before_running(tmp_path, capsys):
+    taken = tmp_path / "taken"
+    taken.write_text("")
+    with pytest.raises(SystemExit) as exit_info:
+        bench_main(["--policies", "nn_dsc", "--scenarios", "bench_mild", "--out", str(taken)])
+    assert exit_info.value.code == 2
+    assert f"--out {taken} is a file; give a folder" in capsys.readouterr().err
+
+
 def test_commands_reject_an_unknown_policy(capsys):
     for main, flag in ((run_main, "--policy"), (bench_main, "--policies")):
         with pytest.raises(SystemExit):

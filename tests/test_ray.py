@@ -36,7 +36,7 @@ def test_two_seeds_by_two_scenarios_then_a_resume(tmp_path, capsys) -> None:
     out = tmp_path / "sweep"
     argv = ["--scenarios", "bench_mild", "bench_lossy_links", "--seeds", "0", "1"]
     argv += ["--set", *TINY, "--eval-seeds", "2", "--eval-steps", "50", "--out", str(out)]
-    assert sweep_main([*argv, "--quiet"]) == 0
+    assert sweep_main(argv) == 0  # Tune's status output on
     printed = capsys.readouterr().out
     assert "4/4 trials done" in printed and "| bench_lossy_links | 2/2 |" in printed
     spec = SweepSpec.from_settings(
@@ -51,8 +51,12 @@ def test_two_seeds_by_two_scenarios_then_a_resume(tmp_path, capsys) -> None:
         assert policy.scenario.name == params["scenario"]
         models[folder] = (folder / "model.zip").stat().st_mtime_ns
     assert (out / "summary.md").exists() and (out / "summary.csv").exists()
+    capsys.readouterr()
     assert sweep_main([*argv, "--quiet"]) == 0  # the same command again: nothing retrained
     assert {folder: (folder / "model.zip").stat().st_mtime_ns for folder in models} == models
+    printed = capsys.readouterr().out
+    assert "Number of trials" not in printed and "Trial status" not in printed  # quiet resume
+    assert printed.startswith("# Sweep summary")
 
 
 def test_an_interrupted_sweep_resumes_keeping_finished_trials(tmp_path) -> None:

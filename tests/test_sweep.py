@@ -293,6 +293,29 @@ def test_an_out_that_is_a_file_is_refused(tmp_path, capsys) -> None:
     assert "is a file; give a folder" in capsys.readouterr().err
 
 
+def test_more_cpus_per_trial_than_this_machine_has_is_refused_not_left_pending(
+    tmp_path, monkeypatch, capsys
+) -> None:
+    monkeypatch.setitem(sys.modules, "ray", _RayThatMustNotStart("ray"))
+    monkeypatch.delenv("RAY_ADDRESS", raising=False)
+    too_many = str((os.cpu_count() or 1) + 1)
+    out = tmp_path / "sweep"
+    with pytest.raises(SystemExit) as exit_info:
+        sweep_main(["--scenarios", "bench_mild", "--out", str(out), "--cpus-per-trial", too_many])
+    assert exit_info.value.code == 2
+    assert f"--cpus-per-trial {too_many} is more than this machine's" in capsys.readouterr().err
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("address", ["localhost", "ray://headnode", "10.0.0.1:port"])
+def test_an_address_without_a_port_says_how_to_write_one(address, monkeypatch) -> None:
+    monkeypatch.setitem(sys.modules, "ray", _RayThatMustNotStart("ray"))
+    with pytest.raises(
+        ValueError, match=rf"Ray address '{address}' has no (valid )?port; use HOST:"
+    ):
+        ray_runtime.start_ray(address)
+
+
 def test_an_address_nobody_answers_at_is_an_error_not_a_hang(tmp_path, monkeypatch, capsys):
     monkeypatch.setitem(sys.modules, "ray", _RayThatMustNotStart("ray"))
     address = f"127.0.0.1:{_closed_port()}"
