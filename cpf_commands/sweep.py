@@ -13,7 +13,7 @@ Folder layout::
 
     OUT/sweep.json              the sweep (grid, fixed fields, evaluation)
     OUT/trials/<trial>/         one agent: model.zip, config.json, evaluation.json, ...
-    OUT/tune/                   Ray Tune's experiment state (used to resume)
+    OUT/tune/run<k>/            Ray Tune's logs of the k-th run of the command
     OUT/summary.md, summary.csv
 
 Example::
@@ -95,55 +95,47 @@ def _parser() -> argparse.ArgumentParser:
     return parser
 
 
-def run_sweep(
-    spec: SweepSpec,
-    out: str | Path,
-    address: str | None = None,
-    max_concurrent: int | None = None,
-    command: str = "",
-    quiet: bool = False,
-) -> list[dict[str, Any]]:
-    """Run (or resume) a sweep and write its summary.
+def _tuner(
+    tune: Any, spec: SweepSpec, folder: Path, max_concurrent: int | None, quiet: bool
+) -> Any:
+    """A Tune experiment over every trial, logged to ``folder/tune/run<k>`` (the k-th run).
 
-    Args:
-        spec: The ``SweepSpec`` (it also says how many CPUs each trial reserves).
-        out: The sweep's folder; on a cluster, a path every node and this
-            machine see (shared storage).
-        address: Ray address; None starts a local Ray instance (or joins the
-            cluster ``RAY_ADDRESS`` names).
-        max_concurrent: Trials at once (None: as many as the CPUs allow).
-        command: The command line recorded in summary.md.
-        quiet: No Ray Tune status output.
-
-    Returns:
-        The summary rows, one per trial (``status`` "done", "error: ...",
-        "stale: ..." or "not finished").
-
-    Raises:
-        ValueError: ``out`` is a file or holds a different sweep; a malformed address.
-        ImportError: Ray is not installed.
-        ConnectionError: No Ray cluster answers at ``address``.
+    Resuming is the trials' own business (``run_trial`` reports a finished
+    trial again without retraining it), not Tune's restore: a trial whose
+    folder was removed, or holds an agent trained with another configuration,
+    runs again.
     """
-    from cpf_commands.sweep_report import (
-        EVALUATION_FILE,
-        summary_csv,
-        summary_markdown,
-        summary_rows,
-    )
     from cpf_commands.sweep_spec import trial_name
     from cpf_commands.sweep_trial import run_trial
 
-    folder = Path(out).resolve()
-    resuming = spec.check_folder(folder)
-    require_ray()  # before a minute of compiling, not after
-    address = resolve_address(address)
-    cpus = os.cpu_count() or 1
-    if address == "local" and spec.cpus_per_trial > cpus:
-        raise ValueError(
-            f"--cpus-per-trial {spec.cpus_per_trial} is more than this machine's {cpus} "
-            f"CPUs: no trial could start. Lower it to at most {cpus}, or run on a cluster "
-            "with larger nodes (--address)."
-        )
+    trainable = tune.with_resources(
+        tune.with_parameters(run_trial, spec=spec, out=str(folder)),
+        {"cpu": spec.cpus_per_trial},
+    )
+    runs = folder / "tune"
+    run = 1 + sum(1 for path in runs.glob("run*") if path.is_dir())
+    return tune.Tuner(
+        trainable,
+        param_space=spec.param_space(tune),
+        tune_config=tune.TuneConfig(
+            max_concurrent_trials=max_concurrent,
+            reuse_actors=True,
+            trial_name_creator=lambda trial: trial_name(trial.config, spec),
+            trial_dirname_creator=lambda trial: trial_name(trial.config, spec),
+        ),
+        run_config=tune.RunConfig(
+            name=f"run{run}", storage_path=str(runs), verbose=0 if quiet else 1
+        ),
+    )
+
+
+def _run_trials(
+    spec: SweepSpec, folder: Path, address: str, max_concurrent: int | None, quiet: bool
+) -> dict[str, str]:
+    """Run the sweep's unfinished trials on Ray; trial name -> why it failed."""
+    from cpf_commands.sweep_report import EVALUATION_FILE
+    from cpf_commands.sweep_spec import trial_name
+
     if address == "local":  # workers share this machine's kernel cache: fill it once, here
         from cpf_env.precompile import precompile
 
@@ -162,56 +154,87 @@ def run_sweep(
     if quiet:  # Tune's newer console output prints its banners even at verbose=0
         os.environ[_OUTPUT_ENGINE] = "0"
     try:
-        trainable = tune.with_resources(
-            tune.with_parameters(run_trial, spec=spec, out=str(folder)),
-            {"cpu": spec.cpus_per_trial},
-        )
-        state = folder / "tune"
-        if resuming and tune.Tuner.can_restore(str(state)):
-            tuner = tune.Tuner.restore(
-                str(state), trainable, resume_unfinished=True, restart_errored=True
-            )
-            local = getattr(tuner, "_local_tuner", None)  # None with Ray Client
-            if local is not None:  # the saved verbosity is the first run's: use this run's
-                local.get_run_config().verbose = 0 if quiet else 1
-        else:
-            tuner = tune.Tuner(
-                trainable,
-                param_space=spec.param_space(tune),
-                tune_config=tune.TuneConfig(
-                    max_concurrent_trials=max_concurrent,
-                    reuse_actors=True,
-                    trial_name_creator=lambda trial: trial_name(trial.config, spec),
-                    trial_dirname_creator=lambda trial: trial_name(trial.config, spec),
-                ),
-                run_config=tune.RunConfig(
-                    name="tune", storage_path=str(folder), verbose=0 if quiet else 1
-                ),
-            )
-        grid = tuner.fit()
-        results = {
-            trial_name(result.config, spec): result
-            for result in (grid[k] for k in range(len(grid)))
-            if result.config is not None
-        }
-        errors = {
-            name: str(result.error).strip().splitlines()[-1]
-            for name, result in results.items()
-            if result.error is not None
-        }
-        for name, result in results.items():  # finished on a node, its folder not seen here
-            finished = (result.metrics or {}).get("trial") == name  # its last report
-            if finished and not (folder / "trials" / name / EVALUATION_FILE).exists():
-                errors[name] = (
-                    f"it finished, but its folder is not at {folder} on this machine: give "
-                    "--out a path that this machine and every node share"
-                )
+        grid = _tuner(tune, spec, folder, max_concurrent, quiet).fit()
     finally:
         ray.shutdown()
         if output is None:
             os.environ.pop(_OUTPUT_ENGINE, None)
         else:
             os.environ[_OUTPUT_ENGINE] = output
+    results = {
+        trial_name(result.config, spec): result
+        for result in (grid[k] for k in range(len(grid)))
+        if result.config is not None
+    }
+    errors = {
+        name: str(result.error).strip().splitlines()[-1]
+        for name, result in results.items()
+        if result.error is not None
+    }
+    for name, result in results.items():  # finished on a node, its folder not seen here
+        finished = (result.metrics or {}).get("trial") == name  # its last report
+        if finished and not (folder / "trials" / name / EVALUATION_FILE).exists():
+            errors[name] = (
+                f"it finished, but its folder is not at {folder} on this machine: give "
+                "--out a path that this machine and every node share"
+            )
+    return errors
+
+
+def run_sweep(
+    spec: SweepSpec,
+    out: str | Path,
+    address: str | None = None,
+    max_concurrent: int | None = None,
+    command: str = "",
+    quiet: bool = False,
+) -> list[dict[str, Any]]:
+    """Run (or resume) a sweep and write its summary.
+
+    A resumed sweep whose trials have all finished writes its summary again
+    without starting Ray.
+
+    Args:
+        spec: The ``SweepSpec`` (it also says how many CPUs each trial reserves).
+        out: The sweep's folder; on a cluster, a path every node and this
+            machine see (shared storage).
+        address: Ray address; None starts a local Ray instance (or joins the
+            cluster ``RAY_ADDRESS`` names).
+        max_concurrent: Trials at once (None: as many as the CPUs allow).
+        command: The command line recorded in summary.md.
+        quiet: No progress lines, no Ray Tune status output.
+
+    Returns:
+        The summary rows, one per trial (``status`` "done", "error: ...",
+        "stale: ..." or "not finished").
+
+    Raises:
+        ValueError: ``out`` is a file or holds a different sweep; a malformed
+            address; more CPUs per trial than this machine has (local Ray).
+        ImportError: Ray is not installed.
+        ConnectionError: No Ray cluster answers at ``address``.
+    """
+    from cpf_commands.sweep_report import summary_csv, summary_markdown, summary_rows
+
+    folder = Path(out).resolve()
+    errors: dict[str, str] = {}
+    finished = 0
+    if spec.check_folder(folder):
+        finished = sum(row["status"] == "done" for row in summary_rows(spec, folder, errors))
+        if not quiet:
+            total = len(list(spec.trials()))
+            print(f"cpf-sweep: resuming {folder}: {finished} of {total} trials finished, kept")
+    if finished < len(list(spec.trials())):
+        require_ray()  # before a minute of compiling, not after
+        address = resolve_address(address)
+        cpus = os.cpu_count() or 1
+        if address == "local" and spec.cpus_per_trial > cpus:
+            raise ValueError(
+                f"--cpus-per-trial {spec.cpus_per_trial} is more than this machine's {cpus} "
+                f"CPUs: no trial could start. Lower it to at most {cpus}, or run on a cluster "
+                "with larger nodes (--address)."
+            )
+        errors = _run_trials(spec, folder, address, max_concurrent, quiet)
     rows = summary_rows(spec, folder, errors)
     (folder / "summary.md").write_text(summary_markdown(spec, rows, command))
     (folder / "summary.csv").write_text(summary_csv(rows))

@@ -3,8 +3,8 @@
 A trial is finished when its folder holds ``evaluation.json`` (written last,
 atomically) and its ``config.json`` records the configuration the sweep
 would train it with now. A trial folder trained with another configuration
-(an earlier version of the package, say) is reported as stale, never
-silently mixed into the summary.
+is never mixed into the summary: it is reported as stale, and the next run
+of the sweep trains it again.
 
 The summary has one row per trial and, over seeds, one row per scenario and
 setting: the mean cost relative to the base policy and the number of trials
@@ -83,8 +83,8 @@ def summary_rows(spec: SweepSpec, out: Path, errors: dict[str, str]) -> list[dic
             row |= record | {"status": "done"}
         elif state == "stale":
             row["status"] = (
-                "stale: trained with another configuration (another package version?); "
-                "run the sweep into a new --out"
+                "stale: trained with another configuration; the next run of the sweep "
+                "trains it again"
             )
         else:
             row["status"] = f"error: {errors[name]}" if name in errors else "not finished"
@@ -136,10 +136,11 @@ def summary_markdown(spec: SweepSpec, rows: Sequence[dict[str, Any]], command: s
     references = sorted({row["reference"] for row in rows if "reference" in row})
     if spec.eval_seeds:
         lines.append(
-            f"Evaluation: {spec.eval_seeds} paired episodes per trial against the trial's "
-            f"base policy ({', '.join(references) or 'none finished yet'}; nn_dsc for an agent "
-            f"trained from scratch), seeds from {BASE_SEED}; one episode where nothing in the "
-            "scenario is random (see `episodes`). cost_ratio < 1: the agent's cost is lower."
+            f"Evaluation: {spec.eval_seeds} paired episodes per trial (seeds from {BASE_SEED}) "
+            "against the trial's base policy, or nn_dsc for an agent trained from scratch "
+            f"(here: {', '.join(references) or 'no trial finished yet'}); a scenario in which "
+            "nothing is random runs one episode (`episodes`). cost_ratio < 1: the agent's "
+            "cost is lower."
         )
     else:
         lines.append("Evaluation: none (--eval-seeds 0).")

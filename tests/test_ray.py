@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -54,9 +55,15 @@ def test_two_seeds_by_two_scenarios_then_a_resume(tmp_path, capsys) -> None:
     capsys.readouterr()
     assert sweep_main([*argv, "--quiet"]) == 0  # the same command again: nothing retrained
     assert {folder: (folder / "model.zip").stat().st_mtime_ns for folder in models} == models
+    assert capsys.readouterr().out.startswith("# Sweep summary")  # all done: Ray not started
+    removed = next(iter(models))
+    shutil.rmtree(removed)
+    assert sweep_main([*argv, "--quiet"]) == 0  # the removed trial trains again, alone
     printed = capsys.readouterr().out
-    assert "Number of trials" not in printed and "Trial status" not in printed  # quiet resume
-    assert printed.startswith("# Sweep summary")
+    assert "Number of trials" not in printed and "Trial status" not in printed  # quiet
+    assert (removed / EVALUATION_FILE).exists()
+    del models[removed]
+    assert {folder: (folder / "model.zip").stat().st_mtime_ns for folder in models} == models
 
 
 def test_an_interrupted_sweep_resumes_keeping_finished_trials(tmp_path) -> None:
@@ -125,7 +132,7 @@ def test_a_trial_trains_exactly_as_train_does(tmp_path) -> None:
     fixed = {"timesteps": 3000, "fleets": 4, "n_steps": 16}
     spec = SweepSpec(("bench_mild",), (3, 4), fixed=fixed, eval_seeds=0, cpus_per_trial=2)
     run_sweep(spec, tmp_path / "sweep", quiet=True)  # one trial at a time
-    results = tmp_path.glob("sweep/tune/bench_mild-seed*/result.json")
+    results = tmp_path.glob("sweep/tune/run1/bench_mild-seed*/result.json")
     pids = {json.loads(path.read_text().splitlines()[-1])["pid"] for path in results}
     assert len(pids) == 1, "the second trial should have reused the first one's process"
     for seed in (3, 4):

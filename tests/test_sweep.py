@@ -22,7 +22,7 @@ from numba.core.registry import CPUDispatcher
 import cpf_env
 from cpf_commands import ray_runtime
 from cpf_commands.precompile import precompile_main
-from cpf_commands.sweep import sweep_main
+from cpf_commands.sweep import run_sweep, sweep_main
 from cpf_commands.sweep_report import (
     EVALUATION_FILE,
     summary_markdown,
@@ -190,7 +190,7 @@ def test_the_summary_has_every_trial_and_each_setting_over_seeds(tmp_path) -> No
     text = summary_markdown(spec, rows, "cpf-sweep ...")
     assert "| bench_mild | 0.1 | 3/3 | 0.9333 | 0.8000 | 1.1000 | 2/3 |" in text
     assert "| bench_mild | 0.2 | 1/3 | 0.5000 | 0.5000 | 0.5000 | 1/1 |" in text
-    assert "base policy (nn_dsc;" in text
+    assert "trained from scratch (here: nn_dsc)" in text
 
 
 def test_a_trial_counts_only_if_it_finished_with_this_configuration(tmp_path) -> None:
@@ -218,7 +218,7 @@ def test_the_summary_names_each_base_and_shows_none_settings(tmp_path) -> None:
             params = {"scenario": "bench_mild", "seed": 0, "base": base, "reward_form": form}
             _finished(tmp_path, spec, params, 0.5, reference=base)
     text = summary_markdown(spec, summary_rows(spec, tmp_path, {}), "cpf-sweep ...")
-    assert "base policy (backstepping, nn_dsc;" in text
+    assert "(here: backstepping, nn_dsc)" in text
     assert "| bench_mild | backstepping | none | 1/1 |" in text
 
 
@@ -282,6 +282,21 @@ def test_without_ray_or_the_learning_extra_cpf_sweep_says_what_to_install(
     assert "needs stable_baselines3 (not installed)" in message
     assert 'install the learning and Ray extras: pip install -e ".[rl,ray]"' in message
     assert not (tmp_path / "sweep").exists()
+
+
+def test_a_resume_with_every_trial_finished_only_rewrites_the_summary(
+    tmp_path, monkeypatch, capsys
+) -> None:
+    monkeypatch.setitem(sys.modules, "ray", _RayThatMustNotStart("ray"))
+    spec = SweepSpec(("bench_mild",), (0, 1), fixed={"timesteps": 100})
+    spec.save(tmp_path)
+    for params in spec.trials():
+        _finished(tmp_path, spec, params, 0.9)
+    rows = run_sweep(spec, tmp_path, command="cpf-sweep ...")
+    assert [row["status"] for row in rows] == ["done", "done"]
+    assert f"resuming {tmp_path}: 2 of 2 trials finished, kept" in capsys.readouterr().out
+    assert "| bench_mild | 2/2 | 0.9000 |" in (tmp_path / "summary.md").read_text()
+    assert not (tmp_path / "tune").exists()
 
 
 def test_an_out_that_is_a_file_is_refused(tmp_path, capsys) -> None:
