@@ -24,10 +24,12 @@ Example::
 from __future__ import annotations
 
 import argparse
+import contextlib
+import fcntl
 import os
 import shlex
 import sys
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -95,6 +97,32 @@ def _parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _usable_cpus() -> int:
+    """CPUs this process may run on (its affinity mask where the OS has one)."""
+    if hasattr(os, "sched_getaffinity"):
+        return len(os.sched_getaffinity(0))
+    return os.cpu_count() or 1
+
+
+@contextlib.contextmanager
+def _only_run_on(folder: Path) -> Iterator[None]:
+    """Hold ``folder/.lock`` while trials run: a second cpf-sweep on the same --out is refused.
+
+    Raises:
+        ValueError: Another process holds the lock.
+    """
+    folder.mkdir(parents=True, exist_ok=True)
+    with open(folder / ".lock", "w") as lock:
+        try:
+            fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            raise ValueError(
+                f"another cpf-sweep is running on --out {folder}; wait for it to end (or "
+                "stop it), or choose another --out."
+            ) from None
+        yield  # the lock goes with the file's closing
+
+
 def _tuner(
     tune: Any, spec: SweepSpec, folder: Path, max_concurrent: int | None, quiet: bool
 ) -> Any:
@@ -113,7 +141,8 @@ def _tuner(
         {"cpu": spec.cpus_per_trial},
     )
     runs = folder / "tune"
-    run = 1 + sum(1 for path in runs.glob("run*") if path.is_dir())
+    numbers = [int(path.name[3:]) for path in runs.glob("run*") if path.name[3:].isdigit()]
+    run = 1 + max(numbers, default=0)
     return tune.Tuner(
         trainable,
         param_space=spec.param_space(tune),
@@ -147,14 +176,20 @@ def _run_trials(
             )
         precompile(spec.scenarios)
     ray = start_ray(address, spec.cpus_per_trial, quiet=quiet)
-    spec.save(folder)
-    from ray import tune
-
     output = os.environ.get(_OUTPUT_ENGINE)
     if quiet:  # Tune's newer console output prints its banners even at verbose=0
         os.environ[_OUTPUT_ENGINE] = "0"
     try:
-        grid = _tuner(tune, spec, folder, max_concurrent, quiet).fit()
+        from ray import tune
+
+        with _only_run_on(folder):
+            spec.save(folder)
+            for name in ("summary.md", "summary.csv"):  # never left behind by an aborted run
+                (folder / name).unlink(missing_ok=True)
+            grid = _tuner(tune, spec, folder, max_concurrent, quiet).fit()
+    except KeyboardInterrupt:  # with Ray Client, Tune's own Ctrl-C handling is on the cluster
+        print("cpf-sweep: interrupted; rerun the same command to resume.", file=sys.stderr)
+        return {}
     finally:
         ray.shutdown()
         if output is None:
@@ -167,16 +202,17 @@ def _run_trials(
         if result.config is not None
     }
     errors = {
-        name: str(result.error).strip().splitlines()[-1]
+        name: (str(result.error).strip().splitlines() or ["unknown error"])[-1]
         for name, result in results.items()
         if result.error is not None
     }
     for name, result in results.items():  # finished on a node, its folder not seen here
-        finished = (result.metrics or {}).get("trial") == name  # its last report
-        if finished and not (folder / "trials" / name / EVALUATION_FILE).exists():
+        reported = (result.metrics or {}).get("trial") == name  # its final report
+        if reported and not (folder / "trials" / name / EVALUATION_FILE).exists():
             errors[name] = (
-                f"it finished, but its folder is not at {folder} on this machine: give "
-                "--out a path that this machine and every node share"
+                f"it finished, but its folder is not (yet) visible at {folder} on this "
+                "machine: give --out a path that this machine and every node share (on a "
+                "slow network file system, rerun the command to pick it up)"
             )
     return errors
 
@@ -218,21 +254,20 @@ def run_sweep(
 
     folder = Path(out).resolve()
     errors: dict[str, str] = {}
-    finished = 0
+    total, done = len(list(spec.trials())), 0
     if spec.check_folder(folder):
-        finished = sum(row["status"] == "done" for row in summary_rows(spec, folder, errors))
+        done = sum(row["status"] == "done" for row in summary_rows(spec, folder, errors))
         if not quiet:
-            total = len(list(spec.trials()))
-            print(f"cpf-sweep: resuming {folder}: {finished} of {total} trials finished, kept")
-    if finished < len(list(spec.trials())):
+            print(f"cpf-sweep: resuming {folder}: {done} of {total} trials finished, kept")
+    if done < total:
         require_ray()  # before a minute of compiling, not after
         address = resolve_address(address)
-        cpus = os.cpu_count() or 1
+        cpus = _usable_cpus()
         if address == "local" and spec.cpus_per_trial > cpus:
             raise ValueError(
-                f"--cpus-per-trial {spec.cpus_per_trial} is more than this machine's {cpus} "
-                f"CPUs: no trial could start. Lower it to at most {cpus}, or run on a cluster "
-                "with larger nodes (--address)."
+                f"--cpus-per-trial {spec.cpus_per_trial} is more than the {cpus} CPUs this "
+                f"process may use: no trial could start. Lower it to at most {cpus}, or run "
+                "on a cluster with larger nodes (--address)."
             )
         errors = _run_trials(spec, folder, address, max_concurrent, quiet)
     rows = summary_rows(spec, folder, errors)

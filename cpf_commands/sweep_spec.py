@@ -226,6 +226,13 @@ class SweepSpec:
         if not path.exists():
             return False
         saved, wanted = json.loads(path.read_text()), self.to_json()
+        version = "cpf_env_version"
+        if saved.get(version) != wanted[version]:
+            raise ValueError(
+                f"{folder} holds a sweep made by cpf_env {saved.get(version) or 'before 0.1.0'}; "
+                f"this is {wanted[version]}, and a sweep is resumed only by the version that "
+                "made it (its trials would mix two versions): choose another --out."
+            )
         if saved != wanted:
             differ = ", ".join(
                 f"{key} (saved {saved.get(key)!r}, now {wanted.get(key)!r})"

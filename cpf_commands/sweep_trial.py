@@ -13,6 +13,7 @@ checkpoints).
 from __future__ import annotations
 
 import json
+import shutil
 import time
 from pathlib import Path
 from typing import Any
@@ -23,7 +24,7 @@ from stable_baselines3.common.callbacks import BaseCallback
 from agents.training import TrainConfig, train
 from cpf_commands.bench import run_bench
 from cpf_commands.bench_report import summarize
-from cpf_commands.sweep_report import EVALUATION_FILE, trial_state, write_evaluation
+from cpf_commands.sweep_report import trial_state, write_evaluation
 from cpf_commands.sweep_spec import SweepSpec, trial_name
 
 __all__ = ["evaluate_agent", "run_trial"]
@@ -110,7 +111,7 @@ def run_trial(params: dict[str, Any], spec: SweepSpec, out: str) -> None:
     if state == "done":
         tune.report(record)
         return
-    (folder / EVALUATION_FILE).unlink(missing_ok=True)  # never paired with a new model
+    shutil.rmtree(folder, ignore_errors=True)  # nothing of an earlier agent is left to mix in
     train(config, folder, progress=False, overwrite=True, callbacks=[_TuneReport()])
     record = json.loads((folder / "config.json").read_text())
     result: dict[str, Any] = {

@@ -40,6 +40,7 @@ def test_two_seeds_by_two_scenarios_then_a_resume(tmp_path, capsys) -> None:
     assert sweep_main(argv) == 0  # Tune's status output on
     printed = capsys.readouterr().out
     assert "4/4 trials done" in printed and "| bench_lossy_links | 2/2 |" in printed
+    assert "Trial status" in printed  # what --quiet must hide below
     spec = SweepSpec.from_settings(
         ["bench_mild", "bench_lossy_links"], [0, 1], TINY, eval_seeds=2, eval_steps=50
     )

@@ -5,6 +5,7 @@ The runs on Ray itself are in ``test_ray.py`` (marker ``ray``).
 
 from __future__ import annotations
 
+import fcntl
 import importlib
 import json
 import os
@@ -31,6 +32,7 @@ from cpf_commands.sweep_report import (
     write_evaluation,
 )
 from cpf_commands.sweep_spec import SweepSpec, parse_setting, trial_name
+from cpf_commands.sweep_trial import run_trial
 from cpf_env.precompile import KERNEL_MODULES, kernels_of_package, precompile
 
 # --- --set parsing ---------------------------------------------------------------------------
@@ -148,7 +150,7 @@ def test_a_folder_keeps_its_sweep_and_refuses_another(tmp_path) -> None:
         spec.check_folder(tmp_path / "file")
     saved = json.loads((tmp_path / "sweep.json").read_text())
     (tmp_path / "sweep.json").write_text(json.dumps(saved | {"cpf_env_version": "0.0.1"}))
-    with pytest.raises(ValueError, match=r"differs in cpf_env_version \(saved '0.0.1', now"):
+    with pytest.raises(ValueError, match=r"made by cpf_env 0.0.1; this is .*choose another --out"):
         spec.check_folder(tmp_path)  # an upgraded package does not resume an old sweep
 
 
@@ -206,7 +208,6 @@ def test_a_trial_counts_only_if_it_finished_with_this_configuration(tmp_path) ->
     assert status[stale].startswith("stale: trained with another configuration")
     assert status[cut] == "not finished"
     assert trial_state(tmp_path / "trials" / cut, spec.config(params[2])) == ("missing", {})
-    assert not list(tmp_path.glob("trials/*/.*partial"))  # the atomic write left nothing
 
 
 def test_the_summary_names_each_base_and_shows_none_settings(tmp_path) -> None:
@@ -284,10 +285,16 @@ def test_without_ray_or_the_learning_extra_cpf_sweep_says_what_to_install(
     assert not (tmp_path / "sweep").exists()
 
 
+def _no_precompile(scenario_names) -> None:
+    raise AssertionError("precompile must not run: there is nothing to train")
+
+
 def test_a_resume_with_every_trial_finished_only_rewrites_the_summary(
     tmp_path, monkeypatch, capsys
 ) -> None:
     monkeypatch.setitem(sys.modules, "ray", _RayThatMustNotStart("ray"))
+    monkeypatch.setattr("cpf_env.precompile.precompile", _no_precompile)
+    monkeypatch.delenv("RAY_ADDRESS", raising=False)
     spec = SweepSpec(("bench_mild",), (0, 1), fixed={"timesteps": 100})
     spec.save(tmp_path)
     for params in spec.trials():
@@ -297,6 +304,44 @@ def test_a_resume_with_every_trial_finished_only_rewrites_the_summary(
     assert f"resuming {tmp_path}: 2 of 2 trials finished, kept" in capsys.readouterr().out
     assert "| bench_mild | 2/2 | 0.9000 |" in (tmp_path / "summary.md").read_text()
     assert not (tmp_path / "tune").exists()
+
+
+def test_a_second_sweep_on_the_same_out_is_refused_while_one_runs(tmp_path, monkeypatch) -> None:
+    ray = types.ModuleType("ray")
+    ray.init = ray.shutdown = lambda *args, **kwargs: None  # type: ignore[attr-defined]
+    ray.tune = types.ModuleType("ray.tune")  # type: ignore[attr-defined]
+    monkeypatch.setitem(sys.modules, "ray", ray)
+    monkeypatch.setattr("cpf_env.precompile.precompile", lambda scenario_names: None)
+    monkeypatch.delenv("RAY_ADDRESS", raising=False)
+    spec = SweepSpec(("bench_mild",), (0,), fixed={"timesteps": 100})
+    with open(tmp_path / ".lock", "w") as running:  # as the first cpf-sweep holds it
+        fcntl.flock(running, fcntl.LOCK_EX)
+        with pytest.raises(ValueError, match=f"another cpf-sweep is running on --out {tmp_path}"):
+            run_sweep(spec, tmp_path)
+
+
+def test_a_trial_to_run_again_starts_from_an_empty_folder(tmp_path, monkeypatch) -> None:
+    """A stale trial is retrained from scratch: nothing of the earlier agent survives."""
+    reports = []
+    tune = types.ModuleType("ray.tune")
+    tune.report = reports.append  # type: ignore[attr-defined]
+    ray = types.ModuleType("ray")
+    ray.tune = tune  # type: ignore[attr-defined]
+    monkeypatch.setitem(sys.modules, "ray", ray)
+    monkeypatch.setitem(sys.modules, "ray.tune", tune)
+    fixed = {"timesteps": 64, "fleets": 2, "n_steps": 16, "normalize_observations": False}
+    spec = SweepSpec(("bench_mild",), (0,), fixed=fixed, eval_seeds=0)
+    params = next(spec.trials())
+    stale = SweepSpec(("bench_mild",), (0,), fixed={**fixed, "timesteps": 32}, eval_seeds=0)
+    folder = tmp_path / "trials" / _finished(tmp_path, stale, params, 0.5)
+    (folder / "vecnormalize.pkl").write_text("statistics of the earlier agent")
+    assert trial_state(folder, spec.config(params))[0] == "stale"
+    run_trial(params, spec, str(tmp_path))
+    state, record = trial_state(folder, spec.config(params))
+    assert state == "done" and reports[-1] == record
+    assert not (folder / "vecnormalize.pkl").exists()
+    run_trial(params, spec, str(tmp_path))  # finished: reported again, not retrained
+    assert reports[-1] == record and len(reports) == 2
 
 
 def test_an_out_that_is_a_file_is_refused(tmp_path, capsys) -> None:
@@ -313,12 +358,13 @@ def test_more_cpus_per_trial_than_this_machine_has_is_refused_not_left_pending(
 ) -> None:
     monkeypatch.setitem(sys.modules, "ray", _RayThatMustNotStart("ray"))
     monkeypatch.delenv("RAY_ADDRESS", raising=False)
-    too_many = str((os.cpu_count() or 1) + 1)
+    too_many = str(len(os.sched_getaffinity(0)) + 1)
     out = tmp_path / "sweep"
     with pytest.raises(SystemExit) as exit_info:
         sweep_main(["--scenarios", "bench_mild", "--out", str(out), "--cpus-per-trial", too_many])
     assert exit_info.value.code == 2
-    assert f"--cpus-per-trial {too_many} is more than this machine's" in capsys.readouterr().err
+    message = capsys.readouterr().err
+    assert f"--cpus-per-trial {too_many} is more than the {int(too_many) - 1} CPUs" in message
     assert not out.exists()
 
 
