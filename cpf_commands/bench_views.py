@@ -14,7 +14,7 @@ from matplotlib.figure import Figure
 
 from cpf_commands.bench_report import HEADLINE, CellResult
 
-__all__ = ["figure", "markdown"]
+__all__ = ["figure", "markdown", "markdown_table"]
 
 
 def _interval(row: dict[str, object] | None, estimate: str = "mean") -> str:
@@ -29,7 +29,8 @@ def _interval(row: dict[str, object] | None, estimate: str = "mean") -> str:
     return f"{mean:.3g} [{low:.3g}, {high:.3g}]"
 
 
-def _table(header: Sequence[str], body: Sequence[Sequence[str]]) -> list[str]:
+def markdown_table(header: Sequence[str], body: Sequence[Sequence[str]]) -> list[str]:
+    """The lines of a markdown table: the header, its rule, one line per row of cell texts."""
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     return lines + ["| " + " | ".join(row) + " |" for row in body]
 
@@ -68,14 +69,14 @@ def markdown(
             failures = next((str(r["failures"]) for r in found if r), "")
             body.append([policy, *(_interval(r) for r in found), failures])
         lines += ["", f"## All scenarios, each episode divided by {reference}'s mean", ""]
-        lines += _table(["policy", *headings, "failures"], body)
+        lines += markdown_table(["policy", *headings, "failures"], body)
     for metric, heading in HEADLINE[:2]:
         body = []
         for policy in policies:
             found = [index.get((policy, name, metric)) for name in names]
             body.append([policy] + [_mean_and_failures(r) for r in found])
         lines += ["", f"## {heading.capitalize()} by scenario (mean; failed episodes)", ""]
-        lines += _table(["policy", *names], body)
+        lines += markdown_table(["policy", *names], body)
     for name in names:
         first = next(cell for cell in cells if cell.scenario == name)
         count = (
@@ -96,7 +97,7 @@ def markdown(
             body.append([policy, text[0], _interval(cost, "iqm"), *text[1:], failures, ratio, p])
         lines += ["", f"## {name} ({count})", ""]
         header = ["policy", headings[0], "cost IQM", *headings[1:]]
-        lines += _table([*header, "failures", f"/ {reference}", "P(beats)"], body)
+        lines += markdown_table([*header, "failures", f"/ {reference}", "P(beats)"], body)
     return "\n".join(lines) + "\n"
 
 

@@ -25,6 +25,7 @@ import numpy as np
 
 from agents.training import TrainConfig
 from cpf_commands.bench import BASE_SEED
+from cpf_commands.bench_views import markdown_table
 from cpf_commands.sweep_spec import SweepSpec, trial_name
 
 __all__ = [
@@ -118,11 +119,11 @@ def _number(value: Any, column: str) -> str:
 
 
 def _table(header: Sequence[str], rows: Sequence[Sequence[Any]]) -> list[str]:
-    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
-    for row in rows:
-        cells = (_number(value, column) for value, column in zip(row, header, strict=True))
-        lines.append("| " + " | ".join(cells) + " |")
-    return lines
+    """A markdown table of values, each formatted for its column."""
+    body = [
+        [_number(value, column) for value, column in zip(row, header, strict=True)] for row in rows
+    ]
+    return markdown_table(header, body)
 
 
 def _setting(value: Any) -> Any:
