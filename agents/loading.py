@@ -29,10 +29,10 @@ from stable_baselines3.common.base_class import BaseAlgorithm
 from agents.training import ALGORITHMS, TrainConfig
 from agents.vec_env import resolve_base_policy
 from baselines.interface import PolicyInterface
-from cpf_env.env import make_scenario
-from cpf_env.residual import ResidualConfig, ResidualController
+from cpf_env.envs.parallel import make_scenario
+from cpf_env.envs.residual import ResidualConfig, ResidualController
 from cpf_env.scenarios import Scenario
-from cpf_env.sim import observation_layout
+from cpf_env.sim.fleet import observation_layout
 
 __all__ = ["TrainedPolicy", "load_policy"]
 

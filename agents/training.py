@@ -48,8 +48,8 @@ from tqdm.auto import tqdm
 from agents.vec_env import FleetVecEnv
 from baselines import POLICIES
 from cpf_env import scenarios
-from cpf_env.residual import ResidualConfig
-from cpf_env.reward import REWARD_FORMS
+from cpf_env.envs.residual import ResidualConfig
+from cpf_env.scenarios.reward_weights import REWARD_FORMS
 
 __all__ = ["ALGORITHMS", "TrainConfig", "build_model", "make_env", "train"]
 
@@ -74,9 +74,9 @@ class TrainConfig:
         fleets: Fleets simulated together (num_envs = fleets x n).
         timesteps: Training budget in vessel-steps (SB3 timesteps).
         seed: Seeds the networks (torch), SB3 and the fleets (fleet k: seed + k).
-        mode: Residual mode (``cpf_env.residual.RESIDUAL_MODES``).
+        mode: Residual mode (``cpf_env.envs.residual.RESIDUAL_MODES``).
         scale: Residual range as a fraction of the limits.
-        extras: Local extras appended to the observation (``cpf_env.residual.EXTRAS``).
+        extras: Local extras appended to the observation (``cpf_env.envs.residual.EXTRAS``).
         hide_residual_from_base: Show the base the applied force minus the residual.
         reward_form: ``"log"`` or ``"quadratic"`` to override the scenario's
             reward form, or None to keep it.

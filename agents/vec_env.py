@@ -3,7 +3,7 @@
 One slot per vessel: ``num_envs = num_fleets * n``, slot ``k * n + i`` is
 vessel i of fleet k, and one network acts for every vessel (parameter
 sharing). Each slot sees only its vessel's local observation (plus the local
-extras of ``cpf_env.residual``); the simulator and the base policy run
+extras of ``cpf_env.envs.residual``); the simulator and the base policy run
 batched, with no Python loop over fleets.
 
 ================  ==============================================================
@@ -53,11 +53,11 @@ from stable_baselines3.common.vec_env import VecEnv
 from stable_baselines3.common.vec_env.base_vec_env import VecEnvIndices, VecEnvStepReturn
 
 from baselines import POLICIES, make_policy
-from cpf_env.env import make_scenario
-from cpf_env.observation import observation_box
-from cpf_env.residual import BasePolicy, ResidualConfig, ResidualController
+from cpf_env.envs.parallel import make_scenario
+from cpf_env.envs.residual import BasePolicy, ResidualConfig, ResidualController
 from cpf_env.scenarios import Scenario
-from cpf_env.sim import FleetSim
+from cpf_env.sim.fleet import FleetSim
+from cpf_env.sim.observation import observation_box
 
 __all__ = ["FleetVecEnv", "resolve_base_policy"]
 

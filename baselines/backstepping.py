@@ -29,7 +29,7 @@ from numpy.typing import NDArray
 from baselines.cooperative import CooperativeStep, LocalObservation, contract
 from baselines.gains import BacksteppingGains
 from baselines.policy import Array, Policy, virtual_control
-from cpf_env.vessel import coriolis_matrix, damping_matrix
+from cpf_env.model.vessel import coriolis_matrix, damping_matrix
 
 __all__ = ["BacksteppingPolicy", "alpha_derivative"]
 

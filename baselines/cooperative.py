@@ -34,8 +34,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from baselines.gains import CooperativeGains
-from cpf_env.observation import ObsLayout
 from cpf_env.scenarios import SpeedSchedule
+from cpf_env.sim.observation import ObsLayout
 
 __all__ = [
     "CooperativeLayer",

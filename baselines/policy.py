@@ -32,7 +32,7 @@ from baselines.gains import CooperativeGains
 from baselines.interface import PolicyInterface
 from cpf_env import scenarios
 from cpf_env.scenarios import Scenario
-from cpf_env.sim import observation_layout
+from cpf_env.sim.fleet import observation_layout
 
 __all__ = ["DIAGNOSTICS", "Policy", "resolve_scenario", "virtual_control"]
 

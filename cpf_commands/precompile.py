@@ -3,7 +3,7 @@
 Run it after installing (in a container image: as a build step), with the
 ``NUMBA_CACHE_DIR`` the workers will use, so that Ray trials, RLlib env
 runners and test workers load the compiled kernels (about 0.35 s) instead of
-each compiling them (15-30 s). See ``cpf_env.precompile`` and ``docs/scaling.md``.
+each compiling them (15-30 s). See ``cpf_env.sim.precompile`` and ``docs/scaling.md``.
 
 Example::
 
@@ -15,7 +15,7 @@ from __future__ import annotations
 import argparse
 from collections.abc import Sequence
 
-from cpf_commands.arguments import add_scenarios_argument
+from cpf_commands.common.arguments import add_scenarios_argument
 
 __all__ = ["precompile_main"]
 
@@ -30,7 +30,7 @@ def precompile_main(argv: Sequence[str] | None = None) -> int:
     )
     add_scenarios_argument(parser, "scenarios to exercise (default: all registered ones)")
     args = parser.parse_args(argv)
-    from cpf_env.precompile import precompile
+    from cpf_env.sim.precompile import precompile
 
     print(
         "cpf-precompile: loading the kernels, or compiling them if the cache is cold "

@@ -29,7 +29,7 @@ import numpy as np
 from tqdm.auto import tqdm
 
 import cpf_env
-from cpf_env.sim import FleetSim
+from cpf_env.sim.fleet import FleetSim
 
 if TYPE_CHECKING:
     from agents import FleetVecEnv

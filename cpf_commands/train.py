@@ -17,7 +17,7 @@ import argparse
 import json
 from collections.abc import Sequence
 
-from cpf_commands.arguments import positive_int
+from cpf_commands.common.arguments import positive_int
 from cpf_env import scenarios
 
 __all__ = ["train_main"]
@@ -26,8 +26,8 @@ __all__ = ["train_main"]
 def _parser() -> argparse.ArgumentParser:
     from agents.training import TrainConfig
     from baselines import POLICIES
-    from cpf_env.residual import EXTRAS, RESIDUAL_MODES
-    from cpf_env.reward import REWARD_FORMS
+    from cpf_env.envs.residual import EXTRAS, RESIDUAL_MODES
+    from cpf_env.scenarios.reward_weights import REWARD_FORMS
 
     defaults = TrainConfig()
     parser = argparse.ArgumentParser(

@@ -8,7 +8,7 @@ Factories (PettingZoo convention)::
     raw = cpf_env.raw_env(scenario, max_steps=500)   # the unwrapped class
 
 Scenarios: ``cpf_env.scenarios.list_scenarios()``; the benchmark suite:
-``cpf_env.suite.list_suite()``. Documentation: ``docs/`` in the repository
+``cpf_env.scenarios.suite.list_suite()``. Documentation: ``docs/`` in the repository
 (``docs/environment.md`` for the interface, ``docs/model.md`` for the equations).
 """
 
@@ -19,13 +19,13 @@ from typing import Any
 from pettingzoo.utils.env import AECEnv
 from pettingzoo.utils.wrappers import OrderEnforcingWrapper
 
-from cpf_env import scenarios, suite
-from cpf_env.aec import CheckedAEC
-from cpf_env.env import CooperativePathFollowingEnv
-from cpf_env.gym_envs import register_envs
-from cpf_env.observation import ObsLayout
-from cpf_env.scenarios import Scenario
-from cpf_env.sim import FleetSim
+from cpf_env import scenarios
+from cpf_env.envs.aec import CheckedAEC
+from cpf_env.envs.gym_envs import register_envs
+from cpf_env.envs.parallel import CooperativePathFollowingEnv
+from cpf_env.scenarios import Scenario, suite
+from cpf_env.sim.fleet import FleetSim
+from cpf_env.sim.observation import ObsLayout
 
 __all__ = [
     "CooperativePathFollowingEnv",
@@ -87,7 +87,7 @@ def env(scenario: str | Scenario = "wang2014", **kwargs: Any) -> AECEnv:
 
     Arguments, spaces and agents are those of ``parallel_env`` (``max_cycles``
     included). Each action is checked at the turn it is given: a bad one raises
-    ``ValueError`` and the same agent acts again (``cpf_env.aec.CheckedAEC``).
+    ``ValueError`` and the same agent acts again (``cpf_env.envs.aec.CheckedAEC``).
     PettingZoo's ``OrderEnforcingWrapper`` is applied; its
     ``AssertOutOfBoundsWrapper`` is not, because force commands beyond the
     limits are legal (the plant saturates them).

@@ -20,12 +20,13 @@ from typing import Any
 import numpy as np
 
 import cpf_env
-from cpf_env.disturbances import Disturbances, GaussMarkov, OceanCurrent
-from cpf_env.graph import Graph, LinkImpairments
-from cpf_env.paths import Circle, Lemniscate, StraightLine
-from cpf_env.reward import RewardWeights
+from cpf_env.model.disturbances import Disturbances, GaussMarkov, OceanCurrent
+from cpf_env.model.graph import Graph
+from cpf_env.model.links import LinkImpairments
+from cpf_env.model.paths import Circle, Lemniscate, StraightLine
+from cpf_env.model.vessel import CYBERSHIP2, damping_matrix
 from cpf_env.scenarios import InitialState, Scenario, SpeedSchedule
-from cpf_env.vessel import CYBERSHIP2, damping_matrix
+from cpf_env.scenarios.reward_weights import RewardWeights
 
 
 def build_scenario() -> Scenario:

@@ -14,7 +14,7 @@ Usage::
 
 from __future__ import annotations
 
-from cpf_commands.cli import run_main
+from cpf_commands.run.cli import run_main
 
 PROG = "reproduce_wang2014.py"
 

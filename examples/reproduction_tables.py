@@ -25,10 +25,10 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from cpf_commands.experiment import run_episode
-from cpf_commands.reproduce import Claim, policy_options, reproduce, settling_time
+from cpf_commands.run.experiment import run_episode
+from cpf_commands.run.reproduce import Claim, policy_options, reproduce, settling_time
 from cpf_env import scenarios
-from cpf_env.metrics import episode_metrics
+from cpf_env.sim.metrics import episode_metrics
 
 #: (scenario, leakage) columns of the claims table.
 READINGS = (

@@ -1,7 +1,7 @@
 """Which reward form tells controllers apart? The measurement behind the default.
 
 Runs ``nn_dsc`` and ``backstepping`` on a scenario under both reward forms of
-``cpf_env.reward`` (``log``, the default, and ``quadratic``) and prints, per
+``cpf_env.sim.reward`` (``log``, the default, and ``quadratic``) and prints, per
 form and policy: the episodic cost, the share of it paid in the first 10 s,
 each term's share of the cost over the last quarter, and the tail RMS path
 error. A good learning signal ranks the policies as their steady-state
@@ -25,7 +25,7 @@ def measure(scenario_name: str, policy_name: str, form: str, seeds: Sequence[int
     """Cost split of ``policy_name`` on ``scenario_name`` under ``form``, averaged over seeds."""
     from baselines import make_policy
     from cpf_env import FleetSim, scenarios
-    from cpf_env.reward import REWARD_TERMS
+    from cpf_env.scenarios.reward_weights import REWARD_TERMS
 
     base = scenarios.get(scenario_name)
     scenario = base.replace(reward=dataclasses.replace(base.reward, form=form))

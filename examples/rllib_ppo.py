@@ -47,8 +47,8 @@ except ImportError as error:  # an optional stack: say which extra brings it
     ) from error
 
 import cpf_env
-from cpf_commands.arguments import positive_int
-from cpf_env.env import INFO_LEVELS
+from cpf_commands.common.arguments import positive_int
+from cpf_env.envs.parallel import INFO_LEVELS
 
 #: Name the env is registered under (``config.environment(ENV_NAME, env_config=...)``).
 ENV_NAME = "cpf_env_parallel"

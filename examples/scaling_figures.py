@@ -87,7 +87,7 @@ def _training_process_rss(fleets: int, scenario: str, queue: multiprocessing.Que
 def memory(scenario: str, fleet_counts: tuple[int, int]) -> dict[str, float]:
     """Simulator bytes per fleet, and a training process's RSS slope and intercept."""
     from cpf_env.scenarios import get
-    from cpf_env.sim import FleetSim
+    from cpf_env.sim.fleet import FleetSim
 
     sim = FleetSim(get(scenario), num_fleets=256)
     arrays = sum(value.nbytes for value in sim.arrays) / 256
@@ -112,9 +112,9 @@ def ray_figures(scenario: str, tiny_trials: int, steps: int, fleets: int) -> dic
     """Idle Ray memory and start-up; overhead per trial; training throughput per trial."""
     import ray
 
-    from cpf_commands.sweep import run_sweep
-    from cpf_commands.sweep_spec import SweepSpec
-    from cpf_env.precompile import precompile
+    from cpf_commands.sweep.cli import run_sweep
+    from cpf_commands.sweep.spec import SweepSpec
+    from cpf_env.sim.precompile import precompile
 
     precompile([scenario])
     start = time.perf_counter()

@@ -35,8 +35,8 @@ except ImportError as error:  # an optional stack: say which extra brings it
     ) from error
 
 import cpf_env
-from cpf_commands.arguments import positive_int
-from cpf_env.torchrl_env import GROUP, TorchRLFleetEnv
+from cpf_commands.common.arguments import positive_int
+from cpf_env.envs.torchrl_env import GROUP, TorchRLFleetEnv
 
 
 def main() -> None:

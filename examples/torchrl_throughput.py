@@ -13,7 +13,7 @@ Routes:
 1. ``PettingZooWrapper(cpf_env.parallel_env(info_level=...))``, one group of
    vessels, one fleet, at the three info levels (a route that fails is
    reported with its error);
-2. ``cpf_env.torchrl_env.TorchRLFleetEnv`` at several batch sizes B.
+2. ``cpf_env.envs.torchrl_env.TorchRLFleetEnv`` at several batch sizes B.
 
 Prints vessel-steps per second and the ratio native / wrapper at B = 256
 (the issue's target is >= 20). Needs the ``torchrl`` extra. Usage::
@@ -39,8 +39,8 @@ except ImportError as error:  # an optional stack: say which extra brings it
     ) from error
 
 import cpf_env
-from cpf_commands.arguments import positive_int
-from cpf_env.torchrl_env import TorchRLFleetEnv
+from cpf_commands.common.arguments import positive_int
+from cpf_env.envs.torchrl_env import TorchRLFleetEnv
 
 
 def vessel_steps_per_second(env: EnvBase, vessels: int, seconds: float, blocks: int = 3) -> float:

@@ -114,7 +114,7 @@ def supersuit_env(fleets: int) -> VecEnv:
 
     import cpf_env
     from baselines import make_policy
-    from cpf_env.wrappers import ResidualWrapper
+    from cpf_env.envs.wrappers import ResidualWrapper
 
     def one() -> Any:
         env = cpf_env.parallel_env("bench_saturation")

@@ -13,12 +13,12 @@ from pathlib import Path as FilePath
 import numpy as np
 
 from cpf_env import scenarios
-from cpf_env.disturbances import Disturbances
-from cpf_env.graph import Graph, SwitchingTopology
-from cpf_env.paths import StraightLine
+from cpf_env.model.disturbances import Disturbances
+from cpf_env.model.graph import Graph, SwitchingTopology
+from cpf_env.model.paths import StraightLine
+from cpf_env.model.vessel import CYBERSHIP2, VesselModel
 from cpf_env.scenarios import InitialState, Scenario
-from cpf_env.sim import FleetSim
-from cpf_env.vessel import CYBERSHIP2, VesselModel
+from cpf_env.sim.fleet import FleetSim
 
 ROOT = FilePath(__file__).resolve().parents[1]
 

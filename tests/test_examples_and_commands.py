@@ -7,10 +7,10 @@ from pathlib import Path
 import pytest
 
 from baselines import POLICIES
-from cpf_commands.experiment import run_episode
+from cpf_commands.run.experiment import run_episode
 from cpf_commands.speed import measure, speed_main
 from cpf_env import scenarios
-from cpf_env.metrics import episode_metrics
+from cpf_env.sim.metrics import episode_metrics
 
 ROOT = Path(__file__).resolve().parents[1]
 

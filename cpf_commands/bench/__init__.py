@@ -1,0 +1,11 @@
+"""``cpf-bench``: policies x scenarios x paired seeds, batched, with statistics.
+
+``cli`` is the command and holds ``run_bench``, its Python entry point;
+``episodes`` runs every seed of one (policy, scenario) cell in one batched
+simulator and reduces each episode to its metrics; ``stats`` holds the
+interval estimators; ``report`` builds the summary rows and ``views`` the
+markdown tables and figures.
+
+What it may import: ``cpf_env``, ``baselines``, ``agents`` and
+``cpf_commands.common``.
+"""

@@ -1,0 +1,222 @@
+"""Statistics tables of a benchmark run: summary rows and the CSV files.
+
+``summarize`` turns per-episode results into one row per policy x scenario x
+metric (mean and IQM with 95 % bootstrap intervals, failures, the ratio to
+the reference policy's mean and the probability of beating it on a paired
+episode), plus, when the reference ran, rows over all scenarios together
+(scenario ``"all"``, metric ``<metric>_normalized``): every episode divided
+by the reference's mean on its scenario, resampled by a bootstrap stratified
+by scenario. Numbers are written with ``repr`` (shortest round-trip form) and
+the files carry no time stamps or paths, so the same arguments give the same
+bytes.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from cpf_commands.bench import stats
+from cpf_commands.bench.episodes import METRICS
+
+__all__ = ["HEADLINE", "SUMMARY_COLUMNS", "CellResult", "episodes_csv", "summarize", "summary_csv"]
+
+#: Metrics shown in summary.md and drawn as figures: (metric, heading), cost first.
+HEADLINE: tuple[tuple[str, str], ...] = (
+    ("cost", "cost"),
+    ("cost_window", "cost, final window"),
+    ("path_error_rms_window", "path error RMS, final window (m)"),
+    ("coordination_error_end", "coordination error at the end"),
+    ("speed_error_rms_window", "speed error RMS, final window (m/s)"),
+    ("control_energy", "control energy (s)"),
+    ("saturated_fraction", "saturated fraction"),
+)
+#: Metrics where higher is better (for all others lower is).
+HIGHER_IS_BETTER = frozenset({"return", "return_window", "steps"})
+
+SUMMARY_COLUMNS = (
+    "policy",
+    "scenario",
+    "metric",
+    "mean",
+    "ci_low",
+    "ci_high",
+    "iqm",
+    "iqm_ci_low",
+    "iqm_ci_high",
+    "n_episodes",
+    "failures",
+    "deterministic",
+    "normalized",
+    "p_beats_reference",
+    "p_ci_low",
+    "p_ci_high",
+)
+
+
+@dataclass(frozen=True)
+class CellResult:
+    """The episodes of one policy on one scenario.
+
+    Attributes:
+        policy: Policy label.
+        scenario: Scenario name.
+        seeds: Reset seeds, one per episode (S,).
+        deterministic: Whether the scenario gives the same episode for every seed
+            (then S = 1).
+        metrics: Metric name -> values per episode, shape (S,).
+    """
+
+    policy: str
+    scenario: str
+    seeds: tuple[int, ...]
+    deterministic: bool
+    metrics: dict[str, NDArray[np.float64]]
+
+
+def _signed(metric: str, values: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Values oriented so that lower is better."""
+    return -values if metric in HIGHER_IS_BETTER else values
+
+
+def _row(
+    policy: str,
+    scenario: str,
+    metric: str,
+    strata: list[NDArray[np.float64]],
+    failures: int,
+    deterministic: bool,
+) -> dict[str, object]:
+    values = np.concatenate(strata)
+    low, high = stats.bootstrap_interval(strata)
+    iqm_low, iqm_high = stats.bootstrap_interval(strata, stats.iqm)
+    return {
+        "policy": policy,
+        "scenario": scenario,
+        "metric": metric,
+        "mean": float(values.mean()),
+        "ci_low": low,
+        "ci_high": high,
+        "iqm": float(stats.iqm(values)),
+        "iqm_ci_low": iqm_low,
+        "iqm_ci_high": iqm_high,
+        "n_episodes": int(values.size),
+        "failures": failures,
+        "deterministic": deterministic,
+        "normalized": None,
+        "p_beats_reference": None,
+        "p_ci_low": None,
+        "p_ci_high": None,
+    }
+
+
+def _compare(
+    row: dict[str, object], values: NDArray, reference: NDArray, metric: str, paired: bool
+) -> None:
+    """Fill the reference columns of ``row`` (``paired``: also the probability of beating it)."""
+    reference_mean = float(reference.mean())
+    if reference_mean != 0.0:
+        row["normalized"] = float(values.mean()) / reference_mean
+    if not paired:
+        return
+    p, low, high = stats.probability_of_beating(_signed(metric, values), _signed(metric, reference))
+    row.update(p_beats_reference=p, p_ci_low=low, p_ci_high=high)
+
+
+def _wins(values: NDArray, reference: NDArray, metric: str) -> NDArray[np.float64]:
+    """1 where ``values`` beats ``reference`` on the same seed, 1/2 on a tie, else 0."""
+    x, y = _signed(metric, values), _signed(metric, reference)
+    return (x < y) + 0.5 * (x == y)
+
+
+def _suite_rows(
+    cells: Sequence[CellResult], reference: str, by_key: dict[tuple[str, str], CellResult]
+) -> list[dict[str, object]]:
+    """Rows over all scenarios: episodes normalized by the reference's mean on their scenario."""
+    names = list(dict.fromkeys(cell.scenario for cell in cells))
+    if any((reference, name) not in by_key for name in names):
+        return []
+    references = [by_key[(reference, name)] for name in names]
+    rows = []
+    for policy in dict.fromkeys(cell.policy for cell in cells):
+        if any((policy, name) not in by_key for name in names):
+            continue  # not run on every scenario: no suite-wide row
+        own = [by_key[(policy, name)] for name in names]
+        failures = sum(int(cell.metrics["terminated"].sum()) for cell in own)
+        for metric, _ in HEADLINE:
+            means = [float(base.metrics[metric].mean()) for base in references]
+            if 0.0 in means:
+                continue
+            strata = [c.metrics[metric] / m for c, m in zip(own, means, strict=True)]
+            row = _row(policy, "all", f"{metric}_normalized", strata, failures, False)
+            row["normalized"] = row["mean"]
+            if policy != reference:
+                wins = [
+                    _wins(c.metrics[metric], base.metrics[metric], metric)
+                    for c, base in zip(own, references, strict=True)
+                ]
+                low, high = stats.bootstrap_interval(wins)
+                p = float(np.concatenate(wins).mean())
+                row.update(p_beats_reference=p, p_ci_low=low, p_ci_high=high)
+            rows.append(row)
+    return rows
+
+
+def summarize(cells: Sequence[CellResult], reference: str = "nn_dsc") -> list[dict[str, object]]:
+    """Summary rows (``SUMMARY_COLUMNS``) of every cell and metric, then the suite-wide rows.
+
+    Metrics a policy does not have (NaN in every episode, e.g. a speed-estimate
+    error without an estimator) get no row. The suite-wide rows need the
+    reference on every scenario.
+    """
+    by_key = {(cell.policy, cell.scenario): cell for cell in cells}
+    rows: list[dict[str, object]] = []
+    for cell in cells:
+        failures = int(cell.metrics["terminated"].sum())
+        base = by_key.get((reference, cell.scenario))
+        for metric in METRICS:
+            values = cell.metrics[metric]
+            if np.all(np.isnan(values)):
+                continue
+            row = _row(cell.policy, cell.scenario, metric, [values], failures, cell.deterministic)
+            if base is not None and not np.all(np.isnan(base.metrics[metric])):
+                _compare(row, values, base.metrics[metric], metric, cell.policy != reference)
+            rows.append(row)
+    return rows + _suite_rows(cells, reference, by_key)
+
+
+def _cell(value: object) -> str:
+    if value is None:
+        return ""
+    if isinstance(value, float):
+        return "" if np.isnan(value) else repr(value)
+    return str(value)
+
+
+def _table(header: Sequence[str], rows: Sequence[Sequence[object]]) -> str:
+    buffer = io.StringIO()
+    writer = csv.writer(buffer, lineterminator="\n")
+    writer.writerow(header)
+    writer.writerows([[_cell(value) for value in row] for row in rows])
+    return buffer.getvalue()
+
+
+def episodes_csv(cells: Sequence[CellResult]) -> str:
+    """``episodes.csv``: one row per episode, the metrics in ``METRICS`` order."""
+    rows = [
+        [cell.policy, cell.scenario, seed, cell.deterministic]
+        + [float(cell.metrics[metric][k]) for metric in METRICS]
+        for cell in cells
+        for k, seed in enumerate(cell.seeds)
+    ]
+    return _table(("policy", "scenario", "seed", "deterministic", *METRICS), rows)
+
+
+def summary_csv(rows: Sequence[dict[str, object]]) -> str:
+    """``summary.csv``: the rows of ``summarize``, columns ``SUMMARY_COLUMNS``."""
+    return _table(SUMMARY_COLUMNS, [[row[c] for c in SUMMARY_COLUMNS] for row in rows])

@@ -1,0 +1,137 @@
+"""Command-line entry points (argparse only here, at the edge).
+
+``cpf-run``: run a scenario with a policy (default: the paper's reproduction,
+``wang2014_fine`` with ``nn_dsc`` under the integrating weight-law reading),
+print the paper's claims with measured values where they apply (else the
+run's own metrics), and write figures and metrics.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from collections.abc import Sequence
+from typing import Any
+
+from cpf_commands.common.arguments import positive_int
+from cpf_commands.common.policies import policy_argument
+from cpf_env import scenarios
+
+__all__ = ["run_main"]
+
+#: Claims that need a part of the policy, and what it is.
+_CLAIM_NEEDS = {2: "NN", 5: "speed estimator"}
+
+
+def _run_parser(prog: str = "cpf-run") -> argparse.ArgumentParser:
+    from baselines import POLICIES
+    from baselines.gains import LEAKAGE_LAWS
+
+    parser = argparse.ArgumentParser(
+        prog=prog,
+        description="Run a scenario with a policy; write Figs. 3-7, metrics.json and "
+        "trajectory.npz; print the paper's claims with the measured values (on the paper's "
+        "scenarios wang2014 and wang2014_fine), else the run's own metrics. Without "
+        "arguments: the paper's reproduction, wang2014_fine with nn_dsc, leakage=plain.",
+    )
+    parser.add_argument("--scenario", default="wang2014_fine", choices=scenarios.list_scenarios())
+    parser.add_argument(
+        "--policy",
+        default="nn_dsc",
+        type=policy_argument,
+        help=f"a baseline ({', '.join(sorted(POLICIES))}) or a cpf-train --out folder",
+    )
+    parser.add_argument(
+        "--leakage",
+        default=None,
+        choices=LEAKAGE_LAWS,
+        help="reading of the NN weight law of nn_dsc and its ablations (default: plain on the "
+        "0.01 s scenarios *_fine, gamma_scaled elsewhere); see docs/reproduction.md",
+    )
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument(
+        "--steps",
+        type=positive_int,
+        default=None,
+        help="control steps, >= 1 (default: the scenario's episode length)",
+    )
+    parser.add_argument("--out", default="outputs", help="output directory (default: outputs)")
+    parser.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
+    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    return parser
+
+
+def _print_metrics(metrics: dict[str, Any]) -> None:
+    """The run's own steady-state metrics, for runs the paper's claims do not cover."""
+    settled = metrics["settling_time_s"]
+    lines = [
+        f"max path error {max(metrics['path_error_max']):.3g} m",
+        f"max |theta_i - theta_j| {metrics['coordination_error_max']:.3g}",
+    ]
+    if "speed_estimate_error_max" in metrics:
+        lines.append(f"max |vhat_i - v0| {max(metrics['speed_estimate_error_max']):.3g} m/s")
+    print(f"Run metrics over the last quarter (from t = {metrics['window_start_s']:.1f} s):")
+    print("  " + "; ".join(lines))
+    within = "within" if metrics["force_within_limits"] else "OUTSIDE"
+    settling = "not settled" if settled is None else f"settled (< 5 cm) from {settled:.1f} s"
+    saturated = max(metrics["saturated_fraction"])
+    print(
+        f"  forces {within} the limits; saturated on {100 * saturated:.1f} % of the steps "
+        f"(worst vessel); {settling}"
+    )
+
+
+def run_main(argv: Sequence[str] | None = None, prog: str = "cpf-run") -> int:
+    """``cpf-run``: see ``cpf-run --help``; ``prog`` names the command in its help."""
+    from cpf_commands.run.reproduce import PAPER_SCENARIOS, reproduce
+
+    parser = _run_parser(prog)
+    args = parser.parse_args(argv)
+    if not args.quiet:
+        print("Loading the simulator kernels (numba compiles them on the first run: 10-30 s)...")
+        sys.stdout.flush()
+    start = time.perf_counter()
+    try:
+        metrics, claims = reproduce(
+            args.scenario,
+            args.policy,
+            seed=args.seed,
+            steps=args.steps,
+            out=args.out,
+            figures=not args.no_figures,
+            progress=not args.quiet,
+            leakage=args.leakage,
+        )
+    except ValueError as error:
+        parser.error(str(error))
+    elapsed = time.perf_counter() - start
+    options = "".join(f", {k}={v}" for k, v in metrics["policy_options"].items())
+    print(
+        f"\n{args.scenario} with {args.policy}{options}, seed {args.seed}: "
+        f"{metrics['steps']} steps ({metrics['duration_s']:.1f} s simulated) in {elapsed:.1f} s"
+    )
+    if args.scenario in PAPER_SCENARIOS:
+        print("Claims of Wang, Wang & Peng (2014), measured over the last quarter of the run:")
+        for claim in claims:
+            verdict = "holds" if claim.holds else "NOT MET"
+            print(
+                f"  {claim.number}. [{claim.figure}] {claim.statement}\n"
+                f"     measured: {claim.measured} -> {verdict}"
+            )
+        shown = {claim.number for claim in claims}
+        for number, part in _CLAIM_NEEDS.items():
+            if number not in shown:
+                print(f"  ({number}. does not apply: {args.policy} has no {part})")
+    else:
+        print(
+            f"The paper's claims are stated for its scenarios {', '.join(PAPER_SCENARIOS)}; "
+            f"{args.scenario} is not one of them."
+        )
+        _print_metrics(metrics)
+    if "output_directory" in metrics:
+        written = "metrics.json and trajectory.npz"
+        if not args.no_figures:
+            written = "Figures, " + written
+        print(f"{written} in {metrics['output_directory']}/")
+    return 0

@@ -1,0 +1,344 @@
+"""Reproduce the paper's simulation: run, measure the five claims, write figures and metrics.
+
+The claims are those of the paper's section 4 (docs/reproduction.md), each checked over the last
+quarter of the episode with the thresholds of the project's acceptance
+criteria. They are evaluated only where they apply: on the paper's scenarios
+(``PAPER_SCENARIOS``), and each claim only for a policy that has the part it
+is about (claim 2 needs an NN, claim 5 a speed estimator). Claim 2 (the NN
+tracks the lumped uncertainty) has no threshold in the paper; it is reported
+as the relative RMS error of the NN output per axis, judged "tracks" below
+``NN_TRACKING_TOLERANCE``, next to the prediction of the steady-state formula
+(see ``predicted_nn_error``).
+
+The weight-law reading of ``nn_dsc`` (``NNDSCGains.leakage``) defaults per
+scenario (``default_leakage``): the integrating reading ``"plain"`` on the
+fine-step scenarios, which exist for it, the policy's own default elsewhere.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from baselines import POLICIES, NNDSCGains
+from cpf_commands.run.experiment import run_episode
+from cpf_commands.run.figures import write_figures
+from cpf_env.envs.parallel import make_scenario
+from cpf_env.scenarios import Scenario
+from cpf_env.scenarios.fine import FINE_SCENARIOS
+from cpf_env.sim.fleet import FleetSim
+from cpf_env.sim.metrics import Trajectory, episode_metrics, final_window
+
+__all__ = [
+    "NN_TRACKING_TOLERANCE",
+    "PAPER_SCENARIOS",
+    "Claim",
+    "default_leakage",
+    "evaluate_claims",
+    "policy_options",
+    "predicted_nn_error",
+    "reproduce",
+    "settling_time",
+    "warm_up",
+]
+
+#: Thresholds over the last quarter (m; path-variable units; m/s).
+PATH_TOLERANCE, COORDINATION_TOLERANCE, SPEED_TOLERANCE = 0.01, 0.01, 1e-4
+#: Relative RMS error below which the NN is said to track f_i.
+NN_TRACKING_TOLERANCE = 0.2
+#: Path error (m) below which every vessel counts as settled (``settling_time``).
+SETTLING_TOLERANCE = 0.05
+#: The paper's simulation, at the RL control step and at the fine one.
+PAPER_SCENARIOS = ("wang2014", "wang2014_fine")
+
+
+@dataclass(frozen=True)
+class Claim:
+    """One claim of the paper with its measured value.
+
+    Attributes:
+        number: 1..5 as in docs/reproduction.md.
+        figure: The paper's figure.
+        statement: What the paper claims.
+        measured: What this run measured, in words with numbers.
+        holds: Whether the measured value meets the stated threshold.
+        values: The measured numbers by name (JSON-ready), e.g. ``relative_error``
+            and ``predicted_relative_error`` (surge, sway, yaw) for claim 2.
+    """
+
+    number: int
+    figure: str
+    statement: str
+    measured: str
+    holds: bool
+    values: dict[str, Any] = field(default_factory=dict)
+
+
+def default_leakage(scenario: str) -> str:
+    """Weight-law reading ``cpf-run`` uses on ``scenario`` unless told otherwise.
+
+    ``"plain"`` (integrating, the reading under which the NN tracks f) on the
+    fine-step scenarios of ``cpf_env.scenarios.fine``; ``"gamma_scaled"`` (the
+    policy's default, stable at 0.05 s) on every other scenario.
+    """
+    return "plain" if scenario in FINE_SCENARIOS else NNDSCGains().leakage
+
+
+def settling_time(trajectory: Trajectory, tolerance: float = SETTLING_TOLERANCE) -> float | None:
+    """Time (s) from which every vessel's path error stays below ``tolerance`` (m).
+
+    Returns None if the last sample is not settled, 0 if all samples are.
+    """
+    worst = trajectory.errors[..., 0].max(axis=1)
+    unsettled = np.flatnonzero(worst >= tolerance)
+    if unsettled.size == 0:
+        return 0.0
+    if unsettled[-1] + 1 >= worst.shape[0]:
+        return None
+    return float(trajectory.time[unsettled[-1] + 1])
+
+
+def _nn_relative_error(trajectory: Trajectory, vessel: int) -> NDArray[np.float64] | None:
+    """RMS(nn - f) / RMS(f) per axis over the last quarter, or None without an NN."""
+    nn, true = trajectory.extras.get("nn_output"), trajectory.extras.get("lumped_true")
+    if nn is None or true is None or not np.any(nn):
+        return None
+    window = final_window(trajectory)
+    error = nn[window, vessel] - true[window, vessel]
+    scale = np.sqrt((true[window, vessel] ** 2).mean(axis=0))
+    return np.sqrt((error**2).mean(axis=0)) / np.maximum(scale, 1e-12)
+
+
+def predicted_nn_error(
+    trajectory: Trajectory, gains: NNDSCGains, vessel: int
+) -> tuple[NDArray[np.float64], float] | None:
+    """Relative RMS error of the NN that the steady-state formula predicts, per axis.
+
+    When the weights follow their equilibrium of [30], What = -g sigma e2^T
+    (g = ``gains.static_gain()``: 1/k_W, or Gamma_W/k_W under ``leakage="plain"``),
+    the NN output is -s e2 with s = g ||sigma(xi)||^2. At steady state the
+    command balances f, -K2 e2 - s e2 = f (z1 small), so the NN outputs
+    s / (K2 + s) f and misses K2 / (K2 + s) f. This returns
+    RMS(K2 / (K2 + s_t) f_t) / RMS(f_t) over the last quarter, per axis.
+
+    Args:
+        trajectory: A run with the ``nubar_dot`` and ``lumped_true`` extras.
+        gains: The gains of the run's NN.
+        vessel: 0-based vessel index.
+
+    Returns:
+        ((3,) predicted errors, mean s over the window), or None without the extras.
+    """
+    nubar_dot, true = trajectory.extras.get("nubar_dot"), trajectory.extras.get("lumped_true")
+    if nubar_dot is None or true is None:
+        return None
+    window = final_window(trajectory)
+    nu = trajectory.nu[window, vessel]
+    xi = np.concatenate([np.ones((nu.shape[0], 1)), nu, nubar_dot[window, vessel]], axis=-1)
+    sigma = np.tanh(xi @ gains.input_weights().T)  # (T, l)
+    s = gains.static_gain() * (sigma**2).sum(axis=-1, keepdims=True)  # (T, 1)
+    f = true[window, vessel]
+    k2 = np.array(gains.K2)
+    missed = k2 / (k2 + s) * f
+    predicted = np.sqrt((missed**2).mean(axis=0)) / np.maximum(np.sqrt((f**2).mean(axis=0)), 1e-12)
+    return predicted, float(s.mean())
+
+
+def _nn_claim(
+    trajectory: Trajectory, vessel: int, gains: NNDSCGains | None
+) -> tuple[str, bool, dict[str, Any]] | None:
+    """Claim 2's message, verdict and values, or None if the policy has no NN."""
+    nn_error = _nn_relative_error(trajectory, vessel)
+    if nn_error is None:
+        return None
+    message = (
+        "relative RMS error (surge, sway, yaw) over last quarter "
+        + ", ".join(f"{e:.3f}" for e in nn_error)
+        + f" (tracks if < {NN_TRACKING_TOLERANCE})"
+    )
+    values: dict[str, Any] = {"relative_error": nn_error.tolist()}
+    prediction = None if gains is None else predicted_nn_error(trajectory, gains, vessel)
+    if gains is not None and prediction is not None:
+        predicted, s = prediction
+        values.update(predicted_relative_error=predicted.tolist(), s_mean=s)
+        message += (
+            "; steady-state formula K2/(K2+s) predicts "
+            + ", ".join(f"{e:.3f}" for e in predicted)
+            + f" with s = {gains.static_gain():g} ||sigma||^2 = {s:.3g} (leakage={gains.leakage})"
+        )
+    return message, bool(np.all(nn_error < NN_TRACKING_TOLERANCE)), values
+
+
+def evaluate_claims(
+    trajectory: Trajectory,
+    metrics: dict[str, Any],
+    gains: NNDSCGains | None = None,
+    estimator: bool = True,
+) -> list[Claim]:
+    """Check the paper's claims (docs/reproduction.md) that apply to a recorded run.
+
+    Args:
+        trajectory: The run.
+        metrics: ``episode_metrics(trajectory)``.
+        gains: The NN's gains, for claim 2's steady-state prediction (None: no prediction).
+        estimator: Whether the policy estimates v0 (claim 5 applies).
+
+    Returns:
+        The claims in order, without claim 2 if the policy has no NN (its NN
+        output is identically 0) and without claim 5 if it has no estimator.
+    """
+    n = trajectory.eta.shape[1]
+    nn_vessel, force_vessel = min(1, n - 1), min(2, n - 1)
+    path = max(metrics["path_error_max"])
+    coordination = metrics["coordination_error_max"]
+    tau = np.abs(trajectory.tau_applied[:, force_vessel]).max(axis=0)
+    limits = np.maximum(
+        np.abs(trajectory.tau_min[force_vessel]), np.abs(trajectory.tau_max[force_vessel])
+    )
+    speed = metrics.get("speed_estimate_error_max") if estimator else None
+    nn = _nn_claim(trajectory, nn_vessel, gains)
+    claims = [
+        Claim(
+            1,
+            "Fig. 3",
+            "every vessel converges to a small neighbourhood of its path",
+            f"max path error over last quarter {path:.3g} m (threshold {PATH_TOLERANCE} m)",
+            path < PATH_TOLERANCE,
+            {"path_error_max": path},
+        )
+    ]
+    if nn is not None:
+        claims.append(
+            Claim(
+                2,
+                "Fig. 4",
+                f"the NN output tracks the lumped uncertainty f of vessel {nn_vessel + 1}",
+                *nn,
+            )
+        )
+    claims += [
+        Claim(
+            3,
+            "Fig. 5",
+            "coordination errors theta_i - theta_j converge near 0",
+            f"max |theta_i - theta_j| over last quarter {coordination:.3g} "
+            f"(threshold {COORDINATION_TOLERANCE})",
+            coordination < COORDINATION_TOLERANCE,
+            {"coordination_error_max": coordination},
+        ),
+        Claim(
+            4,
+            "Fig. 6",
+            f"forces of vessel {force_vessel + 1} stay within the limits",
+            "max |tau| ("
+            + ", ".join(f"{t:.3g}" for t in tau)
+            + ") vs limits ("
+            + ", ".join(f"{t:.3g}" for t in limits)
+            + ")",
+            bool(np.all(tau <= limits + 1e-12)) and metrics["force_within_limits"],
+            {"force_max_abs": tau.tolist(), "limits": limits.tolist()},
+        ),
+    ]
+    if speed is not None:
+        claims.append(
+            Claim(
+                5,
+                "Fig. 7",
+                "every speed estimate converges to v0, also where b_i = 0",
+                f"max |vhat_i - v0| over last quarter {max(speed):.3g} m/s "
+                f"(threshold {SPEED_TOLERANCE})",
+                max(speed) < SPEED_TOLERANCE,
+                {"speed_estimate_error_max": max(speed)},
+            )
+        )
+    return claims
+
+
+def warm_up(scenario: str | Scenario) -> None:
+    """Compile (or load from numba's cache) the simulator kernels a run uses."""
+    sim = FleetSim(make_scenario(scenario), num_fleets=1)
+    sim.reset(seeds=[0])
+    sim.accelerations()
+    sim.step(np.zeros((1, sim.scenario.n, sim.act_dim)))
+
+
+def policy_options(policy: str, scenario: str, leakage: str | None) -> dict[str, Any]:
+    """Options for ``make_policy``: the weight-law reading, for policies that have one."""
+    gains_type = getattr(POLICIES.get(policy), "gains_type", None)
+    if gains_type is None or "leakage" not in gains_type.option_names():
+        if leakage is not None:
+            raise ValueError(
+                f"policy {policy!r} has no NN weight law; leave out the leakage option "
+                "(it applies to nn_dsc and its ablations)."
+            )
+        return {}
+    return {"leakage": default_leakage(scenario) if leakage is None else leakage}
+
+
+def reproduce(
+    scenario: str | Scenario = "wang2014_fine",
+    policy: str = "nn_dsc",
+    seed: int = 0,
+    steps: int | None = None,
+    out: str | Path | None = "outputs",
+    figures: bool = True,
+    progress: bool = False,
+    leakage: str | None = None,
+) -> tuple[dict[str, Any], list[Claim]]:
+    """Run the reproduction and write ``metrics.json``, ``trajectory.npz`` and figures.
+
+    Args:
+        scenario: Scenario name or object.
+        policy: A baseline name or a ``cpf-train --out`` folder (``resolve_policy``).
+        seed: Seed of environment and policy.
+        steps: Control steps (default: the scenario's episode length).
+        out: Output directory; a subdirectory ``<scenario>_<policy>`` is written.
+            None writes nothing.
+        figures: Write the PNG figures.
+        progress: Show a progress bar (after compiling the kernels, so that its
+            time estimate is that of the run).
+        leakage: Weight-law reading of nn_dsc and its ablations (default:
+            ``default_leakage(scenario)``); must be None for other policies.
+
+    Returns:
+        (metrics, claims); the claims are empty off the paper's scenarios.
+        ``metrics`` adds ``scenario``, ``policy``, ``policy_options``, ``seed``,
+        ``settling_time_s``, ``claims`` (each with ``holds``) and, when it
+        writes, ``output_directory``.
+    """
+    resolved = make_scenario(scenario)
+    options = policy_options(policy, resolved.name, leakage)
+    if progress:
+        warm_up(resolved)
+    trajectory = run_episode(
+        resolved, policy, seed=seed, steps=steps, policy_options=options, progress=progress
+    )
+    metrics = episode_metrics(trajectory)
+    policy_type = POLICIES.get(policy)
+    claims: list[Claim] = []
+    if resolved.name in PAPER_SCENARIOS:
+        gains = NNDSCGains.from_options(options) if "leakage" in options else None
+        estimator = not getattr(policy_type, "global_speed", False)
+        claims = evaluate_claims(trajectory, metrics, gains, estimator)
+    metrics.update(
+        scenario=resolved.name,
+        policy=policy,
+        policy_options=options,
+        seed=seed,
+        settling_time_s=settling_time(trajectory),
+        claims=[asdict(claim) for claim in claims],
+    )
+    if out is not None:
+        directory = Path(out) / f"{resolved.name}_{Path(policy).name}"
+        directory.mkdir(parents=True, exist_ok=True)
+        (directory / "metrics.json").write_text(json.dumps(metrics, indent=2))
+        trajectory.save(str(directory / "trajectory.npz"))
+        if figures:
+            write_figures(trajectory, directory)
+        metrics["output_directory"] = str(directory)
+    return metrics, claims

@@ -1,0 +1,375 @@
+"""Residual control, batched: a base policy's command plus a learner's bounded correction.
+
+The learner outputs, per vessel, an action a in [-1, 1]^k. Where it acts is
+the ``mode``:
+
+==================  ==  ==============================================================
+mode                k   applied command of vessel i
+==================  ==  ==============================================================
+``force``           3   tau0 = tau_base + scale * tau_limit * a        (default)
+``force_and_rate``  4   as ``force``, and theta_dot = theta_dot_base + scale *
+                        theta_dot_max * a_3
+``kinematic``       3   the base tracks a point moved by d = kinematic_scale * a in
+                        its own body frame: it is shown z1 - d instead of z1, which
+                        shifts its desired velocity alpha = -K1 z1 + ... by K1 d
+==================  ==  ==============================================================
+
+Everything is composed in physical units before the plant's saturation, which
+stays the only clip; messages (and theta_dot except in ``force_and_rate``)
+are the base's. tau_limit is the per-axis magnitude max(|tau_min|, |tau_max|).
+With a = 0 the base policy's actions pass through unchanged, bit for bit.
+
+What the base policy is told (``hide_residual_from_base``, default True): the
+observation's last applied force minus the last force residual. A saturation
+auxiliary system (the reference's pi, PAPER eq. [21] in ``docs/model.md``)
+compares the applied force with its own command; told the raw applied force,
+it would take every residual for saturation and push back (its state settles
+at residual / K_pi). Told the applied force minus the residual, it sees only
+what the actuators failed to deliver: no residual when nothing saturates.
+
+The learner's input is the vessel's local observation, optionally followed by
+extras that are local by construction (``EXTRAS``):
+
+=====================  ==  ==========================================================
+extra                  #   content
+=====================  ==  ==========================================================
+``base_action``        4   the base's tau0 / tau_limit and theta_dot / theta_dot_max
+``base_signals``       7   the base's own states: speed estimate (m/s), DSC filter
+                           derivative nubar_dot (3), auxiliary state pi (3)
+``multiscale_errors``  9   tanh(z1 / s) for s = 0.01, 0.1, 1 (m, m, rad): the path
+                           error resolved from millimetres to metres
+=====================  ==  ==========================================================
+
+``base_action`` is not available in ``kinematic`` mode (the base acts only
+once the correction is known). ``base_signals`` needs a base policy that
+reports ``diagnostics`` (the analytic policies do).
+
+Example:
+    >>> import numpy as np
+    >>> from cpf_env import FleetSim, scenarios
+    >>> from baselines import make_policy
+    >>> sim = FleetSim(scenarios.get("wang2014"), num_fleets=2)
+    >>> loop = ResidualController(sim.scenario, make_policy("nn_dsc", sim), num_fleets=2)
+    >>> inputs = loop.observe(sim.reset(seeds=[0, 1]))
+    >>> inputs.shape, loop.action_size
+    ((2, 5, 26), 3)
+    >>> obs = sim.step(loop.compose(np.zeros((2, 5, 3))))
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any, Protocol
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from cpf_env.scenarios import Scenario
+from cpf_env.sim.fleet import observation_layout
+from cpf_env.sim.observation import ObsLayout
+
+__all__ = [
+    "EXTRAS",
+    "RESIDUAL_MODES",
+    "BasePolicy",
+    "ResidualConfig",
+    "ResidualController",
+    "ZeroPolicy",
+]
+
+Array = NDArray[np.float64]
+
+#: Where the correction acts, and its action size k.
+RESIDUAL_MODES = {"force": 3, "force_and_rate": 4, "kinematic": 3}
+#: Optional local inputs for the learner, and their sizes.
+EXTRAS = {"base_action": 4, "base_signals": 7, "multiscale_errors": 9}
+#: Scales (m, m, rad) of the squashed path errors of ``multiscale_errors``.
+MULTISCALE = (0.01, 0.1, 1.0)
+
+
+class BasePolicy(Protocol):
+    """What a base policy must offer (the analytic policies of ``baselines`` do).
+
+    ``act_batch(obs (B, n, obs_dim)) -> (B, n, 4 + m)`` and ``reset()``. A batched
+    vector env that restarts single fleets also needs ``reset_fleets(mask)`` and
+    ``act_batch(obs, fleets=index)``; ``base_signals`` needs ``diagnostics``.
+    """
+
+    def act_batch(self, obs: ArrayLike, fleets: ArrayLike | None = None) -> Array:
+        """Actions of the given fleets."""
+        ...
+
+    def reset(self, seed: int | None = None) -> None:
+        """Forget all internal states."""
+        ...
+
+
+@dataclass(frozen=True)
+class ResidualConfig:
+    """How the learner's correction enters (see the module docstring).
+
+    Attributes:
+        mode: ``"force"``, ``"force_and_rate"`` or ``"kinematic"``.
+        scale: Fraction of the force limit (and of theta_dot_max) per unit of
+            action, in (0, 10]; 0.2 means a full action moves the command by
+            20 % of the limit.
+        kinematic_scale: Offset (m, m, rad) per unit of action in ``kinematic`` mode.
+        extras: Names from ``EXTRAS`` appended to the learner's input, in this order.
+        hide_residual_from_base: Show the base the applied force minus the
+            residual (its auxiliary system then reacts to saturation only).
+    """
+
+    mode: str = "force"
+    scale: float = 0.2
+    kinematic_scale: tuple[float, float, float] = (0.05, 0.05, 0.05)
+    extras: tuple[str, ...] = ()
+    hide_residual_from_base: bool = True
+
+    def __post_init__(self) -> None:
+        if self.mode not in RESIDUAL_MODES:
+            raise ValueError(
+                f"residual mode must be one of {sorted(RESIDUAL_MODES)}, got {self.mode!r}."
+            )
+        if not (isinstance(self.scale, int | float) and 0.0 < float(self.scale) <= 10.0):
+            raise ValueError(
+                f"residual scale must be a number in (0, 10] (a fraction of the limits), "
+                f"got {self.scale!r}."
+            )
+        kinematic = np.asarray(self.kinematic_scale, dtype=np.float64)
+        if kinematic.shape != (3,) or not np.all(np.isfinite(kinematic) & (kinematic > 0.0)):
+            raise ValueError(
+                "kinematic_scale must be three positive offsets (m, m, rad), "
+                f"got {self.kinematic_scale!r}."
+            )
+        object.__setattr__(self, "kinematic_scale", tuple(float(x) for x in kinematic))
+        extras = (self.extras,) if isinstance(self.extras, str) else tuple(self.extras)
+        unknown = [name for name in extras if name not in EXTRAS]
+        if unknown or len(set(extras)) != len(extras):
+            raise ValueError(
+                f"extras must be distinct names from {sorted(EXTRAS)}, got {list(extras)}."
+            )
+        if self.mode == "kinematic" and "base_action" in extras:
+            raise ValueError(
+                "extra 'base_action' is not available in 'kinematic' mode: the base acts only "
+                "after the correction is known. Drop it, or use mode='force'."
+            )
+        object.__setattr__(self, "extras", extras)
+
+    @property
+    def action_size(self) -> int:
+        """k, the learner's action length per vessel."""
+        return RESIDUAL_MODES[self.mode]
+
+    def input_size(self, layout: ObsLayout) -> int:
+        """The learner's input length per vessel: observation plus extras."""
+        return layout.size + sum(EXTRAS[name] for name in self.extras)
+
+
+class ZeroPolicy:
+    """The base of a learner that commands everything itself: all-zero actions.
+
+    Args:
+        act_dim: Action length per vessel, 4 + m.
+    """
+
+    def __init__(self, act_dim: int) -> None:
+        self.act_dim = act_dim
+        self.diagnostics: dict[str, Array] = {}
+
+    def act_batch(self, obs: ArrayLike, fleets: ArrayLike | None = None) -> Array:
+        """Zeros of shape (rows, n, 4 + m)."""
+        del fleets
+        shape = np.shape(obs)
+        return np.zeros((shape[0], shape[1], self.act_dim))
+
+    def reset(self, seed: int | None = None) -> None:
+        """Nothing to forget."""
+        del seed
+
+    def reset_fleets(self, fleets: ArrayLike) -> None:
+        """Nothing to forget."""
+        del fleets
+
+
+class ResidualController:
+    """A base policy plus a learner's correction for B fleets (no Gym code).
+
+    Call ``observe(obs)`` with every new observation batch (after reset and
+    after each step), then ``compose(a)`` with the learner's action to get the
+    command for ``FleetSim.step``.
+
+    Args:
+        scenario: The task (limits, dt, layout).
+        base_policy: Any ``BasePolicy``; None commands nothing (a learner from
+            scratch, with ``mode="force_and_rate"`` and ``scale=1``).
+        num_fleets: B.
+        config: ``ResidualConfig`` (default: force residual, scale 0.2, no extras).
+
+    Attributes:
+        layout: The observation layout.
+        input_size: Length of the learner's input per vessel, obs_dim + extras.
+        action_size: k.
+        base_actions: (B, n, 4 + m) the base's last actions (float64).
+        residual: (B, n, k) the last correction in physical units (N, N, N m
+            [, 1/s]; m, m, rad in ``kinematic`` mode).
+    """
+
+    def __init__(
+        self,
+        scenario: Scenario,
+        base_policy: BasePolicy | None,
+        num_fleets: int,
+        config: ResidualConfig | None = None,
+    ) -> None:
+        self.scenario = scenario
+        self.config = config = ResidualConfig() if config is None else config
+        self.layout: ObsLayout = observation_layout(scenario)
+        self.n, self.num_fleets = scenario.n, int(num_fleets)
+        self.act_dim = 4 + scenario.message_size
+        self.base = ZeroPolicy(self.act_dim) if base_policy is None else base_policy
+        if "base_signals" in config.extras and not hasattr(self.base, "diagnostics"):
+            raise ValueError(
+                f"extra 'base_signals' reads the base policy's diagnostics, and "
+                f"{type(self.base).__name__} has none; drop the extra or use an analytic policy."
+            )
+        tau_min, tau_max = scenario.tau_limits
+        self._tau_scale = np.maximum(np.abs(tau_min), np.abs(tau_max))  # (n, 3)
+        self._theta_dot_max = float(scenario.theta_dot_max)
+        self.action_size = config.action_size
+        self.input_size = config.input_size(self.layout)
+        shape = (self.num_fleets, self.n)
+        self.base_actions = np.zeros((*shape, self.act_dim))
+        self.residual = np.zeros((*shape, self.action_size))
+        self._force_residual = np.zeros((*shape, 3))
+        self._obs = np.zeros((*shape, self.layout.size))
+        self._signals = np.zeros((*shape, EXTRAS["base_signals"]))
+
+    # --- the loop -------------------------------------------------------------------------
+
+    def reset(self, seed: int | None = None) -> None:
+        """Forget the base's states and the last correction of every fleet."""
+        self.base.reset(seed=seed)
+        self.residual[:] = 0.0
+        self._force_residual[:] = 0.0
+
+    def reset_fleets(self, fleets: NDArray[np.bool_]) -> None:
+        """Forget the base's states and the last correction of the fleets in the (B,) mask."""
+        reset_fleets = getattr(self.base, "reset_fleets", None)
+        if reset_fleets is None:
+            raise TypeError(
+                f"{type(self.base).__name__} has no reset_fleets(mask): a batched env cannot "
+                "restart single fleets of it. Give the base policy that method."
+            )
+        reset_fleets(fleets)
+        self.residual[fleets] = 0.0
+        self._force_residual[fleets] = 0.0
+        self._signals[fleets] = 0.0
+
+    def observe(
+        self, obs: ArrayLike, fleets: Sequence[int] | NDArray[np.int64] | None = None
+    ) -> Array:
+        """Take new observations; return the learner's input.
+
+        Outside ``kinematic`` mode the base acts here, on the observation it is
+        shown (its internal states advance one step).
+
+        Args:
+            obs: (B, n, obs_dim) observations; with ``fleets``, one row per listed fleet.
+            fleets: Indices of the fleets observed (default: all), e.g. the fleets
+                just reset by a vector env.
+
+        Returns:
+            (rows, n, input_size) float64: observation and extras.
+        """
+        index = slice(None) if fleets is None else np.asarray(fleets, dtype=np.int64)
+        batch = np.asarray(obs, dtype=np.float64)
+        self._obs[index] = batch
+        if self.config.mode != "kinematic":
+            shown = self._shown(batch, index, offset=None)
+            if fleets is None:
+                self.base_actions[:] = self.base.act_batch(shown)
+            else:
+                listed = np.asarray(fleets, dtype=np.int64)
+                self.base_actions[listed] = self.base.act_batch(shown, fleets=listed)
+            self._record_signals(index)
+        return self._inputs(batch, index)
+
+    def compose(self, action: ArrayLike) -> Array:
+        """The command for the plant from the learner's action.
+
+        Args:
+            action: (B, n, k) in [-1, 1] (values outside are clipped to it).
+
+        Returns:
+            (B, n, 4 + m) float64: force command (N, N, N m), theta_dot (1/s), message.
+        """
+        a = np.clip(np.asarray(action, dtype=np.float64), -1.0, 1.0)
+        expected = (self.num_fleets, self.n, self.action_size)
+        if a.shape != expected:
+            raise ValueError(
+                f"residual actions must have shape (B, n, k) = {expected}, got {a.shape}."
+            )
+        if not np.all(np.isfinite(a)):
+            raise ValueError("residual actions must be finite.")
+        scale = self.config.scale
+        if self.config.mode == "kinematic":
+            self.residual = np.asarray(self.config.kinematic_scale) * a
+            shown = self._shown(self._obs, slice(None), offset=self.residual)
+            self.base_actions = self.base.act_batch(shown)
+            self._record_signals(slice(None))
+            return self.base_actions.copy()
+        command = self.base_actions.copy()
+        force = scale * self._tau_scale * a[..., :3]
+        command[..., :3] += force
+        self._force_residual = force
+        if self.config.mode == "force_and_rate":
+            rate = scale * self._theta_dot_max * a[..., 3]
+            command[..., 3] += rate
+            self.residual = np.concatenate([force, rate[..., None]], axis=-1)
+        else:
+            self.residual = force
+        return command
+
+    # --- helpers --------------------------------------------------------------------------
+
+    def _shown(self, obs: Array, index: slice | NDArray[np.int64], offset: Array | None) -> Array:
+        """The observation the base policy is shown (see the module docstring)."""
+        shown = obs
+        if self.config.hide_residual_from_base:
+            shown = obs.copy()
+            shown[..., self.layout.tau] -= self._force_residual[index]
+        if offset is not None:
+            shown = shown.copy() if shown is obs else shown
+            shown[..., self.layout.z1] -= offset[index]
+        return shown
+
+    def _inputs(self, obs: Array, index: slice | NDArray[np.int64]) -> Array:
+        """Observation followed by the configured extras, (rows, n, input_size)."""
+        parts = [obs]
+        for name in self.config.extras:
+            if name == "base_action":
+                base = self.base_actions[index]
+                parts.append(base[..., :3] / self._tau_scale)
+                parts.append(base[..., 3:4] / self._theta_dot_max)
+            elif name == "base_signals":
+                parts.append(self._signals[index])
+            else:
+                z1 = obs[..., self.layout.z1]
+                parts.extend(np.tanh(z1 / s) for s in MULTISCALE)
+        return np.concatenate(parts, axis=-1) if len(parts) > 1 else obs.copy()
+
+    def _record_signals(self, index: slice | NDArray[np.int64]) -> None:
+        """Keep the speed estimate, nubar_dot and pi of the base's last act (``base_signals``)."""
+        if "base_signals" not in self.config.extras:
+            return
+        diagnostics: dict[str, Any] = getattr(self.base, "diagnostics", {})
+        columns = {
+            "speed_estimate": slice(0, 1),
+            "nubar_dot": slice(1, 4),
+            "aux_state": slice(4, 7),
+        }
+        for name, column in columns.items():
+            if name in diagnostics:
+                value = np.asarray(diagnostics[name], dtype=np.float64)
+                self._signals[index, :, column] = value.reshape(*value.shape[:2], -1)

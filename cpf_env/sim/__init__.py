@@ -1,0 +1,13 @@
+"""The simulator: B fleets x n vessels as arrays, advanced by one compiled step.
+
+What lives here: the observation layout and its compiled pieces
+(``observation``), the compiled reward (``reward``), the arrays the step
+mutates (``arrays``), the fused step itself (``kernels``), ``FleetSim``
+(``fleet``: the batched simulator, no Gym code), trajectories and episode
+metrics (``metrics``) and the one-off compilation of every kernel
+(``precompile``).
+
+What it may import: ``cpf_env.model`` and ``cpf_env.scenarios`` (a simulator
+is built from a ``Scenario``). Never ``cpf_env.envs``: the environments are
+views of this layer.
+"""

@@ -1,0 +1,365 @@
+"""The compiled fleet step: plant, paths, links, observations and rewards, fused.
+
+One call advances B fleets x n vessels by one control period:
+
+1. saturate the force command per axis and clip the path-variable rate and
+   the message (``docs/model.md``, "Input saturation");
+2. integrate the plant (``cpf_env.model.plant``) with ``substeps`` RK4 steps, the
+   command and the environmental forces held over the control period
+   (``docs/model.md``, "Time discretization");
+3. advance theta by the commanded rate (exact for a held rate);
+4. advance the Gauss-Markov disturbance states exactly;
+5. send each vessel's packet (theta, message) and deliver, through the active
+   topology, the packets sent ``delay`` steps ago that are not lost;
+6. write observations, rewards, error metrics and termination flags.
+
+Arrays come in two named tuples (``cpf_env.sim.arrays``) built by
+``cpf_env.sim.fleet``: ``FleetArrays`` (mutable state, leading axis B) and
+``KernelConstants`` (scenario constants).
+Everything per vessel is scalar code so numba compiles one fused loop; the
+outer loop over fleets runs in parallel and fleets never interact, so fleet k
+computes the same bits whatever B is.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+from numba import prange
+
+from cpf_env.model import counter_rng
+from cpf_env.model.disturbances import (
+    D_CURRENT_MEAN,
+    D_CURRENT_STD,
+    D_CURRENT_TC,
+    D_SCALE,
+    D_WAVE_MEAN,
+    D_WAVE_STD,
+    D_WAVE_TC,
+    D_WIND_MEAN,
+    D_WIND_STD,
+    D_WIND_TC,
+    gauss_markov_step,
+)
+from cpf_env.model.paths import path_point
+from cpf_env.model.plant import plant_rhs, rk4_period
+from cpf_env.sim.arrays import (
+    ERR_HEADING,
+    ERR_PATH,
+    ERR_SPEED,
+    ERR_SYNC,
+    FleetArrays,
+    KernelConstants,
+)
+from cpf_env.sim.observation import (
+    LEADER,
+    NU,
+    SLOT_AGE,
+    SLOT_DTHETA,
+    SLOT_MSG,
+    SLOT_WEIGHT,
+    SLOTS,
+    T1,
+    T2,
+    TAU,
+    THETA,
+    V0,
+    Z1,
+    path_frame,
+)
+from cpf_env.sim.reward import failure_penalty, step_reward
+
+
+@numba.njit(cache=True, inline="always")
+def _clip(x: float, low: float, high: float) -> float:
+    return min(max(x, low), high)
+
+
+@numba.njit(cache=True)
+def topology_index(c: KernelConstants, step: int) -> int:
+    """Index of the topology member active at control ``step``."""
+    local = step % c.switch_period if c.switch_period > 0 else step
+    index = 0
+    for t in range(c.switch_steps.shape[0]):
+        if c.switch_steps[t] <= local:
+            index = t
+    return index
+
+
+@numba.njit(cache=True)
+def leader_speed(c: KernelConstants, time: float) -> float:
+    """v0 (m/s) of the piecewise-constant schedule at ``time`` (s)."""
+    value = c.v0_values[0]
+    for k in range(c.v0_times.shape[0]):
+        if c.v0_times[k] <= time:
+            value = c.v0_values[k]
+    return value
+
+
+@numba.njit(cache=True)
+def _load(a: FleetArrays, b: int, i: int, tau: np.ndarray) -> tuple:
+    """The plant's held inputs for vessel i of fleet b under applied force ``tau`` (3,)."""
+    return (
+        tau[0], tau[1], tau[2],
+        a.waves[b, i, 0] + a.wind[b, i, 0],
+        a.waves[b, i, 1] + a.wind[b, i, 1],
+        a.waves[b, i, 2] + a.wind[b, i, 2],
+        a.current[b, 0], a.current[b, 1],
+    )  # fmt: skip
+
+
+@numba.njit(cache=True)
+def _integrate_vessel(a: FleetArrays, c: KernelConstants, b: int, i: int, t0: float) -> None:
+    """RK4 over one control period for vessel i of fleet b, forces held."""
+    state = (a.eta[b, i, 0], a.eta[b, i, 1], a.eta[b, i, 2],
+             a.nu[b, i, 0], a.nu[b, i, 1], a.nu[b, i, 2])  # fmt: skip
+    x, y, psi, u, v, r = rk4_period(
+        a.params[b, i], c.disturbances[D_SCALE], t0, c.dt, c.substeps, state,
+        _load(a, b, i, a.tau_applied[b, i]),
+    )  # fmt: skip
+    a.eta[b, i, 0], a.eta[b, i, 1], a.eta[b, i, 2] = x, y, psi
+    a.nu[b, i, 0], a.nu[b, i, 1], a.nu[b, i, 2] = u, v, r
+
+
+@numba.njit(cache=True)
+def plant_accelerations(
+    a: FleetArrays, c: KernelConstants, tau: np.ndarray, out: np.ndarray
+) -> None:
+    """True body accelerations nu' (B, n, 3) at the current state under force ``tau`` (B, n, 3).
+
+    Uses the same right-hand side as the integrator, with the environmental
+    forces and current of the current step; for diagnostics (e.g. the true
+    lumped uncertainty the paper's NN learns), not used by the step itself.
+    """
+    scale = c.disturbances[D_SCALE]
+    for b in range(a.eta.shape[0]):
+        t = a.step[b] * c.dt
+        for i in range(a.eta.shape[1]):
+            rhs = plant_rhs(a.params[b, i], scale, t, a.eta[b, i, 2], a.nu[b, i, 0],
+                            a.nu[b, i, 1], a.nu[b, i, 2], _load(a, b, i, tau[b, i]))  # fmt: skip
+            out[b, i, 0], out[b, i, 1], out[b, i, 2] = rhs[3], rhs[4], rhs[5]
+
+
+@numba.njit(cache=True)
+def _apply_action(a: FleetArrays, c: KernelConstants, actions: np.ndarray, b: int, i: int) -> None:
+    """Store the command, saturate it per axis and clip rate and message."""
+    for k in range(3):
+        command = actions[b, i, k]
+        a.tau_command[b, i, k] = command
+        a.tau_applied[b, i, k] = _clip(command, c.tau_min[i, k], c.tau_max[i, k])
+    a.theta_dot[b, i] = _clip(actions[b, i, 3], -c.theta_dot_max, c.theta_dot_max)
+    for q in range(a.message.shape[2]):
+        a.message[b, i, q] = _clip(actions[b, i, 4 + q], -c.message_max, c.message_max)
+
+
+@numba.njit(cache=True)
+def _advance_disturbances(a: FleetArrays, c: KernelConstants, b: int, step: int) -> None:
+    """Advance wave, wind and current Gauss-Markov states by one control period."""
+    d, key, dt = c.disturbances, a.key[b], c.dt
+    for i in range(a.eta.shape[1]):
+        for k in range(3):
+            index = 3 * i + k
+            a.waves[b, i, k] = gauss_markov_step(
+                a.waves[b, i, k],
+                d[D_WAVE_MEAN + k],
+                d[D_WAVE_STD + k],
+                d[D_WAVE_TC],
+                dt,
+                counter_rng.normal(key, step, counter_rng.STREAM_WAVES, index),
+            )
+            a.wind[b, i, k] = gauss_markov_step(
+                a.wind[b, i, k],
+                d[D_WIND_MEAN + k],
+                d[D_WIND_STD + k],
+                d[D_WIND_TC],
+                dt,
+                counter_rng.normal(key, step, counter_rng.STREAM_WIND, index),
+            )
+    for k in range(2):
+        a.current[b, k] = gauss_markov_step(
+            a.current[b, k],
+            d[D_CURRENT_MEAN + k],
+            d[D_CURRENT_STD],
+            d[D_CURRENT_TC],
+            dt,
+            counter_rng.normal(key, step, counter_rng.STREAM_CURRENT, k),
+        )
+
+
+@numba.njit(cache=True)
+def _exchange_messages(a: FleetArrays, c: KernelConstants, b: int, step: int) -> None:
+    """Send this step's packets and deliver those sent ``delay`` steps ago.
+
+    ``step`` is the index of the step being completed; packets carry theta
+    after it and are stamped ``step + 1`` (the observation time).
+    """
+    n, depth = a.eta.shape[1], a.history.shape[1]
+    m = a.message.shape[2]
+    write = step % depth
+    for i in range(n):
+        a.history[b, write, i, 0] = a.theta[b, i]
+        for q in range(m):
+            a.history[b, write, i, 1 + q] = a.message[b, i, q]
+    sent = step - c.delay
+    if sent < 0:
+        return
+    read = sent % depth
+    member = topology_index(c, step + 1)
+    for i in range(n):
+        for k in range(c.slots.shape[1]):
+            j = c.slots[i, k]
+            if j < 0 or c.slot_weights[member, i, k] == 0.0:
+                continue
+            if c.loss_probability > 0.0:
+                draw = counter_rng.uniform(
+                    a.key[b], step, counter_rng.STREAM_LOSS, i * c.slots.shape[1] + k
+                )
+                if draw < c.loss_probability:
+                    continue
+            a.recv_theta[b, i, k] = a.history[b, read, j, 0]
+            for q in range(m):
+                a.recv_message[b, i, k, q] = a.history[b, read, j, 1 + q]
+            a.recv_step[b, i, k] = sent + 1
+
+
+@numba.njit(cache=True)
+def observe_fleet(a: FleetArrays, c: KernelConstants, b: int, speed_reference: float) -> None:
+    """Write observations, errors, rewards and flags of fleet b at its current step.
+
+    Args:
+        a: Fleet arrays.
+        c: Constants.
+        b: Fleet index.
+        speed_reference: v0 (m/s) the last step's rate is scored against.
+    """
+    n, n_slots = a.eta.shape[1], c.slots.shape[1]
+    m = a.message.shape[2]
+    step = a.step[b]
+    member = topology_index(c, step)
+    v0 = leader_speed(c, step * c.dt)
+    point = np.empty((3, 3))
+    frame = np.empty((3, 3))
+    terminated = False
+    finite = True
+    total = 0.0
+    for i in range(n):
+        obs = a.obs[b, i]
+        path_point(c.path_kinds[i], c.path_params[i], a.theta[b, i], point)
+        path_frame(a.eta[b, i], point, frame)
+        for k in range(3):
+            obs[NU + k] = a.nu[b, i, k]
+            obs[Z1 + k] = frame[0, k]
+            obs[T1 + k] = frame[1, k]
+            obs[T2 + k] = frame[2, k]
+            obs[TAU + k] = a.tau_applied[b, i, k]
+            finite = finite and math.isfinite(a.eta[b, i, k]) and math.isfinite(a.nu[b, i, k])
+        obs[THETA] = a.theta[b, i]
+        heard = c.leaders[member, i]
+        obs[LEADER] = heard
+        obs[V0] = v0 if heard > 0.0 else 0.0
+        sync = 0.0
+        for k in range(n_slots):
+            base = SLOTS + k * (SLOT_MSG + m)
+            weight = c.slot_weights[member, i, k]
+            j = c.slots[i, k]
+            if weight == 0.0:
+                for q in range(SLOT_MSG + m):
+                    obs[base + q] = 0.0
+                continue
+            sync += weight * (a.theta[b, i] - a.theta[b, j])
+            obs[base + SLOT_WEIGHT] = weight
+            obs[base + SLOT_DTHETA] = a.recv_theta[b, i, k] - a.theta[b, i]
+            obs[base + SLOT_AGE] = step - a.recv_step[b, i, k]
+            for q in range(m):
+                obs[base + SLOT_MSG + q] = a.recv_message[b, i, k, q]
+        path_error = math.sqrt(frame[0, 0] ** 2 + frame[0, 1] ** 2)
+        speed_error = a.theta_dot[b, i] - speed_reference
+        a.errors[b, i, ERR_PATH] = path_error
+        a.errors[b, i, ERR_HEADING] = frame[0, 2]
+        a.errors[b, i, ERR_SYNC] = sync
+        a.errors[b, i, ERR_SPEED] = speed_error
+        reward = step_reward(
+            c.reward_params,
+            c.dt,
+            frame[0],
+            sync,
+            speed_error,
+            a.tau_applied[b, i],
+            c.tau_scale[i],
+            a.reward_terms[b, i],
+        )
+        a.reward[b, i] = reward
+        total += reward
+        terminated = terminated or path_error > c.max_path_error
+    if terminated and not a.terminated[b]:  # the step the fleet leaves its path
+        remaining = max(c.max_steps - step, 0) * c.dt
+        penalty = failure_penalty(c.reward_params, remaining, c.max_path_error)
+        for i in range(n):
+            a.reward_terms[b, i, 5] = penalty
+            a.reward[b, i] += penalty
+            total += penalty
+    if c.team_reward:
+        for i in range(n):
+            a.reward[b, i] = total / n
+    a.terminated[b] = a.terminated[b] or terminated  # latched; reset clears it
+    a.nonfinite[b] = not finite
+
+
+@numba.njit(cache=True)
+def step_fleet(a: FleetArrays, c: KernelConstants, actions: np.ndarray, b: int) -> None:
+    """Advance fleet b by one control period (see module docstring)."""
+    step = a.step[b]
+    t0 = step * c.dt
+    v0 = leader_speed(c, t0)
+    for i in range(a.eta.shape[1]):
+        _apply_action(a, c, actions, b, i)
+        _integrate_vessel(a, c, b, i, t0)
+        a.theta[b, i] += c.dt * a.theta_dot[b, i]
+    _advance_disturbances(a, c, b, step)
+    _exchange_messages(a, c, b, step)
+    a.step[b] = step + 1
+    observe_fleet(a, c, b, v0)
+
+
+@numba.njit(cache=True)
+def reset_observation(a: FleetArrays, c: KernelConstants, b: int) -> None:
+    """Observe fleet b right after a reset; its reward and reward terms are zero."""
+    observe_fleet(a, c, b, leader_speed(c, a.step[b] * c.dt))
+    for i in range(a.eta.shape[1]):
+        a.reward[b, i] = 0.0
+        for k in range(a.reward_terms.shape[2]):
+            a.reward_terms[b, i, k] = 0.0
+
+
+# The loops over fleets only dispatch: numba's parfor pass can drop writes made
+# to named-tuple fields directly in a prange body, so every write lives in a
+# callee. Each comes serial (small B: no thread start-up, no waiting for a busy
+# core) and parallel; a fleet computes the same bits in either.
+@numba.njit(cache=True)
+def step_fleets_serial(a: FleetArrays, c: KernelConstants, actions: np.ndarray) -> None:
+    """Advance every fleet by one control period, one after the other."""
+    for b in range(a.eta.shape[0]):
+        step_fleet(a, c, actions, b)
+
+
+@numba.njit(cache=True, parallel=True)
+def step_fleets_parallel(a: FleetArrays, c: KernelConstants, actions: np.ndarray) -> None:
+    """Advance every fleet by one control period, fleets in parallel threads."""
+    for b in prange(a.eta.shape[0]):
+        step_fleet(a, c, actions, b)
+
+
+@numba.njit(cache=True)
+def observe_fleets_serial(a: FleetArrays, c: KernelConstants, fleets: np.ndarray) -> None:
+    """Observe the listed fleets after a reset, one after the other."""
+    for index in range(fleets.shape[0]):
+        reset_observation(a, c, fleets[index])
+
+
+@numba.njit(cache=True, parallel=True)
+def observe_fleets_parallel(a: FleetArrays, c: KernelConstants, fleets: np.ndarray) -> None:
+    """Observe the listed fleets after a reset, in parallel threads."""
+    for index in prange(fleets.shape[0]):
+        reset_observation(a, c, fleets[index])

@@ -1,0 +1,179 @@
+"""Residual control: the composition rule, what the base is told, and the ParallelEnv wrapper."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from pettingzoo.test import parallel_api_test
+
+import cpf_env
+from baselines import make_policy
+from cpf_env import FleetSim, scenarios
+from cpf_env.envs.residual import EXTRAS, ResidualConfig, ResidualController
+from cpf_env.envs.wrappers import ResidualWrapper
+
+SCENARIO = "bench_lossy_links"  # random starts and packet loss: every seed differs
+
+
+def wrapped(steps: int = 300, **options: object) -> ResidualWrapper:
+    env = cpf_env.parallel_env(SCENARIO, max_steps=steps)
+    return ResidualWrapper(env, make_policy("nn_dsc", env), **options)  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize("mode", ["force", "force_and_rate", "kinematic"])
+def test_zero_residual_reproduces_the_base_policy_bit_for_bit(mode: str) -> None:
+    """A whole episode (300 steps, lossy links, random start) with a = 0 equals the base alone."""
+    reference = cpf_env.parallel_env(SCENARIO, max_steps=300)
+    policy = make_policy("nn_dsc", reference)
+    expected, _ = reference.reset(seed=7)
+    env = wrapped(300, mode=mode, extras=("multiscale_errors",) if mode == "kinematic" else ())
+    observations, _ = env.reset(seed=7)
+    d = reference.layout.size
+    steps = 0
+    while reference.agents:
+        actions = policy.act(expected)
+        expected, rewards, terms, truncs, _ = reference.step(actions)
+        zero = {agent: np.zeros(env.controller.action_size, np.float32) for agent in env.agents}
+        observations, got_rewards, got_terms, got_truncs, infos = env.step(zero)
+        for agent in expected:
+            assert np.array_equal(observations[agent][:d], expected[agent])
+            assert got_rewards[agent] == rewards[agent]
+            assert np.array_equal(infos[agent]["residual"], np.zeros(env.controller.action_size))
+        assert (got_terms, got_truncs) == (terms, truncs)
+        steps += 1
+    assert steps == 300 and not env.agents
+
+
+def test_force_residual_is_composed_in_physical_units_before_saturation() -> None:
+    """tau0 = tau_base + scale * tau_limit * a; the plant saturation is the only clip."""
+    scenario = scenarios.get("wang2014")
+    sim = FleetSim(scenario, num_fleets=2)
+    loop = ResidualController(
+        scenario,
+        make_policy("nn_dsc", scenario),
+        2,
+        ResidualConfig(mode="force_and_rate", scale=0.5),
+    )
+    loop.observe(sim.reset(seeds=[0, 1]))
+    base = loop.base_actions.copy()
+    a = np.random.default_rng(0).uniform(-1.0, 1.0, size=(2, 5, 4))
+    command = loop.compose(a)
+    limit = np.array([9.2, 4.5, 3.0])
+    np.testing.assert_allclose(
+        command[..., :3], base[..., :3] + 0.5 * limit * a[..., :3], rtol=1e-14
+    )
+    np.testing.assert_allclose(command[..., 3], base[..., 3] + 0.5 * 1.0 * a[..., 3], rtol=1e-14)
+    assert np.array_equal(command[..., 4:], base[..., 4:])  # messages stay the base's
+    sim.step(command)
+    applied = sim.arrays.tau_applied
+    assert np.array_equal(applied, np.clip(command[..., :3], -limit, limit))
+
+
+def test_out_of_range_residual_is_clipped_to_the_unit_box() -> None:
+    scenario = scenarios.get("wang2014")
+    loop = ResidualController(scenario, make_policy("nn_dsc", scenario), 1)
+    loop.observe(FleetSim(scenario).reset(seeds=[0]))
+    base = loop.base_actions.copy()
+    command = loop.compose(np.full((1, 5, 3), 7.0))
+    np.testing.assert_allclose(command[..., :3], base[..., :3] + 0.2 * np.array([9.2, 4.5, 3.0]))
+
+
+@pytest.mark.parametrize("hide", [True, False])
+def test_what_the_auxiliary_system_sees_of_a_residual(hide: bool) -> None:
+    """Hidden (default): a constant, unsaturating residual leaves pi at rounding level.
+    Shown: pi settles near residual / K_pi, the residual looks like saturation."""
+    scenario = scenarios.get("wang2014")
+    sim = FleetSim(scenario)
+    base = make_policy("nn_dsc", scenario)
+    loop = ResidualController(
+        scenario, base, 1, ResidualConfig(scale=0.05, hide_residual_from_base=hide)
+    )
+    obs = sim.reset(seeds=[0])
+    for _ in range(600):  # past the saturated start
+        loop.observe(obs)
+        obs = sim.step(loop.compose(np.zeros((1, 5, 3))))
+    residual = np.zeros((1, 5, 3))
+    residual[..., 0] = 1.0  # +0.46 N surge
+    for _ in range(100):
+        loop.observe(obs)
+        obs = sim.step(loop.compose(residual))
+    assert not np.any(sim.arrays.tau_command != sim.arrays.tau_applied)  # nothing saturates
+    pi = base.diagnostics["aux_state"][0, :, 0]
+    expected = 0.05 * 9.2 / 200.0  # residual / K_pi
+    if hide:
+        assert np.all(np.abs(pi) < 1e-3 * expected)
+    else:
+        np.testing.assert_allclose(pi, expected, rtol=0.05)
+
+
+def test_extras_are_the_documented_signals() -> None:
+    scenario = scenarios.get("wang2014")
+    config = ResidualConfig(extras=("base_action", "base_signals", "multiscale_errors"))
+    base = make_policy("nn_dsc", scenario)
+    loop = ResidualController(scenario, base, 1, config)
+    obs = FleetSim(scenario).reset(seeds=[0])
+    inputs = loop.observe(obs)
+    d = loop.layout.size
+    assert inputs.shape == (1, 5, d + sum(EXTRAS.values()))
+    assert np.array_equal(inputs[..., :d], obs)
+    action = inputs[..., d : d + 4]
+    np.testing.assert_allclose(
+        action[..., :3] * np.array([9.2, 4.5, 3.0]), loop.base_actions[..., :3]
+    )
+    signals = inputs[..., d + 4 : d + 11]
+    np.testing.assert_array_equal(signals[..., 0], base.diagnostics["speed_estimate"])
+    np.testing.assert_array_equal(signals[..., 1:4], base.diagnostics["nubar_dot"])
+    z1 = obs[..., loop.layout.z1].astype(np.float64)
+    np.testing.assert_allclose(inputs[..., d + 11 : d + 14], np.tanh(z1 / 0.01))
+    np.testing.assert_allclose(inputs[..., d + 17 : d + 20], np.tanh(z1 / 1.0))
+
+
+@pytest.mark.parametrize(
+    ("options", "message"),
+    [
+        ({"mode": "torque"}, "residual mode"),
+        ({"scale": 0.0}, "residual scale"),
+        ({"scale": float("nan")}, "residual scale"),
+        ({"extras": ("v0_of_everyone",)}, "extras"),
+        ({"extras": ("base_action",), "mode": "kinematic"}, "not available in 'kinematic'"),
+        ({"kinematic_scale": (0.1, -0.1, 0.1)}, "kinematic_scale"),
+    ],
+)
+def test_bad_residual_configuration_says_what_to_fix(options: dict, message: str) -> None:
+    with pytest.raises(ValueError, match=message):
+        ResidualConfig(**options)
+
+
+@pytest.mark.filterwarnings("ignore:reset ignores options")  # api_test passes a dummy option
+def test_wrapper_passes_the_pettingzoo_api_test() -> None:
+    parallel_api_test(wrapped(40, extras=("base_action",)), num_cycles=50)
+
+
+def test_wrapper_rejects_bad_corrections_before_any_state_changes() -> None:
+    env = wrapped(50)
+    env.reset(seed=0)
+    before = env.unwrapped.sim.arrays.eta.copy()
+    good = {agent: np.zeros(3, np.float32) for agent in env.agents}
+    for bad, message in [
+        ({**good, "vessel_2": np.zeros(4)}, "correction of vessel_2"),
+        ({**good, "vessel_1": np.array([np.nan, 0, 0])}, "not finite"),
+        ({**good, "vessel_0": np.array([1j, 0, 0])}, "real numbers"),
+        ({k: v for k, v in good.items() if k != "vessel_4"}, "one entry per live agent"),
+    ]:
+        with pytest.raises(ValueError, match=message):
+            env.step(bad)
+    assert np.array_equal(env.unwrapped.sim.arrays.eta, before)
+    env.step(good)  # still usable
+
+
+def test_wrapper_infos_carry_base_command_and_residual() -> None:
+    env = wrapped(50, scale=0.1)
+    env.reset(seed=0)
+    actions = {agent: np.full(3, 0.5, np.float32) for agent in env.agents}
+    *_, infos = env.step(actions)
+    for agent in env.possible_agents:
+        info = infos[agent]
+        np.testing.assert_allclose(info["residual"], 0.05 * np.array([9.2, 4.5, 3.0]))
+        np.testing.assert_allclose(
+            info["tau_command"], info["base_command"][:3] + info["residual"], rtol=1e-6
+        )
