@@ -319,7 +319,7 @@ def _backstepping(
 WORK_ROWS = 11
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True)
 def _act_fleet(
     c: PolicyConstants,
     s: PolicyStates,
@@ -387,11 +387,14 @@ def act_rows_parallel(
     fleets: np.ndarray,
     out: PolicyOutputs,
 ) -> None:
-    """``act_rows_serial`` with the fleets spread over numba's threads (same bits)."""
+    """``act_rows_serial`` with the fleets spread over numba's threads (same bits).
+
+    Each fleet runs in a call of its own (``_act_fleet`` is not inlined), so its
+    scratch arrays are its own and parfors never reorders inside a fleet.
+    """
+    hidden = c.input_weights.shape[0]
     for r in prange(obs.shape[0]):
-        work = np.empty((WORK_ROWS, 3))
-        sigma = np.empty(c.input_weights.shape[0])
-        _act_fleet(c, s, obs, fleets, out, r, work, sigma)
+        _act_fleet(c, s, obs, fleets, out, r, np.empty((WORK_ROWS, 3)), np.empty(hidden))
 
 
 @numba.njit(cache=True)
