@@ -30,14 +30,20 @@ __all__ = ["HEADLINE", "SUMMARY_COLUMNS", "CellResult", "episodes_csv", "summari
 HEADLINE: tuple[tuple[str, str], ...] = (
     ("cost", "cost"),
     ("cost_window", "cost, final window"),
-    ("path_error_rms_window", "path error RMS, final window (m)"),
-    ("coordination_error_end", "coordination error at the end"),
-    ("speed_error_rms_window", "speed error RMS, final window (m/s)"),
+    ("cross_track_error_rms_window", "cross-track error RMS, final window (m)"),
+    ("along_track_error_rms_window", "along-track error RMS, final window (m)"),
+    ("heading_error_rms_window", "heading error RMS, final window (rad)"),
+    ("formation_error_rms_window", "formation error RMS, final window (m)"),
+    ("theta_spread_end", "path-variable spread at the end"),
+    ("progress", "progress (distance made good / v0 T)"),
     ("control_energy", "control energy (s)"),
     ("saturated_fraction", "saturated fraction"),
 )
 #: Metrics where higher is better (for all others lower is).
-HIGHER_IS_BETTER = frozenset({"return", "return_window", "steps"})
+HIGHER_IS_BETTER = frozenset(
+    {"return", "return_window", "steps", "progress", "progress_window"}
+    | {"speed_along_path", "speed_along_path_window"}
+)
 
 SUMMARY_COLUMNS = (
     "policy",
