@@ -2,8 +2,9 @@
 
 ``summarize`` turns per-episode results into one row per policy x scenario x
 metric (mean and IQM with 95 % bootstrap intervals, failures, the ratio to
-the reference policy's mean and the probability of beating it on a paired
-episode), plus, when the reference ran, rows over all scenarios together
+the reference policy's mean, the mean paired difference to it with its
+bootstrap interval, and the probability of beating it on a paired episode
+with Wilson's interval), plus, when the reference ran, rows over all scenarios together
 (scenario ``"all"``, metric ``<metric>_normalized``): every episode divided
 by the reference's mean on its scenario, resampled by a bootstrap stratified
 by scenario. Numbers are written with ``repr`` (shortest round-trip form) and
@@ -59,6 +60,9 @@ SUMMARY_COLUMNS = (
     "failures",
     "deterministic",
     "normalized",
+    "diff_reference",
+    "diff_ci_low",
+    "diff_ci_high",
     "p_beats_reference",
     "p_ci_low",
     "p_ci_high",
@@ -115,6 +119,9 @@ def _row(
         "failures": failures,
         "deterministic": deterministic,
         "normalized": None,
+        "diff_reference": None,
+        "diff_ci_low": None,
+        "diff_ci_high": None,
         "p_beats_reference": None,
         "p_ci_low": None,
         "p_ci_high": None,
@@ -124,12 +131,14 @@ def _row(
 def _compare(
     row: dict[str, object], values: NDArray, reference: NDArray, metric: str, paired: bool
 ) -> None:
-    """Fill the reference columns of ``row`` (``paired``: also the probability of beating it)."""
+    """Fill the reference columns of ``row`` (``paired``: the paired difference, P(beats))."""
     reference_mean = float(reference.mean())
     if reference_mean != 0.0:
         row["normalized"] = float(values.mean()) / reference_mean
     if not paired:
         return
+    diff, diff_low, diff_high = stats.paired_difference(values, reference)
+    row.update(diff_reference=diff, diff_ci_low=diff_low, diff_ci_high=diff_high)
     p, low, high = stats.probability_of_beating(_signed(metric, values), _signed(metric, reference))
     row.update(p_beats_reference=p, p_ci_low=low, p_ci_high=high)
 
@@ -166,8 +175,9 @@ def _suite_rows(
                     _wins(c.metrics[metric], base.metrics[metric], metric)
                     for c, base in zip(own, references, strict=True)
                 ]
-                low, high = stats.bootstrap_interval(wins)
-                p = float(np.concatenate(wins).mean())
+                pooled = np.concatenate(wins)
+                low, high = stats.wilson_interval(float(pooled.sum()), int(pooled.size))
+                p = float(pooled.mean())
                 row.update(p_beats_reference=p, p_ci_low=low, p_ci_high=high)
             rows.append(row)
     return rows

@@ -13,8 +13,41 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from cpf_commands.bench.report import HEADLINE, CellResult
+from cpf_commands.bench.verdict import RELATIVE_TOLERANCE, Verdict, verdicts
 
-__all__ = ["figure", "markdown", "markdown_table"]
+__all__ = ["figure", "markdown", "markdown_table", "terminal_table", "verdict_rows"]
+
+VERDICT_HEADER = ("policy", "scenario", "N", "cost difference [95 %]", "P(beats) [95 %]", "verdict")
+
+
+def verdict_rows(found: Sequence[Verdict]) -> list[list[str]]:
+    """One row of cell texts per verdict (``VERDICT_HEADER``)."""
+    rows = []
+    for v in found:
+        diff, low, high = v.cost_difference
+        p, p_low, p_high = v.p_beats
+        rows.append(
+            [
+                v.policy,
+                v.scenario,
+                str(v.episodes),
+                f"{diff:+.3g} [{low:+.3g}, {high:+.3g}]",
+                f"{p:.2f} [{p_low:.2f}, {p_high:.2f}]",
+                v.label,
+            ]
+        )
+    return rows
+
+
+def terminal_table(cells: Sequence[CellResult], reference: str) -> str:
+    """The verdicts as a plain-text table for the terminal ('' without the reference)."""
+    body = verdict_rows(verdicts(cells, reference))
+    if not body:
+        return ""
+    table = [list(VERDICT_HEADER), *body]
+    widths = [max(len(row[k]) for row in table) for k in range(len(VERDICT_HEADER))]
+    lines = ["  ".join(cell.ljust(w) for cell, w in zip(row, widths, strict=True)) for row in table]
+    return f"against {reference}:\n" + "\n".join(line.rstrip() for line in lines)
 
 
 def _interval(row: dict[str, object] | None, estimate: str = "mean") -> str:
@@ -59,6 +92,22 @@ def markdown(
         f"`P(beats)`: probability of a lower cost than {reference} on the same seed. "
         "All numbers: `summary.csv`.",
     ]
+    judged = verdicts(cells, reference)
+    if judged:
+        lines += [
+            "",
+            f"## Verdict against {reference}",
+            "",
+            f"Cost difference: mean over seeds of (policy - {reference}) cost, with its 95 % "
+            "bootstrap interval; P(beats) with Wilson's 95 % interval. `beats` needs the "
+            "whole cost interval below zero and no guarded physical metric (final-window "
+            "cross-track, heading and formation error, progress, failures) worse by more "
+            f"than {RELATIVE_TOLERANCE:.0%} of {reference}'s mean (and a physical floor) with "
+            "its interval above zero; else `mixed` names the metric that regressed. "
+            "See docs/benchmark.md.",
+            "",
+        ]
+        lines += markdown_table(VERDICT_HEADER, verdict_rows(judged))
     if skipped:
         lines += ["", "Not run (the policy does not fit the scenario):", ""]
         lines += [f"- {policy} on {name}: {why}" for (policy, name), why in skipped.items()]
