@@ -28,6 +28,7 @@ from tqdm.auto import tqdm
 
 from cpf_commands.bench import views
 from cpf_commands.bench.episodes import run_episodes
+from cpf_commands.bench.marl_eval import write_marl_eval
 from cpf_commands.bench.report import HEADLINE, CellResult, episodes_csv, summarize, summary_csv
 from cpf_commands.common.arguments import add_scenarios_argument
 from cpf_commands.common.policies import (
@@ -368,6 +369,13 @@ def _parser() -> argparse.ArgumentParser:
         help="the policy the others are compared with, one of --policies (default: nn_dsc "
         "if it runs, else the first policy)",
     )
+    parser.add_argument(
+        "--marl-eval",
+        default=None,
+        metavar="FILE",
+        help="also write the episodes in marl-eval's JSON format to FILE (for marl-eval and "
+        "BenchMARL plots)",
+    )
     add_address_argument(parser)
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     return parser
@@ -411,6 +419,8 @@ def bench_main(argv: Sequence[str] | None = None) -> int:
         )
     except (ValueError, FileNotFoundError, ImportError, ConnectionError) as error:
         parser.error(str(error))
+    if args.marl_eval is not None:
+        write_marl_eval(cells, args.marl_eval)
     elapsed = time.perf_counter() - start
     table = views.terminal_table(cells, _reference(args.reference, _labelled(args.policies)))
     if table:

@@ -101,3 +101,18 @@ def test_shift_split_runs_the_shifted_scenarios():
     assert [c.scenario for c in cells] == ["bench_lossy_links_shift", "bench_large_fleet_shift"]
     with pytest.raises(ValueError, match="no held-out splits"):
         run_bench(["nn_dsc"], ["wang2014"], seeds=1, steps=2, split="shift")
+
+
+def test_marl_eval_export_has_the_nested_layout(tmp_path):
+    import json
+
+    out = tmp_path / "marl.json"
+    argv = ["--policies", "nn_dsc", "dsc", "--scenarios", "bench_mild", "--seeds", "2"]
+    argv += ["--steps", "5", "--out", str(tmp_path / "b"), "--quiet", "--no-figures"]
+    assert bench_main([*argv, "--marl-eval", str(out)]) == 0
+    data = json.loads(out.read_text())
+    runs = data["cpf_env"]["bench_mild"]["dsc"]
+    assert sorted(runs) == ["seed_10000", "seed_10001"]
+    metrics = runs["seed_10000"]["absolute_metrics"]
+    assert metrics["return"] == [-metrics["cost"][0]]
+    assert "speed_estimate_error_rms" in metrics and len(metrics["cross_track_error_rms"]) == 1
