@@ -241,7 +241,7 @@ class Policy(PolicyInterface, abc.ABC):
         steps: NDArray[np.int64],
     ) -> Array:
         """One step for the fleets whose states are given; updates them in place."""
-        local = LocalObservation.parse(self.layout, batch)
+        local = self._local(batch)
         cooperation = self.cooperation.step(local, states["vhat"], states["gamma"], steps)
         tau0, kinetic = self._kinetics(local, cooperation, states, started.copy())
         states["vhat"], states["gamma"] = cooperation.vhat_next, cooperation.gamma_next
@@ -262,6 +262,10 @@ class Policy(PolicyInterface, abc.ABC):
         return actions
 
     # --- helpers --------------------------------------------------------------------------
+
+    def _local(self, batch: Array) -> LocalObservation:
+        """The local observations (B, n, obs_dim) parsed into named arrays."""
+        return LocalObservation.parse(self.layout, batch)
 
     def _validate(self, obs: ArrayLike) -> Array:
         """Check (B, n, obs_dim) and finiteness; return a float64 array."""
