@@ -50,6 +50,7 @@ from baselines import POLICIES
 from cpf_env import scenarios
 from cpf_env.envs.residual import ResidualConfig
 from cpf_env.scenarios.reward_weights import REWARD_FORMS
+from cpf_env.scenarios.splits import check_training
 
 __all__ = ["ALGORITHMS", "TrainConfig", "build_model", "make_env", "train"]
 
@@ -294,7 +295,9 @@ def train(
 
     Raises:
         FileExistsError: ``out`` holds a trained model and ``overwrite`` is False.
+        ValueError: A held-out evaluation scenario or seed (``splits.check_training``).
     """
+    check_training(config.scenario, range(config.seed, config.seed + config.fleets))
     folder = Path(out)
     if (folder / "model.zip").exists() and not overwrite:
         raise FileExistsError(

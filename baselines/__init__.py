@@ -10,6 +10,8 @@ name                        policy
 ``nn_dsc_no_aux``           ``nn_dsc`` without the auxiliary system
 ``nn_dsc_global_v0``        ``nn_dsc`` with v0 known to every vessel (no estimator)
 ``backstepping``            analytic derivative of alpha, nominal-model cancellation
+``nn_dsc_delay_comp``       ``nn_dsc`` with neighbour theta advanced by packet age x dt x vhat_j
+``backstepping_delay_comp`` ``backstepping`` with the same delay compensation
 ==========================  ===========================================================
 
 Example:
@@ -26,6 +28,7 @@ from __future__ import annotations
 from typing import Any
 
 from baselines.backstepping import BacksteppingPolicy
+from baselines.delay_compensated import BacksteppingDelayCompensated, NNDSCDelayCompensated
 from baselines.gains import BacksteppingGains, CooperativeGains, NNDSCGains
 from baselines.nn_dsc import DSCPolicy, GlobalSpeedPolicy, NNDSCPolicy, NoAuxPolicy
 from baselines.policy import DIAGNOSTICS, Policy
@@ -33,11 +36,13 @@ from baselines.policy import DIAGNOSTICS, Policy
 __all__ = [
     "DIAGNOSTICS",
     "POLICIES",
+    "BacksteppingDelayCompensated",
     "BacksteppingGains",
     "BacksteppingPolicy",
     "CooperativeGains",
     "DSCPolicy",
     "GlobalSpeedPolicy",
+    "NNDSCDelayCompensated",
     "NNDSCGains",
     "NNDSCPolicy",
     "NoAuxPolicy",
@@ -48,7 +53,15 @@ __all__ = [
 #: Policy classes by name.
 POLICIES: dict[str, type[Policy]] = {
     policy.name: policy
-    for policy in (NNDSCPolicy, DSCPolicy, NoAuxPolicy, GlobalSpeedPolicy, BacksteppingPolicy)
+    for policy in (
+        NNDSCPolicy,
+        DSCPolicy,
+        NoAuxPolicy,
+        GlobalSpeedPolicy,
+        BacksteppingPolicy,
+        NNDSCDelayCompensated,
+        BacksteppingDelayCompensated,
+    )
 }
 
 

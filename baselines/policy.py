@@ -134,6 +134,9 @@ class Policy(PolicyInterface):
     global_speed: ClassVar[bool] = False
     #: The kinetic part: one of ``baselines.kernels.KINETICS_*``.
     kinetics: ClassVar[int] = KINETICS_PYTHON
+    #: True: each neighbour's received theta_j is advanced by its packet age x dt x its
+    #: communicated speed estimate (``baselines.delay_compensated``).
+    delay_compensation: ClassVar[bool] = False
 
     def __init__(self, env: object, **options: Any) -> None:
         self.scenario = resolve_scenario(env)
@@ -280,7 +283,7 @@ class Policy(PolicyInterface):
             "use_nn": False,
             "use_aux": False,
             "global_speed": self.global_speed,
-            "delay_compensation": False,
+            "delay_compensation": self.delay_compensation,
             "n_slots": self.layout.n_slots,
             "slot_size": self.layout.slot_size,
             "msg_size": self.layout.msg_size,

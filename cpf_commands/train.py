@@ -19,6 +19,7 @@ from collections.abc import Sequence
 
 from cpf_commands.common.arguments import positive_int
 from cpf_env import scenarios
+from cpf_env.scenarios.splits import check_training
 
 __all__ = ["train_main"]
 
@@ -112,6 +113,7 @@ def train_main(argv: Sequence[str] | None = None) -> int:
             batch_size=args.batch_size,
             n_epochs=args.epochs,
         )
+        check_training(config.scenario, range(config.seed, config.seed + config.fleets))
     except ValueError as error:
         parser.error(str(error))
     try:

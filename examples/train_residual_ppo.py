@@ -123,8 +123,13 @@ _COLUMNS = (
     ("cost", "quadratic_reward", "cost / nn_dsc (quadratic reward)", "ratio"),
     ("path_error_rms_window", "training_reward", "path error RMS, last quarter (m)", "value"),
     ("path_error_max_window", "training_reward", "path error max, last quarter (m)", "value"),
-    ("coordination_error_end", "training_reward", "coordination error at the end", "value"),
-    ("speed_error_rms_window", "training_reward", "speed error RMS, last quarter (m/s)", "value"),
+    ("theta_spread_end", "training_reward", "path-variable spread at the end", "value"),
+    (
+        "theta_rate_error_rms_window",
+        "training_reward",
+        "path-rate error RMS, last quarter (1/s)",
+        "value",
+    ),
     ("cost", "training_reward", "failures", "failures"),
 )
 

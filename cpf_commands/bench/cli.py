@@ -28,6 +28,7 @@ from tqdm.auto import tqdm
 
 from cpf_commands.bench import views
 from cpf_commands.bench.episodes import run_episodes
+from cpf_commands.bench.marl_eval import write_marl_eval
 from cpf_commands.bench.report import HEADLINE, CellResult, episodes_csv, summarize, summary_csv
 from cpf_commands.common.arguments import add_scenarios_argument
 from cpf_commands.common.policies import (
@@ -40,12 +41,15 @@ from cpf_commands.common.policies import (
 from cpf_commands.common.ray_runtime import add_address_argument, start_ray
 from cpf_env.envs.parallel import make_scenario
 from cpf_env.scenarios import Scenario
+from cpf_env.scenarios.splits import EVALUATION_SEED, SPLITS, split_scenario
 from cpf_env.scenarios.suite import is_deterministic, list_suite
 
 __all__ = ["BASE_SEED", "bench_main", "run_bench", "run_cell", "write_outputs"]
 
-#: First evaluation seed (kept apart from the small seeds training runs use).
-BASE_SEED = 10_000
+#: First evaluation seed (training refuses seeds from here on: ``cpf_env.scenarios.splits``).
+BASE_SEED = EVALUATION_SEED
+#: The reference policy when none is given and it runs.
+DEFAULT_REFERENCE = "nn_dsc"
 
 
 def _labelled(policies: Sequence[PolicySpec] | Mapping[str, PolicySpec]) -> dict[str, PolicySpec]:
@@ -220,6 +224,8 @@ def run_bench(
     figures: bool = True,
     distribute: bool = False,
     address: str | None = None,
+    reference: str | None = None,
+    split: str = "test",
 ) -> list[CellResult]:
     """Run every policy on every scenario for ``seeds`` paired seeds, and write the outputs.
 
@@ -237,6 +243,12 @@ def run_bench(
         distribute: Run the (policy, scenario) cells as Ray tasks (needs the
             ``ray`` extra); the results are identical to a local run.
         address: Ray address for ``distribute`` (None: a local Ray instance).
+        reference: Label of the policy every other is compared with (paired
+            differences, P(beats), verdicts), one of ``policies``; None: ``nn_dsc``
+            if it runs, else the first policy.
+        split: ``test`` (the scenarios as named, on the evaluation seeds) or
+            ``shift`` (each suite scenario's ``_shift`` variant, outside its
+            training ranges; ``cpf_env.scenarios.splits``).
 
     Returns:
         One ``CellResult`` per (policy, scenario), policies outermost. A policy
@@ -253,8 +265,18 @@ def run_bench(
         raise ValueError(f"steps must be >= 1, got {steps}.")
     if out is not None and Path(out).exists() and not Path(out).is_dir():
         raise ValueError(f"--out {out} is a file; give a folder (it is created if needed).")
+    if split not in SPLITS:
+        raise ValueError(f"unknown split {split!r}; choose one of {list(SPLITS)}.")
+    if split == "shift":
+        scenario_names = [_shifted(name) for name in scenario_names]
     tasks = [make_scenario(name) for name in scenario_names]
     labelled = _labelled(policies)
+    reference = _reference(reference, labelled)
+    if reference not in labelled:
+        raise ValueError(
+            f"--reference {reference} is not among the policies {sorted(labelled)}; add it to "
+            "--policies or choose one of them."
+        )
     built, skipped = _build(labelled, tasks)
     jobs = [
         (label, labelled[label], task, _episode_seeds(task, seeds, base_seed))
@@ -267,8 +289,22 @@ def run_bench(
     else:
         cells = _run_here(jobs, built, steps, progress)
     if out is not None:
-        write_outputs(cells, out, command, skipped=skipped, figures=figures)
+        write_outputs(cells, out, command, reference=reference, skipped=skipped, figures=figures)
     return cells
+
+
+def _reference(reference: str | None, labelled: Mapping[str, PolicySpec]) -> str:
+    """The reference's label: as given, else nn_dsc if it runs, else the first policy."""
+    if reference is not None:
+        return policy_label(reference)
+    return DEFAULT_REFERENCE if DEFAULT_REFERENCE in labelled else next(iter(labelled))
+
+
+def _shifted(name: str | Scenario) -> Scenario:
+    """The shift split of a suite scenario given by name."""
+    if not isinstance(name, str):
+        raise ValueError("--split shift needs suite scenario names, not Scenario objects.")
+    return split_scenario(name, "shift")
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -319,6 +355,27 @@ def _parser() -> argparse.ArgumentParser:
         "(giving --address implies --ray; results identical to a local run; needs the ray "
         "extra)",
     )
+    parser.add_argument(
+        "--split",
+        choices=SPLITS,
+        default="test",
+        help="test: the scenarios on the evaluation seeds; shift: each suite scenario's "
+        "_shift variant, outside its training ranges (default: test)",
+    )
+    parser.add_argument(
+        "--reference",
+        default=None,
+        metavar="POLICY",
+        help="the policy the others are compared with, one of --policies (default: nn_dsc "
+        "if it runs, else the first policy)",
+    )
+    parser.add_argument(
+        "--marl-eval",
+        default=None,
+        metavar="FILE",
+        help="also write the episodes in marl-eval's JSON format to FILE (for marl-eval and "
+        "BenchMARL plots)",
+    )
     add_address_argument(parser)
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     return parser
@@ -328,6 +385,10 @@ def _command(args: argparse.Namespace) -> str:
     """The command line that regenerates a run's files (the output folder left out)."""
     parts = ["cpf-bench", "--policies", *args.policies, "--scenarios", *args.scenarios]
     parts += ["--seeds", str(args.seeds)]
+    if args.split != "test":
+        parts += ["--split", args.split]
+    if args.reference is not None:
+        parts += ["--reference", args.reference]
     if args.base_seed != BASE_SEED:
         parts += ["--base-seed", str(args.base_seed)]
     if args.steps is not None:
@@ -341,7 +402,7 @@ def bench_main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     start = time.perf_counter()
     try:
-        run_bench(
+        cells = run_bench(
             args.policies,
             args.scenarios,
             seeds=args.seeds,
@@ -353,10 +414,17 @@ def bench_main(argv: Sequence[str] | None = None) -> int:
             figures=not args.no_figures,
             distribute=args.ray or args.address is not None,
             address=args.address,
+            reference=args.reference,
+            split=args.split,
         )
     except (ValueError, FileNotFoundError, ImportError, ConnectionError) as error:
         parser.error(str(error))
+    if args.marl_eval is not None:
+        write_marl_eval(cells, args.marl_eval)
     elapsed = time.perf_counter() - start
+    table = views.terminal_table(cells, _reference(args.reference, _labelled(args.policies)))
+    if table:
+        print(table)
     print(
         f"cpf-bench: {len(args.policies)} policies x {len(args.scenarios)} scenarios in "
         f"{elapsed:.0f} s; results in {args.out}/ (summary.md, summary.csv, episodes.csv)"

@@ -2,8 +2,9 @@
 
 ``summarize`` turns per-episode results into one row per policy x scenario x
 metric (mean and IQM with 95 % bootstrap intervals, failures, the ratio to
-the reference policy's mean and the probability of beating it on a paired
-episode), plus, when the reference ran, rows over all scenarios together
+the reference policy's mean, the mean paired difference to it with its
+bootstrap interval, and the probability of beating it on a paired episode
+with Wilson's interval), plus, when the reference ran, rows over all scenarios together
 (scenario ``"all"``, metric ``<metric>_normalized``): every episode divided
 by the reference's mean on its scenario, resampled by a bootstrap stratified
 by scenario. Numbers are written with ``repr`` (shortest round-trip form) and
@@ -30,14 +31,20 @@ __all__ = ["HEADLINE", "SUMMARY_COLUMNS", "CellResult", "episodes_csv", "summari
 HEADLINE: tuple[tuple[str, str], ...] = (
     ("cost", "cost"),
     ("cost_window", "cost, final window"),
-    ("path_error_rms_window", "path error RMS, final window (m)"),
-    ("coordination_error_end", "coordination error at the end"),
-    ("speed_error_rms_window", "speed error RMS, final window (m/s)"),
+    ("cross_track_error_rms_window", "cross-track error RMS, final window (m)"),
+    ("along_track_error_rms_window", "along-track error RMS, final window (m)"),
+    ("heading_error_rms_window", "heading error RMS, final window (rad)"),
+    ("formation_error_rms_window", "formation error RMS, final window (m)"),
+    ("theta_spread_end", "path-variable spread at the end"),
+    ("progress", "progress (distance made good / v0 T)"),
     ("control_energy", "control energy (s)"),
     ("saturated_fraction", "saturated fraction"),
 )
 #: Metrics where higher is better (for all others lower is).
-HIGHER_IS_BETTER = frozenset({"return", "return_window", "steps"})
+HIGHER_IS_BETTER = frozenset(
+    {"return", "return_window", "steps", "progress", "progress_window"}
+    | {"speed_along_path", "speed_along_path_window"}
+)
 
 SUMMARY_COLUMNS = (
     "policy",
@@ -53,6 +60,9 @@ SUMMARY_COLUMNS = (
     "failures",
     "deterministic",
     "normalized",
+    "diff_reference",
+    "diff_ci_low",
+    "diff_ci_high",
     "p_beats_reference",
     "p_ci_low",
     "p_ci_high",
@@ -109,6 +119,9 @@ def _row(
         "failures": failures,
         "deterministic": deterministic,
         "normalized": None,
+        "diff_reference": None,
+        "diff_ci_low": None,
+        "diff_ci_high": None,
         "p_beats_reference": None,
         "p_ci_low": None,
         "p_ci_high": None,
@@ -118,12 +131,14 @@ def _row(
 def _compare(
     row: dict[str, object], values: NDArray, reference: NDArray, metric: str, paired: bool
 ) -> None:
-    """Fill the reference columns of ``row`` (``paired``: also the probability of beating it)."""
+    """Fill the reference columns of ``row`` (``paired``: the paired difference, P(beats))."""
     reference_mean = float(reference.mean())
     if reference_mean != 0.0:
         row["normalized"] = float(values.mean()) / reference_mean
     if not paired:
         return
+    diff, diff_low, diff_high = stats.paired_difference(values, reference)
+    row.update(diff_reference=diff, diff_ci_low=diff_low, diff_ci_high=diff_high)
     p, low, high = stats.probability_of_beating(_signed(metric, values), _signed(metric, reference))
     row.update(p_beats_reference=p, p_ci_low=low, p_ci_high=high)
 
@@ -160,8 +175,9 @@ def _suite_rows(
                     _wins(c.metrics[metric], base.metrics[metric], metric)
                     for c, base in zip(own, references, strict=True)
                 ]
-                low, high = stats.bootstrap_interval(wins)
-                p = float(np.concatenate(wins).mean())
+                pooled = np.concatenate(wins)
+                low, high = stats.wilson_interval(float(pooled.sum()), int(pooled.size))
+                p = float(pooled.mean())
                 row.update(p_beats_reference=p, p_ci_low=low, p_ci_high=high)
             rows.append(row)
     return rows

@@ -9,12 +9,45 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 
-import numpy as np
 from matplotlib.figure import Figure
+from matplotlib.ticker import FuncFormatter
 
 from cpf_commands.bench.report import HEADLINE, CellResult
+from cpf_commands.bench.verdict import RELATIVE_TOLERANCE, Verdict, verdicts
 
-__all__ = ["figure", "markdown", "markdown_table"]
+__all__ = ["figure", "markdown", "markdown_table", "terminal_table", "verdict_rows"]
+
+VERDICT_HEADER = ("policy", "scenario", "N", "cost difference [95 %]", "P(beats) [95 %]", "verdict")
+
+
+def verdict_rows(found: Sequence[Verdict]) -> list[list[str]]:
+    """One row of cell texts per verdict (``VERDICT_HEADER``)."""
+    rows = []
+    for v in found:
+        diff, low, high = v.cost_difference
+        p, p_low, p_high = v.p_beats
+        rows.append(
+            [
+                v.policy,
+                v.scenario,
+                str(v.episodes),
+                f"{diff:+.3g} [{low:+.3g}, {high:+.3g}]",
+                f"{p:.2f} [{p_low:.2f}, {p_high:.2f}]",
+                v.label,
+            ]
+        )
+    return rows
+
+
+def terminal_table(cells: Sequence[CellResult], reference: str) -> str:
+    """The verdicts as a plain-text table for the terminal ('' without the reference)."""
+    body = verdict_rows(verdicts(cells, reference))
+    if not body:
+        return ""
+    table = [list(VERDICT_HEADER), *body]
+    widths = [max(len(row[k]) for row in table) for k in range(len(VERDICT_HEADER))]
+    lines = ["  ".join(cell.ljust(w) for cell, w in zip(row, widths, strict=True)) for row in table]
+    return f"against {reference}:\n" + "\n".join(line.rstrip() for line in lines)
 
 
 def _interval(row: dict[str, object] | None, estimate: str = "mean") -> str:
@@ -59,6 +92,22 @@ def markdown(
         f"`P(beats)`: probability of a lower cost than {reference} on the same seed. "
         "All numbers: `summary.csv`.",
     ]
+    judged = verdicts(cells, reference)
+    if judged:
+        lines += [
+            "",
+            f"## Verdict against {reference}",
+            "",
+            f"Cost difference: mean over seeds of (policy - {reference}) cost, with its 95 % "
+            "bootstrap interval; P(beats) with Wilson's 95 % interval. `beats` needs the "
+            "whole cost interval below zero and no guarded physical metric (final-window "
+            "cross-track, heading and formation error, progress, failures) worse by more "
+            f"than {RELATIVE_TOLERANCE:.0%} of {reference}'s mean (and a physical floor) with "
+            "its interval above zero; else `mixed` names the metric that regressed. "
+            "See docs/benchmark.md.",
+            "",
+        ]
+        lines += markdown_table(VERDICT_HEADER, verdict_rows(judged))
     if skipped:
         lines += ["", "Not run (the policy does not fit the scenario):", ""]
         lines += [f"- {policy} on {name}: {why}" for (policy, name), why in skipped.items()]
@@ -109,41 +158,84 @@ def _mean_and_failures(row: dict[str, object] | None) -> str:
     return f"{float(row['mean']):.3g}" + (f" ({failures} failed)" if failures else "")  # type: ignore[arg-type]
 
 
+def _ratio(row: dict[str, object], base: dict[str, object]) -> tuple[float, float, float] | None:
+    """Policy mean over the reference mean; the paired interval mapped the same way."""
+    scale = float(base["mean"])  # type: ignore[arg-type]
+    if scale == 0.0 or row["diff_reference"] is None:
+        return None
+    low, high = (float(row[k]) for k in ("diff_ci_low", "diff_ci_high"))  # type: ignore[arg-type]
+    mean = float(row["mean"])  # type: ignore[arg-type]
+    return mean / scale, 1.0 + low / scale, 1.0 + high / scale
+
+
+#: Minor ticks of the log axis that get a label.
+_MINOR = (0.2, 0.5, 2.0, 5.0)
+#: Smallest ratio drawn on the log axis (a ratio at or below it is drawn at it, marked "<").
+_FLOOR = 1e-3
+
+
 def figure(
     rows: list[dict[str, object]], cells: Sequence[CellResult], metric: str, title: str
 ) -> Figure:
-    """One panel per scenario, one bar per policy: mean with its 95 % interval."""
+    """Each policy's mean over the reference's on every scenario, with the paired 95 % interval.
+
+    One row per scenario, one marker per policy, on a log axis centred on 1
+    (the reference); a cell that did not run is written out as "not run".
+    The figure grows with the number of scenarios, so it stays readable.
+    """
     index = {(r["policy"], r["scenario"]): r for r in rows if r["metric"] == metric}
     policies = list(dict.fromkeys(cell.policy for cell in cells))
     names = list(dict.fromkeys(cell.scenario for cell in cells))
-    columns = min(4, len(names))
-    grid = (len(names) + columns - 1) // columns
-    fig = Figure(figsize=(3.2 * columns, 2.8 * grid + 0.6), layout="constrained")
-    axes = np.atleast_1d(fig.subplots(grid, columns, squeeze=False)).reshape(-1)
-    colors = [f"C{k % 10}" for k in range(len(policies))]
-    for ax, name in zip(axes, names, strict=False):
-        for k, policy in enumerate(policies):
-            row = index.get((policy, name))
-            if row is None:
+    reference = next(
+        (
+            p
+            for p in policies
+            if all(index.get((p, n), {}).get("diff_reference") is None for n in names)
+        ),
+        policies[0],
+    )
+    others = [p for p in policies if p != reference]
+    height = 1.2 + 0.28 * max(1, len(names) * max(1, len(others)))
+    fig = Figure(figsize=(8.0, height), layout="constrained")
+    ax = fig.subplots()
+    spacing = 1.0 / (len(others) + 1)
+    for k, policy in enumerate(others):
+        color = f"C{k % 10}"
+        label: str | None = policy.rstrip("/").split("/")[-1]
+        for row_index, name in enumerate(names):
+            y = row_index + (k + 1) * spacing - 0.5
+            row, base = index.get((policy, name)), index.get((reference, name))
+            if row is None or base is None:
+                ax.annotate("not run", (1.0, y), fontsize=7, color="grey", va="center")
                 continue
-            mean = float(row["mean"])  # type: ignore[arg-type]
-            error = [[mean - float(row["ci_low"])], [float(row["ci_high"]) - mean]]  # type: ignore[arg-type]
-            ax.bar(k, mean, color=colors[k], yerr=error, capsize=3)
-            if int(row["failures"]):  # type: ignore[call-overload]
-                ax.annotate(
-                    f"{row['failures']} failed",
-                    (k, mean),
-                    ha="center",
-                    va="bottom",
-                    fontsize=7,
-                    color="red",
-                )
-        deterministic = any(c.deterministic for c in cells if c.scenario == name)
-        ax.set_title(f"{name} (deterministic)" if deterministic else name, fontsize=9)
-        ax.set_xticks(range(len(policies)), policies, rotation=45, ha="right", fontsize=7)
-        ax.tick_params(axis="y", labelsize=7)
-        ax.grid(axis="y", alpha=0.3)
-    for ax in axes[len(names) :]:
-        ax.set_visible(False)
-    fig.suptitle(f"{title}: mean and 95 % bootstrap interval")
+            ratio = _ratio(row, base)
+            if ratio is None:
+                ax.annotate("no ratio (zero mean)", (1.0, y), fontsize=7, color="grey", va="center")
+                continue
+            mean, low, high = (max(value, _FLOOR) for value in ratio)
+            ax.errorbar(
+                mean,
+                y,
+                xerr=[[mean - low], [high - mean]],
+                fmt="o",
+                color=color,
+                markersize=4,
+                capsize=2,
+                label=label,
+            )
+            label = None
+            failures = int(row["failures"])  # type: ignore[call-overload]
+            if failures:
+                ax.annotate(f"{failures} failed", (high, y), fontsize=7, color="red", va="center")
+    ax.axvline(1.0, color="black", linewidth=0.8)
+    ax.set_xscale("log")
+    ax.set_yticks(range(len(names)), names, fontsize=8)
+    ax.set_ylim(len(names) - 0.5, -0.5)
+    ax.grid(axis="x", which="both", alpha=0.3)
+    ax.set_xlabel(f"mean / {reference}'s mean (log; < 1 is better for errors and cost)", fontsize=8)
+    ax.xaxis.set_major_formatter(FuncFormatter(lambda x, _: f"x{x:g}"))
+    ax.xaxis.set_minor_formatter(FuncFormatter(lambda x, _: f"{x:g}" if x in _MINOR else ""))
+    ax.tick_params(axis="x", which="both", labelsize=7)
+    fig.legend(fontsize=7, loc="outside lower center", ncols=min(3, max(1, len(others))))
+    fig.suptitle(f"{title}\nrelative to {reference}, paired 95 % bootstrap interval", fontsize=10)
     return fig

@@ -27,7 +27,8 @@ from typing import Any
 import numpy as np
 from tqdm.auto import tqdm
 
-from cpf_commands.common.policies import resolve_policy
+from cpf_commands.common.policies import BenchPolicy, resolve_policy
+from cpf_commands.common.rollout import rollout
 from cpf_env.envs.parallel import make_scenario
 from cpf_env.model.paths import encode_paths, evaluate_paths
 from cpf_env.scenarios import Scenario
@@ -57,52 +58,21 @@ def run_episode(
         progress: Show a progress bar.
 
     Returns:
-        The recorded trajectory (T = number of steps taken).
+        The recorded trajectory (T = number of steps taken); its
+        ``fleet_metrics`` are the benchmark's metrics of this episode
+        (``cpf_env.sim.fleet_metrics``), from the same rollout ``cpf-bench`` uses.
     """
     resolved = make_scenario(scenario)
+    controller = resolve_policy(policy, resolved, **(policy_options or {}))
+    recorder = _TrajectoryRecorder()
     horizon = resolved.max_steps if steps is None else int(steps)
     if horizon < 1:
         raise ValueError(f"steps must be >= 1, got {steps}.")
-    sim = FleetSim(resolved, num_fleets=1)
-    controller = resolve_policy(policy, resolved, **(policy_options or {}))
-    controller.reset(seed=seed)
-    obs = sim.reset(seeds=[seed])
-    a = sim.arrays
-    mass = sim.mass_matrices()[0]
-    zero_force = np.zeros_like(a.tau_applied)
-    names = (
-        "time",
-        "eta",
-        "nu",
-        "theta",
-        "theta_dot",
-        "tau_command",
-        "tau_applied",
-        "errors",
-        "reward",
-        "v0",
-    )
-    series: dict[str, list[np.ndarray]] = {name: [] for name in names}
-    extras: dict[str, list[np.ndarray]] = {"lumped_true": []}
-    for _ in tqdm(range(horizon), disable=not progress, desc=f"{resolved.name}/{policy}"):
-        actions = controller.act_batch(obs)
-        free = sim.accelerations(zero_force)[0]
-        time = float(sim.time[0])
-        series["time"].append(np.array(time))
-        series["v0"].append(np.array(sim.v0_at(time)))
-        for name in ("eta", "nu", "theta", "errors"):
-            series[name].append(getattr(a, name)[0].copy())
-        for name, value in controller.diagnostics.items():
-            extras.setdefault(name, []).append(np.array(value[0], dtype=np.float64))
-        if "nubar_dot" in controller.diagnostics:
-            nubar_dot = controller.diagnostics["nubar_dot"][0]
-            extras["lumped_true"].append(np.einsum("ijk,ik->ij", mass, nubar_dot - free))
-        obs = sim.step(actions)
-        for name in ("theta_dot", "tau_command", "tau_applied", "reward"):
-            series[name].append(getattr(a, name)[0].copy())
-        if a.terminated[0]:
-            break
-    stacked = {name: np.stack(values) for name, values in series.items()}
+    with tqdm(total=horizon, disable=not progress, desc=f"{resolved.name}/{policy}") as bar:
+        metrics = rollout(
+            controller, resolved, [seed], steps, bar, observer=recorder, policy_seed=seed
+        )
+    stacked = {name: np.stack(values) for name, values in recorder.series.items()}
     theta = stacked["theta"]
     kinds, params = encode_paths(resolved.paths)
     desired = evaluate_paths(
@@ -115,6 +85,47 @@ def run_episode(
         eta_desired=desired,
         tau_min=tau_min,
         tau_max=tau_max,
-        extras={name: np.stack(values) for name, values in extras.items() if values},
+        extras={name: np.stack(values) for name, values in recorder.extras.items() if values},
+        fleet_metrics={name: float(values[0]) for name, values in metrics.items()},
         **stacked,
     )
+
+
+class _TrajectoryRecorder:
+    """Records fleet 0 of a rollout as a ``Trajectory``'s series.
+
+    Sample k: the state at t_k and the action taken then, then the reward
+    that action earned, plus the policy's diagnostics and the true lumped
+    uncertainty (module docstring).
+    """
+
+    _BEFORE = ("eta", "nu", "theta", "errors")
+    _AFTER = ("theta_dot", "tau_command", "tau_applied", "reward")
+
+    def __init__(self) -> None:
+        names = ("time", "v0", *self._BEFORE, *self._AFTER)
+        self.series: dict[str, list[np.ndarray]] = {name: [] for name in names}
+        self.extras: dict[str, list[np.ndarray]] = {"lumped_true": []}
+        self._mass: np.ndarray | None = None
+
+    def before(self, sim: FleetSim, actions: np.ndarray, policy: BenchPolicy) -> None:
+        """Record the state at t_k and the policy's diagnostics."""
+        a = sim.arrays
+        free = sim.accelerations(np.zeros_like(a.tau_applied))[0]
+        time = float(sim.time[0])
+        self.series["time"].append(np.array(time))
+        self.series["v0"].append(np.array(sim.v0_at(time)))
+        for name in self._BEFORE:
+            self.series[name].append(getattr(a, name)[0].copy())
+        for name, value in policy.diagnostics.items():
+            self.extras.setdefault(name, []).append(np.array(value[0], dtype=np.float64))
+        if "nubar_dot" in policy.diagnostics:
+            nubar_dot = policy.diagnostics["nubar_dot"][0]
+            if self._mass is None:
+                self._mass = sim.mass_matrices()[0]
+            self.extras["lumped_true"].append(np.einsum("ijk,ik->ij", self._mass, nubar_dot - free))
+
+    def after(self, sim: FleetSim) -> None:
+        """Record what the step's action did."""
+        for name in self._AFTER:
+            self.series[name].append(getattr(sim.arrays, name)[0].copy())

@@ -18,7 +18,7 @@ import them.
     True
 """
 
-from cpf_env.scenarios import fine, paper, suite
+from cpf_env.scenarios import fine, paper, splits, suite
 from cpf_env.scenarios.registry import get, list_scenarios, register
 from cpf_env.scenarios.scenario import InitialState, Scenario, SpeedSchedule
 
@@ -31,5 +31,6 @@ __all__ = [
     "list_scenarios",
     "paper",
     "register",
+    "splits",
     "suite",
 ]

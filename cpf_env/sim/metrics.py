@@ -1,15 +1,17 @@
-"""Episode recordings and the metrics computed from them.
+"""Episode recordings and the paper-claim metrics computed from them.
 
 A ``Trajectory`` holds what one fleet did over an episode, sampled once per
 control step; ``episode_metrics`` reduces it to the numbers the paper's
 claims and the benchmark are stated in, over a final window of the episode
 (by default its last quarter, where the paper's claims are about steady
-state).
+state). These are per-vessel maxima for checking the paper's claims; the
+benchmark's metrics, which ``cpf-run`` also reports (``Trajectory.fleet_metrics``),
+are defined once in ``cpf_env.sim.fleet_metrics``.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, field, fields
 from typing import Any
 
 import numpy as np
@@ -37,6 +39,8 @@ class Trajectory:
         tau_min: (n, 3) lower force limits.
         tau_max: (n, 3) upper force limits.
         extras: Policy diagnostics and derived series, name -> (T, n, ...) array.
+        fleet_metrics: The benchmark's metrics of the episode
+            (``cpf_env.sim.fleet_metrics.METRICS``), name -> value.
     """
 
     time: NDArray[np.float64]
@@ -53,11 +57,14 @@ class Trajectory:
     tau_min: NDArray[np.float64]
     tau_max: NDArray[np.float64]
     extras: dict[str, NDArray[np.float64]]
+    fleet_metrics: dict[str, float] = field(default_factory=dict)
 
     def save(self, path: str) -> None:
         """Write every series to a compressed ``.npz`` file."""
-        arrays = {f.name: getattr(self, f.name) for f in fields(self) if f.name != "extras"}
+        mappings = ("extras", "fleet_metrics")
+        arrays = {f.name: getattr(self, f.name) for f in fields(self) if f.name not in mappings}
         arrays.update({f"extra_{k}": v for k, v in self.extras.items()})
+        arrays.update({f"metric_{k}": np.array(v) for k, v in self.fleet_metrics.items()})
         np.savez_compressed(path, **arrays)
 
 

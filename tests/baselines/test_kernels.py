@@ -4,7 +4,8 @@
 links, a switching topology, model spread with random starts), one stream of
 40 observations of 2 fleets (``nn_dsc`` in closed loop, fleet 0's policy
 restarted at step 20), and the actions and diagnostics that each analytic
-policy's former numpy implementation computed from that stream, recorded
+policy's former numpy implementation (the delay-compensated ones included)
+computed from that stream, recorded
 before the compiled kernels replaced it. The policies are replayed on the
 same stream here.
 
@@ -27,11 +28,19 @@ from cpf_env import FleetSim, scenarios
 
 DATA = np.load(Path(__file__).parent / "data" / "numpy_policies.npz")
 CASES = ("lossy_links", "switching_topology", "bench_heterogeneous")
-POLICIES = ("nn_dsc", "dsc", "nn_dsc_no_aux", "nn_dsc_global_v0", "backstepping")
+POLICIES = (
+    "nn_dsc",
+    "dsc",
+    "nn_dsc_no_aux",
+    "nn_dsc_global_v0",
+    "backstepping",
+    "nn_dsc_delay_comp",
+    "backstepping_delay_comp",
+)
 SIGNALS = ("actions", "nn_output", "speed_estimate", "aux_state", "nubar_dot")
 RESTART = 20
 #: Policies without the NN: bit-identical to the numpy implementation.
-EXACT = ("dsc", "backstepping")
+EXACT = ("dsc", "backstepping", "backstepping_delay_comp")
 
 
 def _replay(name: str, scenario: str) -> dict[str, np.ndarray]:

@@ -136,12 +136,13 @@ def test_ablation_switches(name):
         obs = sim.step(policy.act_batch(obs))
         d = policy.diagnostics
         aux.append(np.abs(d["aux_state"]).max())
-        if name in ("dsc", "backstepping"):
+        if name in ("dsc", "backstepping", "backstepping_delay_comp"):
             np.testing.assert_array_equal(d["nn_output"], 0.0)
         if name == "nn_dsc_global_v0":
             np.testing.assert_array_equal(d["speed_estimate"], s.v0_schedule.at(k * s.dt))
     # Sustained early saturation drives the auxiliary system of the policies that have one.
-    assert (max(aux) > 0.0) == (name not in ("nn_dsc_no_aux", "backstepping"))
+    without_aux = ("nn_dsc_no_aux", "backstepping", "backstepping_delay_comp")
+    assert (max(aux) > 0.0) == (name not in without_aux)
 
 
 def test_global_v0_follows_the_schedule_on_its_own_clock():

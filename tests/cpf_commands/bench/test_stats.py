@@ -82,7 +82,45 @@ def test_probability_of_beating_counts_paired_wins_and_half_ties():
     p, low, high = stats.probability_of_beating([1.0, 2.0, 3.0, 0.0], [2.0, 2.0, 2.0, 1.0])
     assert p == pytest.approx((1 + 0.5 + 0 + 1) / 4)
     assert 0.0 <= low <= p <= high <= 1.0
-    assert stats.probability_of_beating([1.0], [2.0]) == (1.0, 1.0, 1.0)
+    p, low, high = stats.probability_of_beating([1.0], [2.0])
+    assert (p, high) == (1.0, 1.0) and low < 0.25  # one win of one proves little
+
+
+@pytest.mark.parametrize("trials", [1, 5, 10, 20, 37])
+def test_wilson_interval_matches_scipy_at_every_count(trials):
+    scipy_stats = pytest.importorskip("scipy.stats")
+    for wins in range(trials + 1):
+        expected = scipy_stats.binomtest(wins, trials).proportion_ci(0.95, method="wilson")
+        low, high = stats.wilson_interval(wins, trials)
+        assert low == pytest.approx(expected.low, abs=1e-12)
+        assert high == pytest.approx(expected.high, abs=1e-12)
+
+
+def test_wilson_interval_at_none_and_all_of_the_seeds():
+    # 0/N: (0, z^2 / (N + z^2)); N/N: (N / (N + z^2), 1), written out for z = 1.959964
+    z2 = 1.959963984540054**2
+    for n in (10, 20):
+        assert stats.wilson_interval(0, n) == pytest.approx((0.0, z2 / (n + z2)))
+        assert stats.wilson_interval(n, n) == pytest.approx((n / (n + z2), 1.0))
+    assert stats.wilson_interval(10, 10)[0] < 0.75  # 10 wins of 10 is not certainty
+    p, low, high = stats.probability_of_beating(np.zeros(10), np.ones(10))
+    assert p == 1.0 and low == pytest.approx(10 / (10 + z2)) and high == 1.0
+
+
+def test_wilson_interval_refuses_impossible_counts():
+    with pytest.raises(ValueError, match="successes <= trials"):
+        stats.wilson_interval(11, 10)
+    with pytest.raises(ValueError, match="successes <= trials"):
+        stats.wilson_interval(0, 0)
+
+
+def test_paired_difference_is_the_mean_of_per_seed_differences():
+    values, reference = np.array([1.0, 2.0, 4.0, 3.0]), np.array([2.0, 2.5, 3.0, 5.0])
+    mean, low, high = stats.paired_difference(values, reference)
+    assert mean == pytest.approx((-1.0 - 0.5 + 1.0 - 2.0) / 4)
+    assert -2.0 <= low <= mean <= high <= 1.0
+    # a constant shift is known exactly: a zero-width interval at the shift
+    assert stats.paired_difference(reference - 0.25, reference) == pytest.approx((-0.25,) * 3)
 
 
 def test_probability_of_beating_needs_pairs():

@@ -1,0 +1,148 @@
+"""The multi-metric verdict: did a policy beat the reference on a scenario?
+
+A lower cost alone can hide a controller that buys its reward with a
+physical regression (a steady heading offset, a larger cross-track error, a
+slower fleet). The verdict therefore reads the paired cost difference and a
+declared set of physical metrics (``GUARDED``), all on the same seeds:
+
+* ``beats``: the 95 % interval of the mean paired cost difference
+  (policy - reference) lies below zero and no guarded metric regressed;
+* ``mixed (worse: ...)``: the cost interval lies below zero but a guarded
+  metric regressed (named);
+* ``loses``: the cost interval lies above zero;
+* ``no difference``: the cost interval contains zero (``no difference
+  (worse: ...)`` if a guarded metric regressed).
+
+A guarded metric regressed when its mean paired difference, oriented so
+that positive is worse, exceeds ``max(RELATIVE_TOLERANCE x |reference
+mean|, floor)`` and the lower end of its 95 % bootstrap interval is above
+zero (a real, not a noisy, regression). The floors ignore differences
+below what matters physically on a 1.255 m model ship (1 mm, 1 mrad, 1 %
+of the distance v0 T, any extra failure).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from cpf_commands.bench import stats
+from cpf_commands.bench.report import CellResult
+
+__all__ = [
+    "GUARDED",
+    "RELATIVE_TOLERANCE",
+    "Verdict",
+    "suite_cost_difference",
+    "verdict",
+    "verdicts",
+]
+
+#: Relative tolerance of a guarded metric, as a fraction of the reference's mean.
+RELATIVE_TOLERANCE = 0.10
+#: Guarded physical metrics: name -> (short label, absolute floor, higher is better).
+GUARDED: dict[str, tuple[str, float, bool]] = {
+    "cross_track_error_rms_window": ("cross-track", 1e-3, False),
+    "heading_error_rms_window": ("heading", 1e-3, False),
+    "formation_error_rms_window": ("formation", 1e-3, False),
+    "progress_window": ("progress", 0.01, True),
+    "terminated": ("failures", 0.0, False),
+}
+
+
+@dataclass(frozen=True)
+class Verdict:
+    """One policy against the reference on one scenario.
+
+    Attributes:
+        policy: The policy's label.
+        scenario: Scenario name.
+        reference: The reference policy's label.
+        episodes: Paired episodes N.
+        cost_difference: (mean, low, high) of the paired cost difference.
+        p_beats: (probability, low, high) of a lower cost on a seed (Wilson interval).
+        regressed: Short labels of the guarded metrics that regressed.
+        label: ``beats``, ``mixed (worse: ...)``, ``loses`` or ``no difference``.
+    """
+
+    policy: str
+    scenario: str
+    reference: str
+    episodes: int
+    cost_difference: tuple[float, float, float]
+    p_beats: tuple[float, float, float]
+    regressed: tuple[str, ...]
+    label: str
+
+
+def _regressed(cell: CellResult, base: CellResult) -> tuple[str, ...]:
+    """The guarded metrics on which ``cell`` is worse than ``base`` beyond tolerance."""
+    worse = []
+    for metric, (label, floor, higher_better) in GUARDED.items():
+        sign = -1.0 if higher_better else 1.0
+        mean, low, _ = stats.paired_difference(
+            sign * cell.metrics[metric], sign * base.metrics[metric]
+        )
+        tolerance = max(RELATIVE_TOLERANCE * abs(float(base.metrics[metric].mean())), floor)
+        if mean > tolerance and low > 0.0:
+            worse.append(label)
+    return tuple(worse)
+
+
+def verdict(cell: CellResult, base: CellResult) -> Verdict:
+    """The verdict of ``cell`` against the reference's ``base`` (same scenario and seeds).
+
+    Raises:
+        ValueError: The cells ran different scenarios or seeds.
+    """
+    if cell.scenario != base.scenario or cell.seeds != base.seeds:
+        raise ValueError(
+            f"{cell.policy} and {base.policy} must run the same scenario and seeds to be compared."
+        )
+    cost = stats.paired_difference(cell.metrics["cost"], base.metrics["cost"])
+    p_beats = stats.probability_of_beating(cell.metrics["cost"], base.metrics["cost"])
+    regressed = _regressed(cell, base)
+    worse = f" (worse: {', '.join(regressed)})" if regressed else ""
+    if cost[2] < 0.0:
+        label = "mixed" + worse if regressed else "beats"
+    elif cost[1] > 0.0:
+        label = "loses"
+    else:
+        label = "no difference" + worse
+    return Verdict(
+        cell.policy, cell.scenario, base.policy, len(cell.seeds), cost, p_beats, regressed, label
+    )
+
+
+def verdicts(cells: Sequence[CellResult], reference: str) -> list[Verdict]:
+    """Every non-reference cell's verdict where the reference ran the same scenario."""
+    bases = {cell.scenario: cell for cell in cells if cell.policy == reference}
+    return [
+        verdict(cell, bases[cell.scenario])
+        for cell in cells
+        if cell.policy != reference and cell.scenario in bases
+    ]
+
+
+def suite_cost_difference(
+    cells: Sequence[CellResult], policy: str, reference: str
+) -> tuple[float, float, float] | None:
+    """Suite-wide relative cost difference (policy / reference - 1), stratified by scenario.
+
+    Every episode's cost is divided by the reference's mean cost on its
+    scenario; the mean of (normalized - 1) over all episodes has a bootstrap
+    interval that resamples each scenario on its own. None if the policy or
+    the reference misses a scenario.
+    """
+    names = list(dict.fromkeys(cell.scenario for cell in cells))
+    by_key = {(cell.policy, cell.scenario): cell for cell in cells}
+    if any((p, n) not in by_key for p in (policy, reference) for n in names):
+        return None
+    strata = []
+    for name in names:
+        scale = float(by_key[(reference, name)].metrics["cost"].mean())
+        strata.append(by_key[(policy, name)].metrics["cost"] / scale - 1.0)
+    low, high = stats.bootstrap_interval(strata)
+    return float(np.concatenate(strata).mean()), low, high

@@ -1,0 +1,278 @@
+"""The benchmark's per-episode metrics: one definition, recorded step by step.
+
+``FleetMetrics`` is fed the simulator after every control step (the state
+the step's action led to, and the reward that action earned) and reduces
+the recorded series to one value per episode and metric (``METRICS``). It
+is the one implementation behind ``cpf-bench`` and ``cpf-run`` (both step
+through ``cpf_commands.common.rollout``); ``docs/benchmark.md`` gives every
+formula.
+
+Conventions (chosen once, for every metric):
+
+* sampling: after each step, t_k = (k + 1) dt, k = 0 .. T - 1;
+* aggregation: first over the n vessels of a fleet at each step (mean of
+  squares for an RMS, max for a max, the spread over vessels for a
+  formation error), then over the steps;
+* failure masking: a fleet that leaves its path (``terminated``) is counted
+  up to and including the step it failed and not after;
+* window: metrics with suffix ``_window`` use the last quarter of the horizon
+  (``WINDOW_FRACTION``); an episode that ended before the window is measured
+  at its last counted step.
+
+Path-relative quantities of vessel i, from its pose (x_i, y_i, psi_i), body
+velocity (u_i, v_i) and its path point eta_d(theta_i) = (x_d, y_d, psi_d),
+psi_d the path's tangent angle and |eta_d'| its speed dp/dtheta:
+
+    along_i  =  cos psi_d (x_i - x_d) + sin psi_d (y_i - y_d)        (m)
+    cross_i  = -sin psi_d (x_i - x_d) + cos psi_d (y_i - y_d)        (m)
+    heading_i = wrap(psi_i - psi_d) in [-pi, pi)                       (rad)
+    sog_i    = u_i cos(psi_i - psi_d) - v_i sin(psi_i - psi_d)        (m/s)
+    thetap_i = theta_i + along_i / |eta_d'|  (the vessel's position projected
+               onto its path, to first order, as a path variable)
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+from cpf_env.model.paths import encode_paths, evaluate_paths
+from cpf_env.scenarios.reward_weights import REWARD_TERMS
+from cpf_env.sim import arrays
+from cpf_env.sim.fleet import FleetSim
+
+__all__ = ["METRICS", "WINDOW_FRACTION", "FleetMetrics", "path_relative"]
+
+#: Fraction of the horizon, at its end, that the ``_window`` metrics use.
+WINDOW_FRACTION = 0.25
+
+Array = NDArray[np.float64]
+
+_TERM_COSTS = tuple(f"cost_{term}" for term in REWARD_TERMS)
+#: Metrics measured over the episode and again over the final window.
+_MEASURES = (
+    "return",
+    "cost",
+    *_TERM_COSTS,
+    "path_error_rms",
+    "path_error_max",
+    "along_track_error_rms",
+    "cross_track_error_rms",
+    "cross_track_error_max",
+    "heading_error_rms",
+    "heading_error_max",
+    "formation_error_rms",
+    "formation_error_max",
+    "speed_along_path",
+    "speed_along_path_error_rms",
+    "progress",
+    "theta_spread_rms",
+    "theta_rate_error_rms",
+    "speed_estimate_error_rms",
+    "control_energy",
+    "saturated_fraction",
+)
+#: Every per-episode metric, in the column order of ``episodes.csv``.
+METRICS: tuple[str, ...] = (
+    *_MEASURES,
+    "formation_error_end",
+    "theta_spread_end",
+    *(f"{name}_window" for name in _MEASURES),
+    "terminated",
+    "steps",
+)
+
+#: Per-step fleet series, each (S, T): sums over steps give totals, maxima give maxima.
+_SERIES = (
+    "reward",
+    *_TERM_COSTS,
+    "path_error_sq",
+    "path_error_max",
+    "along_sq",
+    "cross_sq",
+    "cross_max",
+    "heading_sq",
+    "heading_max",
+    "formation",
+    "sog",
+    "sog_error_sq",
+    "thetap",
+    "v0",
+    "spread",
+    "rate_error_sq",
+    "estimate_error_sq",
+    "energy",
+    "saturated",
+)
+
+
+def _wrap(angle: Array) -> Array:
+    """Angles wrapped to [-pi, pi)."""
+    return (angle + np.pi) % (2.0 * np.pi) - np.pi
+
+
+def path_relative(
+    eta: Array, nu: Array, theta: Array, kinds: NDArray[np.int64], params: Array
+) -> dict[str, Array]:
+    """Each vessel's errors relative to its path point, in the path's tangent frame.
+
+    Args:
+        eta: (S, n, 3) poses x, y (m), psi (rad).
+        nu: (S, n, 3) body velocities u, v (m/s), r (rad/s).
+        theta: (S, n) path variables.
+        kinds: (n,) path kinds (``encode_paths``).
+        params: (n, PATH_PARAM_SIZE) encoded paths.
+
+    Returns:
+        ``along``, ``cross`` (m), ``heading`` (rad), ``sog`` (m/s), ``path_speed``
+        (|eta_d'|, m per unit theta) and ``thetap`` (projected path variable),
+        each (S, n); formulas in the module docstring.
+    """
+    S, n = theta.shape
+    point = evaluate_paths(
+        np.tile(kinds, S), np.tile(params, (S, 1)), np.ascontiguousarray(theta.reshape(-1))
+    ).reshape(S, n, 3, 3)
+    psi_d = point[..., 0, 2]
+    c, s = np.cos(psi_d), np.sin(psi_d)
+    dx, dy = eta[..., 0] - point[..., 0, 0], eta[..., 1] - point[..., 0, 1]
+    along = c * dx + s * dy
+    relative = eta[..., 2] - psi_d
+    path_speed = np.hypot(point[..., 1, 0], point[..., 1, 1])
+    return {
+        "along": along,
+        "cross": -s * dx + c * dy,
+        "heading": _wrap(relative),
+        "sog": nu[..., 0] * np.cos(relative) - nu[..., 1] * np.sin(relative),
+        "path_speed": path_speed,
+        "thetap": theta + along / path_speed,
+    }
+
+
+class FleetMetrics:
+    """Records S fleets' steps and reduces them to per-episode metrics.
+
+    Args:
+        sim: The simulator the fleets run in (its paths, force scale, dt, S).
+        horizon: T, the control steps the rollout may take.
+    """
+
+    def __init__(self, sim: FleetSim, horizon: int) -> None:
+        self.dt = float(sim.scenario.dt)
+        self.horizon = int(horizon)
+        self._kinds, self._params = encode_paths(sim.scenario.paths)
+        self._tau_scale = sim.constants.tau_scale
+        self.series = {name: np.zeros((sim.num_fleets, self.horizon)) for name in _SERIES}
+        self._start_thetap = np.zeros(sim.num_fleets)
+        self._has_estimate = True
+
+    def start(self, a: arrays.FleetArrays) -> None:
+        """Note where each fleet starts (after reset), for ``progress``."""
+        rel = path_relative(a.eta, a.nu, a.theta, self._kinds, self._params)
+        self._start_thetap = rel["thetap"].mean(axis=1)
+
+    def record(self, t: int, a: arrays.FleetArrays, v0: float, estimate: Array | None) -> None:
+        """Write step t's fleet values (after the step) into column t of every series.
+
+        Args:
+            t: Step index, 0 .. T - 1.
+            a: The simulator's arrays after step t.
+            v0: Leader speed the step's rate is scored against (m/s).
+            estimate: (S, n) the policy's speed estimates used at step t, or None.
+        """
+        x = self.series
+        rel = path_relative(a.eta, a.nu, a.theta, self._kinds, self._params)
+        path_error = a.errors[..., arrays.ERR_PATH]
+        x["reward"][:, t] = a.reward.mean(axis=1)
+        for k, name in enumerate(_TERM_COSTS):
+            x[name][:, t] = a.reward_terms[:, :, k].mean(axis=1)
+        x["path_error_sq"][:, t] = (path_error**2).mean(axis=1)
+        x["path_error_max"][:, t] = path_error.max(axis=1)
+        x["along_sq"][:, t] = (rel["along"] ** 2).mean(axis=1)
+        x["cross_sq"][:, t] = (rel["cross"] ** 2).mean(axis=1)
+        x["cross_max"][:, t] = np.abs(rel["cross"]).max(axis=1)
+        x["heading_sq"][:, t] = (rel["heading"] ** 2).mean(axis=1)
+        x["heading_max"][:, t] = np.abs(rel["heading"]).max(axis=1)
+        thetap = rel["thetap"]
+        spread = thetap.max(axis=1) - thetap.min(axis=1)
+        x["formation"][:, t] = spread * rel["path_speed"].mean(axis=1)
+        x["sog"][:, t] = rel["sog"].mean(axis=1)
+        x["sog_error_sq"][:, t] = ((rel["sog"] - v0 * rel["path_speed"]) ** 2).mean(axis=1)
+        x["thetap"][:, t] = thetap.mean(axis=1)
+        x["v0"][:, t] = v0
+        x["spread"][:, t] = a.theta.max(axis=1) - a.theta.min(axis=1)
+        x["rate_error_sq"][:, t] = ((a.theta_dot - v0) ** 2).mean(axis=1)
+        x["energy"][:, t] = ((a.tau_applied / self._tau_scale) ** 2).sum(axis=2).mean(axis=1)
+        x["saturated"][:, t] = (a.tau_command != a.tau_applied).any(axis=2).mean(axis=1)
+        self._has_estimate = self._has_estimate and estimate is not None
+        if estimate is not None:
+            x["estimate_error_sq"][:, t] = ((np.asarray(estimate) - v0) ** 2).mean(axis=1)
+
+    def reduce(self, end: NDArray[np.int64], failed: NDArray[np.bool_]) -> dict[str, Array]:
+        """Per-episode metrics (``METRICS``), each (S,).
+
+        Args:
+            end: (S,) steps each episode lasted (1 .. T).
+            failed: (S,) whether each fleet left its path.
+        """
+        S = end.shape[0]
+        time = np.arange(self.horizon)[None, :]
+        counted = time < end[:, None]
+        first = self.horizon - max(1, round(WINDOW_FRACTION * self.horizon))
+        window_start = np.minimum(first, end - 1)
+        window = counted & (time >= window_start[:, None])
+        before = self.series["thetap"][np.arange(S), window_start - 1]
+        start = np.where(window_start > 0, before, self._start_thetap)
+        metrics = self._reduce(counted, self._start_thetap)
+        metrics.update({f"{k}_window": v for k, v in self._reduce(window, start).items()})
+        last = end - 1
+        metrics["formation_error_end"] = self.series["formation"][np.arange(S), last]
+        metrics["theta_spread_end"] = self.series["spread"][np.arange(S), last]
+        if not self._has_estimate:
+            for name in ("speed_estimate_error_rms", "speed_estimate_error_rms_window"):
+                metrics[name] = np.full(S, np.nan)
+        metrics["terminated"] = failed.astype(np.float64)
+        metrics["steps"] = end.astype(np.float64)
+        return {name: metrics[name] for name in METRICS}
+
+    def _reduce(self, mask: NDArray[np.bool_], start_thetap: Array) -> dict[str, Array]:
+        """Metrics over the steps in ``mask`` (S, T); progress from ``start_thetap`` (S,).
+
+        Every reduction runs along the contiguous last axis, so fleet k's numbers
+        do not depend on how many fleets ran beside it.
+        """
+        x = self.series
+        count = np.maximum(mask.sum(axis=1), 1)
+        last = self.horizon - 1 - np.argmax(mask[:, ::-1], axis=1)
+
+        def total(name: str) -> Array:
+            return np.where(mask, x[name], 0.0).sum(axis=1)
+
+        def rms(name: str) -> Array:
+            return np.sqrt(total(name) / count)
+
+        def peak(name: str) -> Array:
+            return np.where(mask, x[name], 0.0).max(axis=1)
+
+        made_good = x["thetap"][np.arange(mask.shape[0]), last] - start_thetap
+        return {
+            "return": total("reward"),
+            "cost": -total("reward"),
+            **{name: -total(name) for name in _TERM_COSTS},
+            "path_error_rms": rms("path_error_sq"),
+            "path_error_max": peak("path_error_max"),
+            "along_track_error_rms": rms("along_sq"),
+            "cross_track_error_rms": rms("cross_sq"),
+            "cross_track_error_max": peak("cross_max"),
+            "heading_error_rms": rms("heading_sq"),
+            "heading_error_max": peak("heading_max"),
+            "formation_error_rms": np.sqrt(np.where(mask, x["formation"] ** 2, 0.0).sum(1) / count),
+            "formation_error_max": peak("formation"),
+            "speed_along_path": total("sog") / count,
+            "speed_along_path_error_rms": rms("sog_error_sq"),
+            "progress": made_good / (self.dt * total("v0")),
+            "theta_spread_rms": np.sqrt(np.where(mask, x["spread"] ** 2, 0.0).sum(1) / count),
+            "theta_rate_error_rms": rms("rate_error_sq"),
+            "speed_estimate_error_rms": rms("estimate_error_sq"),
+            "control_energy": self.dt * total("energy"),
+            "saturated_fraction": total("saturated") / count,
+        }

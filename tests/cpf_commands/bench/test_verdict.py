@@ -1,0 +1,118 @@
+"""The multi-metric verdict, --reference and --split, on constructed and short real runs."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from cpf_commands.bench import verdict as verdicts_module
+from cpf_commands.bench.cli import bench_main, run_bench
+from cpf_commands.bench.report import CellResult
+from cpf_commands.bench.verdict import GUARDED, verdict
+from cpf_env.sim.fleet_metrics import METRICS
+
+SEEDS = tuple(range(10))
+
+
+def _cell(policy: str, cost: np.ndarray, **changes: np.ndarray) -> CellResult:
+    metrics = {name: np.full(len(SEEDS), 0.01) for name in METRICS}
+    metrics["progress_window"] = np.full(len(SEEDS), 0.9)
+    metrics["terminated"] = np.zeros(len(SEEDS))
+    metrics["cost"] = cost
+    metrics.update(changes)
+    return CellResult(policy, "bench_mild", SEEDS, False, metrics)
+
+
+BASE_COST = 100.0 + np.arange(10.0)
+REFERENCE = _cell("nn_dsc", BASE_COST)
+
+
+def test_lower_cost_and_no_regression_beats():
+    v = verdict(_cell("better", BASE_COST - 5.0), REFERENCE)
+    assert v.label == "beats"
+    assert v.cost_difference == pytest.approx((-5.0, -5.0, -5.0))
+    assert v.p_beats[0] == 1.0 and v.p_beats[1] < 0.75  # Wilson at 10/10
+
+
+def test_a_heading_regression_makes_it_mixed_and_names_it():
+    worse = np.full(10, 0.01 * 30)  # 30x the reference's heading error
+    v = verdict(_cell("agent", BASE_COST - 5.0, heading_error_rms_window=worse), REFERENCE)
+    assert v.label == "mixed (worse: heading)"
+    assert v.regressed == ("heading",)
+
+
+@pytest.mark.parametrize("metric", sorted(GUARDED))
+def test_every_guarded_metric_can_regress(metric):
+    _, floor, higher_better = GUARDED[metric]
+    base = REFERENCE.metrics[metric]
+    step = max(0.5 * abs(float(base.mean())), 2 * floor, 0.5)
+    changed = base - step if higher_better else base + step
+    v = verdict(_cell("p", BASE_COST - 5.0, **{metric: changed}), REFERENCE)
+    assert v.regressed == (GUARDED[metric][0],)
+
+
+def test_within_tolerance_or_below_the_floor_is_not_a_regression():
+    # cross-track 5 % worse: within the 10 % tolerance; 0.5 mm worse on 0.1 mm: below 1 mm floor
+    slightly = np.full(10, 0.0105)
+    v = verdict(_cell("p", BASE_COST - 5.0, cross_track_error_rms_window=slightly), REFERENCE)
+    assert v.label == "beats"
+    tiny_base = _cell("nn_dsc", BASE_COST, cross_track_error_rms_window=np.full(10, 1e-4))
+    tiny = np.full(10, 6e-4)
+    v = verdict(_cell("p", BASE_COST - 5.0, cross_track_error_rms_window=tiny), tiny_base)
+    assert v.label == "beats"
+
+
+def test_higher_cost_loses_and_noise_is_no_difference():
+    assert verdict(_cell("p", BASE_COST + 3.0), REFERENCE).label == "loses"
+    noise = BASE_COST + np.array([3.0, -3.0] * 5)
+    assert verdict(_cell("p", noise), REFERENCE).label == "no difference"
+
+
+def test_suite_cost_difference_is_relative_and_stratified():
+    other = CellResult("nn_dsc", "bench_switching", SEEDS, False, dict(REFERENCE.metrics))
+    policy_a = _cell("p", BASE_COST * 0.9)
+    policy_b = CellResult("p", "bench_switching", SEEDS, False, {**REFERENCE.metrics})
+    cells = [REFERENCE, other, policy_a, policy_b]
+    mean, low, high = verdicts_module.suite_cost_difference(cells, "p", "nn_dsc")
+    assert mean == pytest.approx(-0.05)  # -10 % on one scenario, 0 on the other
+    assert low <= mean <= high
+
+
+def test_reference_must_be_one_of_the_policies():
+    with pytest.raises(ValueError, match="--reference backstepping is not among"):
+        run_bench(["nn_dsc", "dsc"], ["bench_mild"], seeds=1, steps=2, reference="backstepping")
+
+
+def test_terminal_prints_the_verdict_against_any_reference(tmp_path, capsys):
+    argv = ["--policies", "backstepping", "dsc", "--scenarios", "bench_mild", "--seeds", "3"]
+    argv += ["--steps", "20", "--reference", "backstepping", "--out", str(tmp_path), "--quiet"]
+    assert bench_main([*argv, "--no-figures"]) == 0
+    out = capsys.readouterr().out
+    assert "against backstepping:" in out and "dsc" in out and "P(beats)" in out
+    summary = (tmp_path / "summary.md").read_text()
+    assert "## Verdict against backstepping" in summary
+    assert "--reference backstepping" in summary
+
+
+def test_shift_split_runs_the_shifted_scenarios():
+    cells = run_bench(
+        ["nn_dsc"], ["bench_lossy_links", "bench_large_fleet"], seeds=2, steps=5, split="shift"
+    )
+    assert [c.scenario for c in cells] == ["bench_lossy_links_shift", "bench_large_fleet_shift"]
+    with pytest.raises(ValueError, match="no held-out splits"):
+        run_bench(["nn_dsc"], ["wang2014"], seeds=1, steps=2, split="shift")
+
+
+def test_marl_eval_export_has_the_nested_layout(tmp_path):
+    import json
+
+    out = tmp_path / "marl.json"
+    argv = ["--policies", "nn_dsc", "dsc", "--scenarios", "bench_mild", "--seeds", "2"]
+    argv += ["--steps", "5", "--out", str(tmp_path / "b"), "--quiet", "--no-figures"]
+    assert bench_main([*argv, "--marl-eval", str(out)]) == 0
+    data = json.loads(out.read_text())
+    runs = data["cpf_env"]["bench_mild"]["dsc"]
+    assert sorted(runs) == ["seed_10000", "seed_10001"]
+    metrics = runs["seed_10000"]["absolute_metrics"]
+    assert metrics["return"] == [-metrics["cost"][0]]
+    assert "speed_estimate_error_rms" in metrics and len(metrics["cross_track_error_rms"]) == 1
