@@ -76,7 +76,7 @@ BREAKS: tuple[Break, ...] = (
     Break("nn-halved", "baselines/nn_dsc.py", "        return output, weights_next", "        return 0.5 * output, weights_next", (REPRODUCE_TESTS,)),  # noqa: E501
     Break("aux-off", "baselines/nn_dsc.py", "use_aux: ClassVar[bool] = True", "use_aux: ClassVar[bool] = False", ("tests/baselines/test_nn_dsc.py",)),  # noqa: E501
     Break("reward-scale-not-squared", "cpf_env/sim/reward.py", "error_squared / (scale * scale)", "error_squared / scale", ("tests/cpf_env/sim/test_reward.py", "tests/cpf_env/envs/test_env.py"), warm_cache=True),  # noqa: E501
-    Break("cache-stamp-per-file", "cpf_env/kernel_cache.py", 'return ("cpf_env kernel sources", self._stamp)', "return self._inner.get_source_stamp()", ("tests/cpf_env/test_kernel_cache.py",)),  # noqa: E501
+    Break("cache-stamp-per-file", "cpf_env/model/kernel_cache.py", 'return ("cpf_env kernel sources", self._stamp)', "return self._inner.get_source_stamp()", ("tests/cpf_env/model/test_kernel_cache.py",)),  # noqa: E501
 )
 # fmt: on
 

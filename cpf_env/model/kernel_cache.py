@@ -18,7 +18,8 @@ machine code. Where the cache lives is numba's decision, unchanged:
 
 It must run before any kernel module is imported (numba chooses a
 function's cache locator when it decorates it), so ``cpf_env/__init__.py``
-imports it first. Functions of other packages keep numba's own stamp. A
+imports it first. It lives in ``cpf_env.model``, the lowest layer, so that
+every layer with kernels may import it. Functions of other packages keep numba's own stamp. A
 locator list forced through numba's ``NUMBA_CACHE_LOCATOR_CLASSES`` setting
 bypasses this key; so does importing a kernel module without importing
 ``cpf_env`` itself, which Python does not allow.
@@ -53,7 +54,7 @@ KERNEL_MODULES = (
 #: the kernel modules' imports of ``cpf_env``).
 KERNEL_SOURCES = (*KERNEL_MODULES, "scenarios.reward_weights", "sim.arrays")
 
-_PACKAGE_DIRECTORY = Path(__file__).resolve().parent
+_PACKAGE_DIRECTORY = Path(__file__).resolve().parent.parent  # cpf_env/
 #: numba's cache machinery, whose locator list this module extends (``_CacheImpl`` before
 #: numba renamed it ``CacheImpl``).
 _CACHE_IMPL: Any = getattr(caching, "CacheImpl", None) or getattr(caching, "_CacheImpl")  # noqa: B009
