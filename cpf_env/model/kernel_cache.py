@@ -18,11 +18,11 @@ machine code. Where the cache lives is numba's decision, unchanged:
 
 It must run before any kernel module is imported (numba chooses a
 function's cache locator when it decorates it), so ``cpf_env/__init__.py``
-imports it first. It lives in ``cpf_env.model``, the lowest layer, so that
-every layer with kernels may import it. Functions of other packages keep numba's own stamp. A
-locator list forced through numba's ``NUMBA_CACHE_LOCATOR_CLASSES`` setting
-bypasses this key; so does importing a kernel module without importing
-``cpf_env`` itself, which Python does not allow.
+imports it first; importing any kernel module imports ``cpf_env`` first, so
+the key is always in place. It lives in ``cpf_env.model``, the lowest layer,
+so that every layer with kernels may import it. Functions of other packages
+keep numba's own stamp. A locator list forced through numba's
+``NUMBA_CACHE_LOCATOR_CLASSES`` setting bypasses this key.
 """
 
 from __future__ import annotations
