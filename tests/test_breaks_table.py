@@ -38,3 +38,9 @@ def test_a_break_whose_text_is_gone_says_what_to_update(tmp_path: Path) -> None:
 def test_names_are_unique() -> None:
     names = [entry.name for entry in breaks.BREAKS]
     assert len(names) == len(set(names))
+
+
+def test_a_break_of_a_missing_file_says_what_to_update(tmp_path: Path) -> None:
+    entry = breaks.Break("moved", "gone.py", "old", "new", ("tests/conftest.py",))
+    with pytest.raises(ValueError, match=r"gone\.py does not exist"):
+        breaks.apply_break(entry, tmp_path)

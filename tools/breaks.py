@@ -101,6 +101,11 @@ def _run(command: Sequence[str], copy: Path) -> subprocess.CompletedProcess[str]
 def apply_break(entry: Break, copy: Path) -> None:
     """Edit ``entry.path`` in ``copy``; raise ValueError unless ``old`` occurs exactly once."""
     path = copy / entry.path
+    if not path.is_file():
+        raise ValueError(
+            f"break {entry.name!r}: {entry.path} does not exist; update the entry in "
+            "tools/breaks.py to the current code."
+        )
     source = path.read_text()
     count = source.count(entry.old)
     if count != 1:
