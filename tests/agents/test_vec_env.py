@@ -194,12 +194,14 @@ def test_observations_are_not_aliased_through_steps_and_auto_resets() -> None:
     kept = env.reset()
     snapshot = kept.copy()
     action = np.full((env.num_envs, 3), 0.5, np.float32)
-    terminal = None
-    for _ in range(5):  # through one auto-reset at step 3
+    terminal, kept_step = None, None
+    for step in range(5):  # through one auto-reset at step 3
         obs, _rewards, dones, infos = env.step(action)
+        if step == 0:
+            kept_step, step_snapshot = obs, obs.copy()
         if dones.any() and terminal is None:
             terminal = infos[int(np.flatnonzero(dones)[0])]["terminal_observation"]
             terminal_snapshot = terminal.copy()
-    assert np.array_equal(kept, snapshot)
+    assert np.array_equal(kept, snapshot) and np.array_equal(kept_step, step_snapshot)
     assert terminal is not None and np.array_equal(terminal, terminal_snapshot)
     assert not np.array_equal(obs, snapshot)

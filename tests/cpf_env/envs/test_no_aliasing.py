@@ -73,25 +73,26 @@ def test_aec_env_observations_are_not_aliased() -> None:
     assert not np.array_equal(env.observe("vessel_0"), snapshot)
 
 
-def test_gymnasium_single_env_observations_are_not_aliased() -> None:
-    env = CentralizedFleetEnv(SCENARIO)
-    kept, _ = env.reset(seed=0)
-    snapshot = kept.copy()
+def _assert_single_env_not_aliased(env: gymnasium.Env) -> None:
+    """The reset observation and the first step's survive two more steps unchanged."""
+    first, _ = env.reset(seed=0)
+    kept = [(first, first.copy())]
     action = np.full(env.action_space.shape, 0.5, np.float32)
-    for _ in range(3):
+    for step in range(3):
         observation, *_ = env.step(action)
-    assert np.array_equal(kept, snapshot)
-    assert not np.array_equal(observation, snapshot)
+        if step == 0:
+            kept.append((observation, observation.copy()))
+    for value, snapshot in kept:
+        assert np.array_equal(value, snapshot)
+    assert not np.array_equal(observation, kept[1][1])
+
+
+def test_gymnasium_single_env_observations_are_not_aliased() -> None:
+    _assert_single_env_not_aliased(CentralizedFleetEnv(SCENARIO))
 
 
 def test_gymnasium_registered_env_observations_are_not_aliased() -> None:
-    env = gymnasium.make("cpf_env/CentralizedFleet-v0")
-    kept, _ = env.reset(seed=0)
-    snapshot = kept.copy()
-    for _ in range(3):
-        observation, *_ = env.step(np.full(env.action_space.shape, 0.5, np.float32))
-    assert np.array_equal(kept, snapshot)
-    assert not np.array_equal(observation, snapshot)
+    _assert_single_env_not_aliased(gymnasium.make("cpf_env/CentralizedFleet-v0"))
 
 
 def test_gymnasium_vector_env_observations_and_infos_are_not_aliased() -> None:
