@@ -54,7 +54,8 @@ from stable_baselines3.common.vec_env.base_vec_env import VecEnvIndices, VecEnvS
 
 from baselines import POLICIES, make_policy
 from cpf_env.envs.parallel import make_scenario
-from cpf_env.envs.residual import BasePolicy, ResidualConfig, ResidualController
+from cpf_env.envs.policy import FleetPolicy
+from cpf_env.envs.residual import ResidualConfig, ResidualController
 from cpf_env.scenarios import Scenario
 from cpf_env.sim.fleet import FleetSim
 from cpf_env.sim.observation import observation_box
@@ -63,10 +64,10 @@ __all__ = ["FleetVecEnv", "resolve_base_policy"]
 
 
 def resolve_base_policy(
-    base_policy: str | BasePolicy | None,
+    base_policy: str | FleetPolicy | None,
     scenario: Scenario,
     policy_options: dict[str, Any] | None = None,
-) -> BasePolicy | None:
+) -> FleetPolicy | None:
     """A base policy from a name of ``baselines.POLICIES``, an object, or None (none)."""
     if base_policy is None or base_policy == "none":
         return None
@@ -113,7 +114,7 @@ class FleetVecEnv(VecEnv):
         self,
         scenario: str | Scenario = "wang2014",
         num_fleets: int = 64,
-        base_policy: str | BasePolicy | None = "nn_dsc",
+        base_policy: str | FleetPolicy | None = "nn_dsc",
         residual: ResidualConfig | None = None,
         stagger: bool = True,
         policy_options: dict[str, Any] | None = None,

@@ -10,8 +10,10 @@ class derives the rest:
 - ``predict(obs, state, episode_start, deterministic)`` in the Stable-Baselines3
   style, so ``stable_baselines3.common.evaluation.evaluate_policy`` runs it.
 
-Trained agents (``agents.load_policy``) offer the same, so every command
-evaluates analytic and learned policies through the same code.
+This is the base class of the policy contract ``cpf_env.envs.policy.FleetPolicy``
+(documented there once: shapes, units, the optional members). Trained agents
+(``agents.load_policy``) derive from it too, so every command evaluates
+analytic and learned policies through the same code.
 """
 
 from __future__ import annotations

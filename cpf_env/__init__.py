@@ -16,6 +16,9 @@ from __future__ import annotations
 
 from typing import Any
 
+# First: numba picks a kernel's cache key when it compiles the decorator (kernel_cache).
+from cpf_env.model import kernel_cache  # noqa: F401  # isort: skip
+
 from pettingzoo.utils.env import AECEnv
 from pettingzoo.utils.wrappers import OrderEnforcingWrapper
 

@@ -11,6 +11,7 @@ from collections.abc import Sequence
 from pathlib import Path as FilePath
 
 import numpy as np
+import pytest
 
 from cpf_env import scenarios
 from cpf_env.model.disturbances import Disturbances
@@ -132,3 +133,22 @@ def random_actions(
     actions[..., 3] = rate + 0.05 * rng.standard_normal(shape)
     actions[..., 4:] = rng.uniform(-2.0, 2.0, size=(*shape, sim.act_dim - 4))
     return actions
+
+
+# --- shared runs of the reproduction tests (tests/cpf_commands/run/), once per session -----
+
+
+@pytest.fixture(scope="session")
+def short_run():
+    """6 s of wang2014 with nn_dsc."""
+    from cpf_commands.run.experiment import run_episode
+
+    return run_episode("wang2014", "nn_dsc", seed=0, steps=120)
+
+
+@pytest.fixture(scope="session")
+def fine_run():
+    """60 s of the reproduction configuration (wang2014_fine, leakage=plain)."""
+    from cpf_commands.run.experiment import run_episode
+
+    return run_episode("wang2014_fine", "nn_dsc", steps=6000, policy_options={"leakage": "plain"})

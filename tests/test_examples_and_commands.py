@@ -44,9 +44,9 @@ def test_speed_measure_reports_every_component():
     }
     episode = rows[-1]
     assert episode["steps_per_s"] == pytest.approx(20 / episode["seconds"], rel=1e-3)
-    for row in rows:
+    for row in rows:  # both rates are rounded to 0.1: steps_per_s's rounding, times B n
         assert row["vessel_steps_per_s"] == pytest.approx(
-            row["steps_per_s"] * row["B"] * 5, rel=1e-4
+            row["steps_per_s"] * row["B"] * 5, abs=0.05 * row["B"] * 5 + 0.05
         )
         assert row["steps_per_s"] > 0
 

@@ -7,8 +7,8 @@ labelled and evaluated the same way. A policy specification is one of:
 * a name of ``baselines.POLICIES`` (``"nn_dsc"``, ``"dsc"``, ...);
 * a path to a ``cpf-train --out`` folder, loaded by ``agents.load_policy``
   (imported only then, so the analytic side never needs the learning stack);
-* a ready policy object with ``act_batch`` (and ``reset``, ``diagnostics``)
-  for programmatic use;
+* a ready policy object (``cpf_env.envs.policy.FleetPolicy``: ``act_batch``,
+  ``reset``, ``diagnostics``) for programmatic use;
 * a callable ``scenario -> policy object``, for a policy that must be built
   per scenario (the bench runs several).
 
@@ -23,31 +23,27 @@ from __future__ import annotations
 import argparse
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any, Protocol, runtime_checkable
-
-import numpy as np
-from numpy.typing import NDArray
+from typing import Any
 
 from cpf_env.envs.parallel import make_scenario
+from cpf_env.envs.policy import FleetPolicy
 from cpf_env.scenarios import Scenario
 
-__all__ = ["BenchPolicy", "PolicySpec", "policy_argument", "policy_label", "resolve_policy"]
+__all__ = [
+    "BenchPolicy",
+    "FleetPolicy",
+    "PolicySpec",
+    "policy_argument",
+    "policy_label",
+    "resolve_policy",
+]
 
 
-@runtime_checkable
-class BenchPolicy(Protocol):
-    """What the commands need of a policy (the analytic policies' interface)."""
+#: The policy contract (``cpf_env.envs.policy.FleetPolicy``) under the name the commands used
+#: before it was defined once; kept for existing callers.
+BenchPolicy = FleetPolicy
 
-    diagnostics: dict[str, NDArray[np.float64]]
-
-    def reset(self, seed: int | None = None) -> None:
-        """Forget all internal states."""
-
-    def act_batch(self, obs: NDArray[Any]) -> NDArray[np.float64]:
-        """Actions (B, n, 4 + m) from observations (B, n, obs_dim)."""
-
-
-PolicySpec = str | Path | BenchPolicy | Callable[[Scenario], BenchPolicy]
+PolicySpec = str | Path | FleetPolicy | Callable[[Scenario], FleetPolicy]
 
 
 def policy_label(spec: PolicySpec) -> str:
@@ -87,16 +83,16 @@ def policy_argument(text: str) -> str:
     return text
 
 
-def resolve_policy(spec: PolicySpec, scenario: str | Scenario, **options: Any) -> BenchPolicy:
+def resolve_policy(spec: PolicySpec, scenario: str | Scenario, **options: Any) -> FleetPolicy:
     """Build the policy ``spec`` for ``scenario``.
 
     Args:
-        spec: See the module docstring.
+        spec: One of the specifications listed in this module's docstring.
         scenario: The evaluation scenario (name or object).
         **options: Gains for a baseline (e.g. ``K2=(30, 30, 5)``); only baselines take them.
 
     Returns:
-        A policy with ``reset``, ``act_batch`` and ``diagnostics``.
+        A ``FleetPolicy``.
 
     Raises:
         ValueError: A name that is neither a baseline nor an existing folder,
@@ -121,7 +117,7 @@ def resolve_policy(spec: PolicySpec, scenario: str | Scenario, **options: Any) -
                 "agents.load_policy (the learning extra: pip install 'cpf_env[rl]')."
             ) from error
         return load_policy(Path(spec), resolved)
-    if isinstance(spec, BenchPolicy):
+    if isinstance(spec, FleetPolicy):
         return spec
     if callable(spec):
         return spec(resolved)

@@ -35,8 +35,13 @@ from cpf_env.sim.fleet import FleetSim
 from cpf_env.sim.metrics import Trajectory, episode_metrics, final_window
 
 __all__ = [
+    "COMMAND_BOUND",
+    "COORDINATION_TOLERANCE",
     "NN_TRACKING_TOLERANCE",
     "PAPER_SCENARIOS",
+    "PATH_TOLERANCE",
+    "SATURATION_TRANSIENT",
+    "SPEED_TOLERANCE",
     "Claim",
     "default_leakage",
     "evaluate_claims",
@@ -51,6 +56,16 @@ __all__ = [
 PATH_TOLERANCE, COORDINATION_TOLERANCE, SPEED_TOLERANCE = 0.01, 0.01, 1e-4
 #: Relative RMS error below which the NN is said to track f_i.
 NN_TRACKING_TOLERANCE = 0.2
+#: Claim 4: the paper's forces saturate "only in the first seconds" (Fig. 6), so the
+#: command must be inside the limits from this time (s) on; measured: nn_dsc's last
+#: saturated command of vessel 3 at 4.85 s (wang2014_fine) and 3.2 s (wang2014), 18.3 s
+#: without the auxiliary system on wang2014_fine.
+SATURATION_TRANSIENT = 10.0
+#: Claim 4: bound on the peak |tau0| / limit of vessel 3 (per axis). The peak is the
+#: initial errors' command in the first half second; measured 16.0 (sway, wang2014_fine)
+#: and 7.9 (wang2014) for nn_dsc, 54 when the auxiliary system is off (the command winds
+#: up), 160 for a policy commanding 10 times nn_dsc's force.
+COMMAND_BOUND = 25.0
 #: Path error (m) below which every vessel counts as settled (``settling_time``).
 SETTLING_TOLERANCE = 0.05
 #: The paper's simulation, at the RL control step and at the fine one.
@@ -174,6 +189,56 @@ def _nn_claim(
     return message, bool(np.all(nn_error < NN_TRACKING_TOLERANCE)), values
 
 
+def _force_claim(trajectory: Trajectory, vessel: int) -> Claim:
+    """Claim 4 on what the controller decides: its command tau0, not the clipped force.
+
+    Holds when (a) the command exceeds a limit at some step (saturation is
+    active, else the claim says nothing), (b) it is inside the limits from
+    ``SATURATION_TRANSIENT`` s on (saturated only in the transient: no windup;
+    a run shorter than that cannot show it),
+    (c) its peak stays within ``COMMAND_BOUND`` times the limits, and (d) the
+    applied force is within the limits, which the plant's clip guarantees
+    (structural, reported as such).
+    """
+    limits = np.maximum(np.abs(trajectory.tau_min[vessel]), np.abs(trajectory.tau_max[vessel]))
+    command = np.abs(trajectory.tau_command[:, vessel])  # (T, 3)
+    beyond = np.any(command > limits, axis=1)  # (T,)
+    saturated_steps = int(beyond.sum())
+    last = float(trajectory.time[np.flatnonzero(beyond)[-1]]) if saturated_steps else None
+    peak = command.max(axis=0) / limits
+    applied = np.abs(trajectory.tau_applied[:, vessel]).max(axis=0)
+    within = bool(np.all(applied <= limits + 1e-12))
+    # A run that ends inside the transient cannot show that saturation ends with it.
+    confined = last is not None and bool(last < SATURATION_TRANSIENT <= trajectory.time[-1])
+    bounded = bool(np.all(peak <= COMMAND_BOUND))
+    last_text = "never" if last is None else f"last at {last:.3g} s"
+    measured = (
+        f"command beyond the limits on {saturated_steps} steps, {last_text} "
+        f"(must saturate, and only before {SATURATION_TRANSIENT:g} s); peak |tau0| / limit "
+        + " / ".join(f"{p:.3g}" for p in peak)
+        + f" (bound {COMMAND_BOUND:g}); applied max |tau| "
+        + " / ".join(f"{t:.3g}" for t in applied)
+        + " vs limits "
+        + " / ".join(f"{t:.3g}" for t in limits)
+        + " (structural: the plant clips)"
+    )
+    return Claim(
+        4,
+        "Fig. 6",
+        f"forces of vessel {vessel + 1} saturate only in the transient and stay within the limits",
+        measured,
+        saturated_steps > 0 and confined and bounded and within,
+        {
+            "saturated_steps": saturated_steps,
+            "last_saturated_time": last,
+            "command_peak_over_limit": peak.tolist(),
+            "force_max_abs": applied.tolist(),
+            "limits": limits.tolist(),
+            "applied_within_limits": within,
+        },
+    )
+
+
 def evaluate_claims(
     trajectory: Trajectory,
     metrics: dict[str, Any],
@@ -196,10 +261,6 @@ def evaluate_claims(
     nn_vessel, force_vessel = min(1, n - 1), min(2, n - 1)
     path = max(metrics["path_error_max"])
     coordination = metrics["coordination_error_max"]
-    tau = np.abs(trajectory.tau_applied[:, force_vessel]).max(axis=0)
-    limits = np.maximum(
-        np.abs(trajectory.tau_min[force_vessel]), np.abs(trajectory.tau_max[force_vessel])
-    )
     speed = metrics.get("speed_estimate_error_max") if estimator else None
     nn = _nn_claim(trajectory, nn_vessel, gains)
     claims = [
@@ -231,18 +292,7 @@ def evaluate_claims(
             coordination < COORDINATION_TOLERANCE,
             {"coordination_error_max": coordination},
         ),
-        Claim(
-            4,
-            "Fig. 6",
-            f"forces of vessel {force_vessel + 1} stay within the limits",
-            "max |tau| ("
-            + ", ".join(f"{t:.3g}" for t in tau)
-            + ") vs limits ("
-            + ", ".join(f"{t:.3g}" for t in limits)
-            + ")",
-            bool(np.all(tau <= limits + 1e-12)) and metrics["force_within_limits"],
-            {"force_max_abs": tau.tolist(), "limits": limits.tolist()},
-        ),
+        _force_claim(trajectory, force_vessel),
     ]
     if speed is not None:
         claims.append(

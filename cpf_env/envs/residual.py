@@ -60,11 +60,12 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any, Protocol
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from cpf_env.envs.policy import FleetPolicy
 from cpf_env.scenarios import Scenario
 from cpf_env.sim.fleet import observation_layout
 from cpf_env.sim.observation import ObsLayout
@@ -88,21 +89,9 @@ EXTRAS = {"base_action": 4, "base_signals": 7, "multiscale_errors": 9}
 MULTISCALE = (0.01, 0.1, 1.0)
 
 
-class BasePolicy(Protocol):
-    """What a base policy must offer (the analytic policies of ``baselines`` do).
-
-    ``act_batch(obs (B, n, obs_dim)) -> (B, n, 4 + m)`` and ``reset()``. A batched
-    vector env that restarts single fleets also needs ``reset_fleets(mask)`` and
-    ``act_batch(obs, fleets=index)``; ``base_signals`` needs ``diagnostics``.
-    """
-
-    def act_batch(self, obs: ArrayLike, fleets: ArrayLike | None = None) -> Array:
-        """Actions of the given fleets."""
-        ...
-
-    def reset(self, seed: int | None = None) -> None:
-        """Forget all internal states."""
-        ...
+#: The base policy's contract, ``cpf_env.envs.policy.FleetPolicy`` (the name this module used
+#: before the contract was defined once; kept for existing callers).
+BasePolicy = FleetPolicy
 
 
 @dataclass(frozen=True)
@@ -201,7 +190,7 @@ class ResidualController:
 
     Args:
         scenario: The task (limits, dt, layout).
-        base_policy: Any ``BasePolicy``; None commands nothing (a learner from
+        base_policy: Any ``FleetPolicy``; None commands nothing (a learner from
             scratch, with ``mode="force_and_rate"`` and ``scale=1``).
         num_fleets: B.
         config: ``ResidualConfig`` (default: force residual, scale 0.2, no extras).
@@ -218,7 +207,7 @@ class ResidualController:
     def __init__(
         self,
         scenario: Scenario,
-        base_policy: BasePolicy | None,
+        base_policy: FleetPolicy | None,
         num_fleets: int,
         config: ResidualConfig | None = None,
     ) -> None:

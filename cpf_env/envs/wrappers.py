@@ -43,7 +43,8 @@ from numpy.typing import NDArray
 from pettingzoo.utils.wrappers import BaseParallelWrapper
 
 from cpf_env.envs.parallel import CooperativePathFollowingEnv
-from cpf_env.envs.residual import BasePolicy, ResidualConfig, ResidualController
+from cpf_env.envs.policy import FleetPolicy
+from cpf_env.envs.residual import ResidualConfig, ResidualController
 from cpf_env.sim.observation import observation_box
 
 __all__ = ["ResidualWrapper"]
@@ -68,7 +69,7 @@ class ResidualWrapper(BaseParallelWrapper):
     def __init__(
         self,
         env: CooperativePathFollowingEnv,
-        base_policy: BasePolicy,
+        base_policy: FleetPolicy,
         scale: float = 0.2,
         mode: str = "force",
         extras: tuple[str, ...] = (),

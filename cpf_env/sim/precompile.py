@@ -9,8 +9,10 @@ cold compiles for 15-30 s. Many processes starting together on a cold cache
 ``precompile()`` (or the ``cpf-precompile`` command) once per machine or
 container image, with the same ``NUMBA_CACHE_DIR`` the workers will see.
 
-The cache is specific to the CPU model and to the installed file versions:
-nodes of another CPU type, or an upgraded package, compile again once.
+The cache is specific to the CPU model and to the kernels' sources: nodes of
+another CPU type compile again once, and so does every process after an edit
+to any module a kernel compiles from (``cpf_env.model.kernel_cache`` keys the cache
+on all of them, so no stale kernel is ever loaded).
 
 Example:
     >>> from cpf_env.sim.precompile import precompile
@@ -33,6 +35,7 @@ import numpy as np
 from numba.core.registry import CPUDispatcher
 
 from cpf_env import scenarios
+from cpf_env.model.kernel_cache import KERNEL_MODULES
 from cpf_env.sim.fleet import PARALLEL_MIN_FLEETS, FleetSim
 
 __all__ = [
@@ -42,18 +45,6 @@ __all__ = [
     "kernels_of_package",
     "precompile",
 ]
-
-#: The modules of ``cpf_env`` that define numba kernels (a test keeps this list complete).
-KERNEL_MODULES = (
-    "model.counter_rng",
-    "model.disturbances",
-    "model.paths",
-    "model.plant",
-    "model.vessel",
-    "sim.kernels",
-    "sim.observation",
-    "sim.reward",
-)
 
 
 @dataclass(frozen=True)

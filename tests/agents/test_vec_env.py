@@ -186,3 +186,22 @@ def test_locality_a_non_neighbour_does_not_reach_a_vessels_input() -> None:
     inputs = [env.step(np.full((5, 3), 0.3, np.float32))[0] for env in envs]
     assert np.array_equal(inputs[0][0], inputs[1][0])
     assert not np.array_equal(inputs[0][3], inputs[1][3])
+
+
+def test_observations_are_not_aliased_through_steps_and_auto_resets() -> None:
+    """A kept observation batch, and a terminal observation, survive the next steps unchanged."""
+    env = FleetVecEnv("bench_saturation", num_fleets=2, base_policy="nn_dsc", max_steps=3)
+    kept = env.reset()
+    snapshot = kept.copy()
+    action = np.full((env.num_envs, 3), 0.5, np.float32)
+    terminal, kept_step = None, None
+    for step in range(5):  # through one auto-reset at step 3
+        obs, _rewards, dones, infos = env.step(action)
+        if step == 0:
+            kept_step, step_snapshot = obs, obs.copy()
+        if dones.any() and terminal is None:
+            terminal = infos[int(np.flatnonzero(dones)[0])]["terminal_observation"]
+            terminal_snapshot = terminal.copy()
+    assert np.array_equal(kept, snapshot) and np.array_equal(kept_step, step_snapshot)
+    assert terminal is not None and np.array_equal(terminal, terminal_snapshot)
+    assert not np.array_equal(obs, snapshot)

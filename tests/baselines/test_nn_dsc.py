@@ -253,30 +253,34 @@ def test_ablations_take_the_weight_law_option(name):
     assert baselines.make_policy(name, "wang2014_fine", leakage="plain").gains.leakage == "plain"
 
 
-@pytest.mark.slow
 def test_nn_matters_on_unknown_force_fine():
     """Without the NN the unknown force leaves centimetres (README ablation table).
 
-    Measured over the last quarter of 150 s: dsc 2.4e-2 m, nn_dsc (leakage="plain") 1.4e-3 m.
+    40 s, last quarter (30-40 s): dsc 1.5e-2 m, nn_dsc (leakage="plain") 7.7e-4 m
+    (over 150 s: 2.4e-2 and 1.4e-3 m).
     """
     errors = {}
     for name in ("dsc", "nn_dsc"):
-        trajectory = run_episode("unknown_force_fine", name, policy_options={"leakage": "plain"})
+        trajectory = run_episode(
+            "unknown_force_fine", name, steps=4000, policy_options={"leakage": "plain"}
+        )
         errors[name] = max(episode_metrics(trajectory)["path_error_max"])
-    assert errors["dsc"] > 0.02 and errors["nn_dsc"] < 0.002
+    assert errors["dsc"] > 0.01 and errors["nn_dsc"] < 0.002
 
 
-@pytest.mark.slow
 def test_aux_matters_on_saturation_fine():
     """Without the auxiliary system the fleet settles much later (README ablation table).
 
     With the integrating NN, e2 = z2 - pi keeps the NN from learning the
     saturation as model error; with e2 = z2 it winds up and holds the
-    actuators at their limits. Measured: settled (< 5 cm) from 18.7 s with,
-    34.7 s without.
+    actuators at their limits. Measured over 40 s: settled (< 5 cm) from
+    18.65 s with, 34.68 s without (the same as over 150 s).
     """
     settled = {}
     for name in ("nn_dsc", "nn_dsc_no_aux"):
-        trajectory = run_episode("saturation_fine", name, policy_options={"leakage": "plain"})
+        trajectory = run_episode(
+            "saturation_fine", name, steps=4000, policy_options={"leakage": "plain"}
+        )
         settled[name] = settling_time(trajectory)
-    assert settled["nn_dsc"] < 20.0 and settled["nn_dsc_no_aux"] > 30.0
+    assert settled["nn_dsc"] < 20.0
+    assert settled["nn_dsc_no_aux"] is not None and settled["nn_dsc_no_aux"] > 30.0

@@ -27,11 +27,6 @@ from cpf_env.sim.fleet import FleetSim
 from cpf_env.sim.metrics import episode_metrics
 
 
-@pytest.fixture(scope="module")
-def short_run():
-    return run_episode("wang2014", "nn_dsc", seed=0, steps=120)
-
-
 def test_trajectory_shapes_and_alignment(short_run):
     t = short_run
     assert t.eta.shape == (120, 5, 3)
@@ -64,9 +59,10 @@ def test_claims_are_five_and_read_the_metrics(short_run):
     metrics = episode_metrics(short_run)
     claims = evaluate_claims(short_run, metrics)
     assert [c.number for c in claims] == [1, 2, 3, 4, 5]
-    # 6 s into the run the fleet has not converged: claim 1 must not hold yet.
+    # 6 s into the run the fleet has not converged: claim 1 must not hold yet; nor can
+    # claim 4, whose transient (10 s) the run has not left.
     assert not claims[0].holds
-    assert claims[3].holds == metrics["force_within_limits"]
+    assert not claims[3].holds and claims[3].values["saturated_steps"] > 0
 
 
 def test_reproduce_writes_outputs(tmp_path):
@@ -216,12 +212,6 @@ def test_settling_time():
 # --- claim 2: the steady-state formula and the two readings of the weight law -------------
 
 
-@pytest.fixture(scope="module")
-def fine_run():
-    """60 s of the reproduction configuration (wang2014_fine, leakage=plain)."""
-    return run_episode("wang2014_fine", "nn_dsc", steps=6000, policy_options={"leakage": "plain"})
-
-
 def test_fine_configuration_meets_all_five_claims(fine_run):
     """Measured at 60 s (last quarter 45-60 s): path 7.6e-5 m, NN 0.052 / 0.067 / 0.014."""
     claims = evaluate_claims(fine_run, episode_metrics(fine_run), NNDSCGains(leakage="plain"))
@@ -249,17 +239,19 @@ def test_steady_state_formula_integrating_reading(fine_run):
 def test_steady_state_formula_gamma_scaled_reading():
     """Under the default law, s = ||sigma||^2 / k_W ~ 10.1: the NN learns s/(K2+s) of f.
 
-    Tolerance 12 % relative: the prediction 0.856 / 0.874 / 0.441 is met to 0.5 %
-    on surge and sway; yaw, where the neglected sway-yaw coupling of M
-    (M23 = 1.09 vs M33 = 2.76) and the end of the transient weigh most, measures
-    0.486 at 40 s and 0.452 at 150 s.
+    Tolerance 0.01 absolute on surge and sway, where the prediction 0.856 / 0.874
+    is met to 0.5 % (an NN output half as large would leave 0.92 of f on surge);
+    12 % relative on yaw, where the neglected sway-yaw coupling of M
+    (M23 = 1.09 vs M33 = 2.76) and the end of the transient weigh most: it
+    measures 0.486 at 40 s and 0.452 at 150 s.
     """
     trajectory = run_episode("wang2014", "nn_dsc", steps=800)
     predicted, s = predicted_nn_error(trajectory, NNDSCGains(), vessel=1)
     measured = _nn_relative_error(trajectory, 1)
     assert 9.0 < s < 11.0
     np.testing.assert_allclose(predicted, [0.856, 0.874, 0.441], atol=0.005)
-    np.testing.assert_allclose(measured, predicted, rtol=0.12)
+    np.testing.assert_allclose(measured[:2], predicted[:2], atol=0.01)
+    np.testing.assert_allclose(measured[2], predicted[2], rtol=0.12)
     assert np.all(measured > NN_TRACKING_TOLERANCE)  # claim 2 is not met under this reading
 
 

@@ -177,3 +177,69 @@ def test_wrapper_infos_carry_base_command_and_residual() -> None:
         np.testing.assert_allclose(
             info["tau_command"], info["base_command"][:3] + info["residual"], rtol=1e-6
         )
+
+
+class _Recorder:
+    """A base policy that records the observation it is shown and commands nothing."""
+
+    def __init__(self, act_dim: int) -> None:
+        self.act_dim = act_dim
+        self.shown: list[np.ndarray] = []
+        self.diagnostics: dict[str, np.ndarray] = {}
+
+    def act_batch(self, obs: np.ndarray, fleets: object = None) -> np.ndarray:
+        self.shown.append(np.array(obs, dtype=np.float64))
+        return np.zeros((*np.shape(obs)[:2], self.act_dim))
+
+    def reset(self, seed: int | None = None) -> None:
+        del seed
+
+    def reset_fleets(self, fleets: object) -> None:
+        del fleets
+
+
+def test_kinematic_residual_shows_the_base_a_target_moved_by_the_offset() -> None:
+    """a = (1, -0.5, 0.25) with kinematic_scale (0.05, 0.04, 0.02) moves the tracked point by
+    d = (0.05, -0.02, 0.005) m, m, rad in the body frame: the base sees z1 - d, nothing else."""
+    scenario = scenarios.get("bench_lossy_links")
+    sim = FleetSim(scenario, num_fleets=2)
+    recorder = _Recorder(4 + scenario.message_size)
+    config = ResidualConfig(mode="kinematic", kinematic_scale=(0.05, 0.04, 0.02))
+    loop = ResidualController(scenario, recorder, 2, config)
+    obs = sim.reset(seeds=[3, 4]).astype(np.float64)
+    loop.observe(obs)
+    assert recorder.shown == []  # in kinematic mode the base acts only once the offset is known
+    action = np.zeros((2, 5, 3))
+    action[..., 0], action[..., 1], action[..., 2] = 1.0, -0.5, 0.25
+    action[1, 2] = (-1.0, 1.0, -1.0)  # one vessel with the opposite offset
+    loop.compose(action)
+    (shown,) = recorder.shown
+    z1 = loop.layout.z1
+    expected = obs.copy()
+    expected[..., z1] = obs[..., z1] - np.array([0.05, -0.02, 0.005])
+    expected[1, 2, z1] = obs[1, 2, z1] - np.array([-0.05, 0.04, -0.02])
+    np.testing.assert_allclose(shown, expected, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(loop.residual[0, 0], [0.05, -0.02, 0.005], rtol=1e-15)
+
+
+def test_kinematic_residual_commands_what_the_base_commands_for_the_moved_target() -> None:
+    """nn_dsc through the kinematic residual equals a second nn_dsc fed z1 - d by hand."""
+    scenario = scenarios.get("wang2014")
+    sim = FleetSim(scenario)
+    loop = ResidualController(
+        scenario, make_policy("nn_dsc", scenario), 1, ResidualConfig(mode="kinematic")
+    )
+    reference = make_policy("nn_dsc", scenario)
+    obs = sim.reset(seeds=[0])
+    action = np.random.default_rng(1).uniform(-1.0, 1.0, size=(1, 5, 3))
+    offset = 0.05 * action  # the default kinematic_scale, m, m, rad
+    unmoved = make_policy("nn_dsc", scenario).act_batch(obs)
+    for step in range(3):
+        loop.observe(obs)
+        command = loop.compose(action)
+        moved = obs.astype(np.float64)
+        moved[..., loop.layout.z1] -= offset
+        np.testing.assert_array_equal(command, reference.act_batch(moved))
+        if step == 0:  # the moved target changes the force: the offset is not dropped
+            assert np.all(np.abs(command[..., :3] - unmoved[..., :3]) > 1e-6)
+        obs = sim.step(command)

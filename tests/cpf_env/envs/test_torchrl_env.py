@@ -260,3 +260,16 @@ def test_throughput_example_prints_its_table() -> None:
     assert "native B = 256 / PettingZooWrapper, info_level=none:" in out
     rows = [line for line in out.splitlines() if line.startswith("TorchRLFleetEnv")]
     assert [line.split()[1] for line in rows] == ["2", "256"]
+
+
+def test_observations_are_not_aliased() -> None:
+    """A kept observation tensor is unchanged after the next steps."""
+    env = TorchRLFleetEnv("wang2014", num_fleets=2)
+    td = env.reset()
+    kept = td[GROUP, "observation"]
+    snapshot = kept.clone()
+    actions = np.full((2, env.n, env.sim.act_dim), 0.5, np.float32)
+    for _ in range(3):
+        step, td = env.step_and_maybe_reset(with_action(td, actions))
+    assert torch.equal(kept, snapshot)
+    assert not torch.equal(step["next", GROUP, "observation"], snapshot)

@@ -1,0 +1,58 @@
+"""One policy contract (cpf_env.envs.policy.FleetPolicy) for every kind of policy."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from conftest import ROOT
+
+import baselines
+from cpf_commands.common import policies
+from cpf_commands.common.policies import resolve_policy
+from cpf_env import FleetSim, scenarios
+from cpf_env.envs import residual
+from cpf_env.envs.policy import FleetPolicy
+from cpf_env.envs.residual import ZeroPolicy
+
+
+def test_the_old_names_are_the_one_contract() -> None:
+    assert residual.BasePolicy is FleetPolicy and policies.BenchPolicy is FleetPolicy
+
+
+@pytest.mark.parametrize("name", sorted(baselines.POLICIES))
+def test_every_baseline_meets_the_contract(name: str) -> None:
+    scenario = scenarios.get("wang2014")
+    policy = baselines.make_policy(name, scenario)
+    assert isinstance(policy, FleetPolicy)
+    obs = FleetSim(scenario, num_fleets=2).reset(seeds=[0, 1])
+    actions = policy.act_batch(obs)
+    assert actions.shape == (2, scenario.n, 4 + scenario.message_size)
+    assert actions.dtype == np.float64
+    policy.reset_fleets(np.array([True, False]))  # the batched-env member, present
+
+
+def test_a_trained_agent_and_the_zero_policy_meet_it() -> None:
+    from agents import load_policy
+
+    agent = ROOT / "results" / "residual_rl" / "agents" / "residual_ppo_bench_lossy_links_5m_s0"
+    assert isinstance(load_policy(agent, "bench_lossy_links"), FleetPolicy)
+    assert isinstance(ZeroPolicy(4), FleetPolicy)
+
+
+def test_the_resolver_accepts_a_plain_object_with_the_contract_and_refuses_others() -> None:
+    class Minimal:
+        """act_batch(obs), reset(seed), diagnostics: what the commands need."""
+
+        def __init__(self) -> None:
+            self.diagnostics: dict = {}
+
+        def act_batch(self, obs, fleets=None):
+            return np.zeros((*np.shape(obs)[:2], 4))
+
+        def reset(self, seed=None):
+            del seed
+
+    minimal = Minimal()
+    assert resolve_policy(minimal, "wang2014") is minimal
+    with pytest.raises(ValueError, match="cannot use int as a policy"):
+        resolve_policy(3, "wang2014")  # type: ignore[arg-type]
