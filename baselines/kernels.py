@@ -27,12 +27,14 @@ kinetic part is written in Python (``Policy._kinetics``, see
 from __future__ import annotations
 
 import math
+from pathlib import Path
 from typing import NamedTuple
 
 import numba
 import numpy as np
 from numba import prange
 
+from cpf_env.model import kernel_cache
 from cpf_env.model.vessel import coriolis_coefficients, damping_coefficients
 from cpf_env.sim.observation import (
     LEADER,
@@ -61,6 +63,9 @@ __all__ = [
     "act_rows_serial",
     "cooperative_rows",
 ]
+
+# The cached kernels below inline cpf_env's helpers: key them on those sources and this file.
+kernel_cache.stamp_package(Path(__file__).parent, (Path(__file__),))
 
 #: ``PolicyConstants.kinetics``: the kinetic part given in Python, the NN-based DSC, backstepping.
 KINETICS_PYTHON, KINETICS_NN_DSC, KINETICS_BACKSTEPPING = 0, 1, 2

@@ -237,9 +237,15 @@ class Policy(PolicyInterface):
             index = self._fleet_index(fleets, batch.shape[0])
             states = self._states_for(self._all_fleets.shape[0])
         rows = batch.shape[0]
+        vectors = np.empty((5, rows, self.n, 3))  # one allocation per shape, C-contiguous slices
+        scalars = np.empty((3, rows, self.n))
         out = PolicyOutputs(
-            actions=np.empty((rows, self.n, self.act_dim)),
-            **{name: np.empty((rows, self.n, *shape)) for name, shape in DIAGNOSTICS.items()},
+            np.empty((rows, self.n, self.act_dim)),
+            *vectors[:3],  # nn_output, nubar_dot, alpha
+            scalars[0],  # speed_estimate
+            *vectors[3:],  # aux_state, tau_command
+            scalars[1],  # omega_s
+            scalars[2],  # gamma
         )
         if self.kinetics == KINETICS_PYTHON:
             self._act_in_python(batch, index, states, out)

@@ -107,3 +107,18 @@ def test_parallel_kernel_equals_the_serial_one_bit_for_bit(name: str) -> None:
                 serial.act_batch(obs[fleets], fleets=fleets), actions[fleets], err_msg=str(t)
             )
         obs = sim.step(actions)
+
+
+def test_policy_kernels_are_keyed_on_the_simulator_sources_they_inline(monkeypatch) -> None:
+    """An edit to cpf_env's kernel sources (vessel.py, observation.py, ...) or to
+    baselines/kernels.py changes the cache stamp of the policy kernels."""
+    from baselines import kernels
+    from cpf_env.model import kernel_cache
+
+    source = kernels.__file__
+    stamp = kernel_cache._stamp_of(source)
+    assert stamp is not None
+    locator = kernels.act_rows_serial._cache._impl._locator
+    assert locator.get_source_stamp() == ("cpf_env kernel sources", stamp)
+    monkeypatch.setattr(kernel_cache, "_digest", lambda: "edited cpf_env sources")
+    assert kernel_cache._stamp_of(source) not in (None, stamp)
