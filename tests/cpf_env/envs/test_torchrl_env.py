@@ -260,3 +260,24 @@ def test_throughput_example_prints_its_table() -> None:
     assert "native B = 256 / PettingZooWrapper, info_level=none:" in out
     rows = [line for line in out.splitlines() if line.startswith("TorchRLFleetEnv")]
     assert [line.split()[1] for line in rows] == ["2", "256"]
+
+
+def test_a_float_reset_mask_is_refused_before_any_fleet_resets() -> None:
+    env = TorchRLFleetEnv("bench_mild", num_fleets=3)
+    env.set_seed(0)
+    env.reset()
+    before = env.sim.arrays.eta.copy()
+    with pytest.raises(ValueError, match="must be a bool tensor"):
+        env.reset(TensorDict({"_reset": torch.tensor([[1.0], [0.0], [0.0]])}, batch_size=[3]))
+    np.testing.assert_array_equal(env.sim.arrays.eta, before)
+
+
+def test_a_gpu_device_is_refused_with_what_to_do() -> None:
+    with pytest.raises(ValueError, match="runs on the CPU"):
+        TorchRLFleetEnv("wang2014", num_fleets=2, device="cuda")
+
+
+def test_a_fractional_seed_is_refused() -> None:
+    env = TorchRLFleetEnv("bench_mild", num_fleets=2)
+    with pytest.raises(ValueError, match="seed must be an integer"):
+        env.set_seed(1.5)  # type: ignore[arg-type]
