@@ -59,7 +59,7 @@ LOOPBACK = "127.0.0.1"
 TOKEN_FILE = Path("~/.ray/auth_token")
 
 
-def private_token_file(path: Path = TOKEN_FILE) -> Path:
+def private_token_file(path: Path | None = None) -> Path | None:
     """Create Ray's token file readable by its owner only (0600), or make it so.
 
     Ray writes the file with the default permissions (0644 under the usual
@@ -67,9 +67,16 @@ def private_token_file(path: Path = TOKEN_FILE) -> Path:
     file is created here with a token from Ray's own generator, with 0600
     from the start; an existing one of ours is restricted to 0600.
 
+    Args:
+        path: The file; default: ``RAY_AUTH_TOKEN_PATH`` if set, else ``~/.ray/auth_token``.
+
     Returns:
-        The token file's path.
+        The token file's path, or None if ``RAY_AUTH_TOKEN`` gives the token (no file).
     """
+    if path is None:
+        if os.environ.get("RAY_AUTH_TOKEN"):
+            return None
+        path = Path(os.environ.get("RAY_AUTH_TOKEN_PATH") or TOKEN_FILE)
     token = path.expanduser()
     token.parent.mkdir(mode=0o700, parents=True, exist_ok=True)
     if not token.exists():
