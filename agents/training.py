@@ -371,6 +371,7 @@ def _train_into(
     total = -(-config.timesteps // per_call) * per_call  # SB3 completes whole rollouts
     model.learn(config.timesteps, callback=[_ProgressBar(total, progress), *callbacks])
     elapsed = time.perf_counter() - start
+    model.logger.close()  # progress.csv complete on disk before the folder is swapped in
     model.save(folder / "model.zip")  # SB3's format, to resume training; evaluation ignores it
     network = network_from_tensors(
         actor_tensors(model, config.algo), config.algo, config.net_arch, folder / "model.zip"

@@ -130,7 +130,8 @@ class ResidualWrapper(BaseParallelWrapper):
         command = self.controller.compose(correction)
         used = (self.controller.base_actions[0].copy(), self.controller.residual[0].copy())
         env_actions = {
-            agent: command[0, i].astype(np.float32) for i, agent in enumerate(self.env.agents)
+            agent: command[0, i]
+            for i, agent in enumerate(self.env.agents)  # float64: exact
         }
         observations, rewards, terminations, truncations, infos = self.env.step(env_actions)
         self._inputs = self.controller.observe(self._stack(observations))
