@@ -10,23 +10,28 @@ SB3's ``evaluate_policy`` treat it as any analytic policy.
 Example (with a folder written by ``cpf-train --out runs/ppo``)::
 
     from agents import load_policy
-    policy = load_policy("runs/ppo", scenario="bench_lossy_links")
+    policy = load_policy("runs/ppo", scenario="bench_lossy_links")  # no pickle is read
     actions = policy.act_batch(obs)  # (B, n, obs_dim) -> (B, n, 4 + m)
 """
 
 from __future__ import annotations
 
-import json
-import pickle
 from pathlib import Path
-from typing import Any
+from typing import Protocol
 
 import numpy as np
 import torch
 from numpy.typing import ArrayLike, NDArray
-from stable_baselines3.common.base_class import BaseAlgorithm
 
-from agents.training import ALGORITHMS, TrainConfig
+from agents.agent_folder import (
+    MANIFEST,
+    AgentFolderError,
+    Normalization,
+    PolicyNetwork,
+    read_agent,
+)
+from agents.legacy import is_sb3_folder, read_sb3_folder
+from agents.training import TrainConfig
 from agents.vec_env import resolve_base_policy
 from baselines.interface import PolicyInterface
 from cpf_env.envs.parallel import make_scenario
@@ -34,60 +39,108 @@ from cpf_env.envs.residual import ResidualConfig, ResidualController
 from cpf_env.scenarios import Scenario
 from cpf_env.sim.fleet import observation_layout
 
-__all__ = ["TrainedPolicy", "load_policy"]
+__all__ = ["Actor", "TorchActor", "TrainedPolicy", "load_policy"]
 
 Array = NDArray[np.float64]
 
 
-def load_policy(path: str | Path, scenario: str | Scenario | None = None) -> TrainedPolicy:
+def load_policy(
+    path: str | Path, scenario: str | Scenario | None = None, trust_pickle: bool = False
+) -> TrainedPolicy:
     """Load a trained agent from the folder ``cpf-train --out`` wrote.
 
+    Reads the data-only format (``agents.agent_folder``: safetensors and JSON,
+    every file checked against the manifest); nothing in the folder can run
+    code. An old SB3 folder (``model.zip`` and ``vecnormalize.pkl``, both
+    pickles) is read only with ``trust_pickle=True``, with a warning.
+
     Args:
-        path: The folder (with ``model.zip`` and ``config.json``).
+        path: The folder.
         scenario: Evaluation scenario (name or ``Scenario``); default: the training
             scenario with the training run's overrides. Its observation layout
             must match the training one (the network's input size).
+        trust_pickle: Allow unpickling an old SB3 folder. Unpickling runs any code
+            its author put in the files: only for folders you made or trust.
 
     Raises:
         FileNotFoundError: ``path`` is not a ``cpf-train`` output folder.
+        AgentFolderError: (a ValueError) a file missing, altered or inconsistent
+            with the others (named), or an SB3 folder without ``trust_pickle``.
         ValueError: The scenario's observations do not fit the network.
     """
     folder = Path(path)
-    missing = [name for name in ("model.zip", "config.json") if not (folder / name).is_file()]
-    if missing:
+    if (folder / MANIFEST).is_file():
+        record, network, normalization = read_agent(folder)
+    elif is_sb3_folder(folder):
+        if not trust_pickle:
+            raise AgentFolderError(
+                f"{folder} is an old SB3 agent folder (model.zip, vecnormalize.pkl): loading "
+                "it unpickles them, which runs any code their author put in them. If you "
+                "trust it, pass --trust-pickle (load_policy(..., trust_pickle=True)), or "
+                "convert it once: python examples/convert_sb3_agents.py FOLDER."
+            )
+        record, network, normalization = read_sb3_folder(folder)
+    else:
         raise FileNotFoundError(
-            f"{folder} is not a cpf-train output folder: missing {missing}. "
+            f"{folder} is not a cpf-train output folder: no {MANIFEST}. "
             "Train one with `cpf-train --out DIR`, or give a baseline name."
         )
-    record = json.loads((folder / "config.json").read_text())
     config = TrainConfig.from_json(record["config"])
-    model = ALGORITHMS[config.algo].load(folder / "model.zip", device="cpu")
-    statistics = None
-    if (folder / "vecnormalize.pkl").is_file():
-        with open(folder / "vecnormalize.pkl", "rb") as handle:
-            statistics = pickle.load(handle)  # SB3's own format (VecNormalize.save)
     if scenario is None:
         resolved = make_scenario(config.scenario, **config.scenario_overrides())
     else:
         resolved = make_scenario(scenario)
-    return TrainedPolicy(folder.name, config, model, statistics, resolved)
+    return TrainedPolicy(folder.name, config, TorchActor(network, normalization), resolved)
+
+
+class Actor(Protocol):
+    """The learned part of a policy: raw learner inputs -> actions in [-1, 1]."""
+
+    input_size: int
+    action_size: int
+
+    def __call__(self, rows: NDArray[np.float32]) -> NDArray[np.float32]:
+        """(R, input_size) float32 inputs -> (R, action_size) float32 actions."""
+
+
+class TorchActor:
+    """``PolicyNetwork`` behind the saved normalization, on one torch thread.
+
+    torch's multi-threaded matrix products sum in an order that depends on the
+    thread count, so the outputs would otherwise differ in the last bits
+    between a laptop, a Ray worker (one thread) and a cluster node. torch's
+    thread count is process-wide: it is set and restored around each forward
+    pass, so calling it from several Python threads at once is not safe.
+
+    Args:
+        network: The deterministic actor.
+        normalization: The observation statistics, or None.
+    """
+
+    def __init__(self, network: PolicyNetwork, normalization: Normalization | None) -> None:
+        self.network, self.normalization = network, normalization
+        self.input_size, self.action_size = network.input_size, network.action_size
+
+    def __call__(self, rows: NDArray[np.float32]) -> NDArray[np.float32]:
+        """(R, k) float32 inputs -> (R, a) float32 actions, bit-identical to SB3's predict."""
+        if self.normalization is not None:
+            rows = self.normalization.apply(rows)
+        threads = torch.get_num_threads()
+        torch.set_num_threads(1)  # the same bits whatever the process's thread setting
+        try:
+            with torch.no_grad():
+                return self.network(torch.from_numpy(rows)).numpy()
+        finally:
+            torch.set_num_threads(threads)
 
 
 class TrainedPolicy(PolicyInterface):
     """Base policy plus a trained network, with the analytic policies' interface.
 
-    The network runs on one thread: torch's multi-threaded matrix products sum
-    in an order that depends on the thread count, so its outputs would
-    otherwise differ in the last bits between a laptop, a Ray worker (one
-    thread) and a cluster node. For the batch sizes of an evaluation one
-    thread is also the fastest.
-
     Args:
         name: Label (the folder name).
         config: The training run's configuration.
-        model: The SB3 model.
-        statistics: The saved ``VecNormalize`` (its ``obs_rms``, ``clip_obs`` and
-            ``epsilon`` are used), or None.
+        actor: The learned part (``TorchActor``, or ``agents.onnx_policy.OnnxActor``).
         scenario: The evaluation scenario.
     """
 
@@ -95,13 +148,12 @@ class TrainedPolicy(PolicyInterface):
         self,
         name: str,
         config: TrainConfig,
-        model: BaseAlgorithm,
-        statistics: Any,
+        actor: Actor,
         scenario: Scenario,
     ) -> None:
         self.name = name
         self.config = config
-        self.model = model
+        self.actor = actor
         self.scenario = scenario
         self.layout = observation_layout(scenario)
         self.n, self.obs_dim = scenario.n, self.layout.size
@@ -115,15 +167,20 @@ class TrainedPolicy(PolicyInterface):
             if base is None
             else config.residual_config()
         )
-        self._statistics = statistics
         self._controller: ResidualController | None = None
         size = self._residual.input_size(self.layout)
-        expected = model.observation_space.shape
+        expected = (actor.input_size,)
         if expected != (size,):
             raise ValueError(
                 f"scenario {scenario.name!r} gives inputs of size {size} but the "
                 f"network of {name!r} takes {expected}: evaluate it on a scenario with the "
                 f"training scenario's neighbour slots and message size ({config.scenario!r})."
+            )
+        if actor.action_size != self._residual.action_size:
+            raise AgentFolderError(
+                f"the network of {name!r} gives {actor.action_size} actions but its "
+                f"config.json (mode {self._residual.mode!r}) asks for "
+                f"{self._residual.action_size}."
             )
 
     def reset(self, seed: int | None = None) -> None:
@@ -147,10 +204,8 @@ class TrainedPolicy(PolicyInterface):
     def act_batch(self, obs: ArrayLike, fleets: ArrayLike | None = None) -> Array:
         """Base action plus the trained correction, (B, n, 4 + m) float64.
 
-        The network runs with one torch thread, so that the actions have the
-        same bits whatever the caller's thread setting; torch's thread count is
-        process-wide, so this sets it and restores it around the forward pass,
-        and calling it from several Python threads at once is not safe.
+        A ``TorchActor`` runs with one torch thread (see there): the actions have
+        the same bits whatever the caller's thread setting.
 
         Args:
             obs: (B, n, obs_dim) local observations.
@@ -176,22 +231,8 @@ class TrainedPolicy(PolicyInterface):
             )
         inputs = self._controller.observe(batch)
         rows = inputs.reshape(-1, inputs.shape[-1]).astype(np.float32)
-        threads = torch.get_num_threads()
-        torch.set_num_threads(1)  # the same bits whatever the process's thread setting
-        try:
-            action, _ = self.model.predict(self._normalize(rows), deterministic=True)
-        finally:
-            torch.set_num_threads(threads)
+        action = self.actor(rows)
         command = self._controller.compose(np.asarray(action).reshape(*batch.shape[:2], -1))
         base_diagnostics = getattr(self._base, "diagnostics", {}) if self._base else {}
         self.diagnostics = {**base_diagnostics, "residual": self._controller.residual.copy()}
         return command
-
-    def _normalize(self, rows: NDArray[np.float32]) -> NDArray[np.float32]:
-        """Apply the saved observation statistics as ``VecNormalize`` does at evaluation."""
-        if self._statistics is None:
-            return rows
-        rms = self._statistics.obs_rms
-        scaled = (rows - rms.mean) / np.sqrt(rms.var + self._statistics.epsilon)
-        clip = self._statistics.clip_obs
-        return np.clip(scaled, -clip, clip).astype(np.float32)

@@ -3,12 +3,16 @@
 ``train(config, out)`` builds ``FleetVecEnv`` -> ``VecMonitor`` -> ``VecNormalize``
 (observations only; rewards stay in their units so episode costs read as the
 benchmark's), creates PPO or SAC with residual-learning defaults, learns, and
-writes to ``out``:
+writes to ``out`` (built in a temporary sibling and renamed into place, so a
+killed run leaves the old folder or the new one; a lock refuses a second run
+on the same folder):
 
-- ``model.zip``: the SB3 model;
-- ``vecnormalize.pkl``: the observation statistics;
-- ``config.json``: the exact ``TrainConfig``, the package versions and the
-  training time; ``agents.load_policy(out)`` rebuilds the policy from it;
+- ``policy.safetensors``, ``normalization.json``, ``config.json`` (the exact
+  ``TrainConfig``, the package versions and the training time) and
+  ``manifest.json``: the data-only agent (``agents.agent_folder``) that
+  ``agents.load_policy(out)`` reads;
+- ``model.zip``: SB3's own save, to resume training with SB3 (a pickle, never
+  read by evaluation);
 - ``progress.csv`` (and TensorBoard event files when tensorboard is installed).
 
 Residual-learning defaults (Johannink et al. 2019, Silver et al. 2018, and
@@ -27,7 +31,6 @@ minibatches (8,192) and few epochs (4).
 from __future__ import annotations
 
 import dataclasses
-import json
 import math
 import platform
 import time
@@ -42,17 +45,25 @@ from stable_baselines3 import PPO, SAC
 from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.logger import configure
+from stable_baselines3.common.running_mean_std import RunningMeanStd
 from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 from tqdm.auto import tqdm
 
+from agents.agent_folder import Normalization, actor_tensors, network_from_tensors, write_agent
 from agents.vec_env import FleetVecEnv
 from baselines import POLICIES
-from cpf_env import scenarios
+from cpf_env import atomic, scenarios
 from cpf_env.envs.residual import ResidualConfig
 from cpf_env.scenarios.reward_weights import REWARD_FORMS
 from cpf_env.scenarios.splits import check_training
 
 __all__ = ["ALGORITHMS", "TrainConfig", "build_model", "make_env", "train"]
+
+#: Largest training seed: numpy's legacy seeding, which SB3 calls, takes 32 bits.
+MAX_SEED = 2**32 - 1
+#: Accepted initial log standard deviations: exp(-20) is no noise, exp(5) = 148 already
+#: saturates every action; outside, the Gaussian's density under- or overflows.
+LOG_STD_RANGE = (-20.0, 5.0)
 
 #: SB3 algorithms by name.
 ALGORITHMS: dict[str, type[BaseAlgorithm]] = {"ppo": PPO, "sac": SAC}
@@ -150,16 +161,30 @@ class TrainConfig:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                 raise ValueError(f"{name} must be an integer >= 1, got {value!r}.")
-        if isinstance(self.seed, bool) or not isinstance(self.seed, int) or self.seed < 0:
-            raise ValueError(f"seed must be an integer >= 0, got {self.seed!r}.")
+        if (
+            isinstance(self.seed, bool)
+            or not isinstance(self.seed, int)
+            or not 0 <= self.seed <= MAX_SEED
+        ):
+            raise ValueError(
+                f"seed must be an integer in [0, 2**32 - 1] (numpy's and SB3's seed range), "
+                f"got {self.seed!r}."
+            )
         if not self.net_arch or min(self.net_arch) < 1:
             raise ValueError(f"net_arch must list layer sizes >= 1, got {list(self.net_arch)}.")
         if not (_is_real(self.learning_rate) and self.learning_rate > 0):
             raise ValueError(f"learning_rate must be a number > 0, got {self.learning_rate!r}.")
         if not (_is_real(self.gamma) and 0 < self.gamma <= 1):
             raise ValueError(f"gamma must be in (0, 1], got {self.gamma!r}.")
-        if not _is_real(self.log_std_init):
-            raise ValueError(f"log_std_init must be a finite number, got {self.log_std_init!r}.")
+        if not (
+            _is_real(self.log_std_init)
+            and LOG_STD_RANGE[0] <= self.log_std_init <= LOG_STD_RANGE[1]
+        ):
+            raise ValueError(
+                f"log_std_init must be a number in [{LOG_STD_RANGE[0]}, {LOG_STD_RANGE[1]}] "
+                f"(a standard deviation of exp(log_std_init) actions of range 1), got "
+                f"{self.log_std_init!r}."
+            )
         for name in ("hide_residual_from_base", "normalize_observations"):
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"{name} must be true or false, got {getattr(self, name)!r}.")
@@ -294,17 +319,39 @@ def train(
         The output folder.
 
     Raises:
-        FileExistsError: ``out`` holds a trained model and ``overwrite`` is False.
-        ValueError: A held-out evaluation scenario or seed (``splits.check_training``).
+        FileExistsError: ``out`` holds files and ``overwrite`` is False.
+        ValueError: ``out`` is empty or a file, or a held-out evaluation scenario or seed
+            (``splits.check_training``).
+        cpf_env.atomic.FolderLockedError: Another run is writing ``out``.
     """
     check_training(config.scenario, range(config.seed, config.seed + config.fleets))
+    folder = _output_folder(out)
+    with atomic.FolderLock(folder, "another training run"):
+        if folder.exists() and any(folder.iterdir()) and not overwrite:
+            held = "a trained model" if (folder / "config.json").exists() else "files"
+            raise FileExistsError(
+                f"{folder} already holds {held}; choose another output folder or "
+                "overwrite it (cpf-train --force, train(..., overwrite=True))."
+            )
+        with atomic.staged_folder(folder) as staging:
+            _train_into(config, staging, progress, callbacks)
+    return folder
+
+
+def _output_folder(out: str | Path) -> Path:
+    """``out`` as a folder path, refusing an empty one and an existing file."""
+    if not str(out).strip():
+        raise ValueError("the output folder is empty; give one (cpf-train --out DIR).")
     folder = Path(out)
-    if (folder / "model.zip").exists() and not overwrite:
-        raise FileExistsError(
-            f"{folder} already holds a trained model; choose another output folder or "
-            "overwrite it (cpf-train --force, train(..., overwrite=True))."
-        )
-    folder.mkdir(parents=True, exist_ok=True)
+    if folder.exists() and not folder.is_dir():
+        raise ValueError(f"{folder} is a file; give a folder for the trained agent.")
+    return folder
+
+
+def _train_into(
+    config: TrainConfig, folder: Path, progress: bool, callbacks: Sequence[BaseCallback]
+) -> None:
+    """Train and write every file of the agent into ``folder`` (the staging folder)."""
     torch.manual_seed(config.seed)
     if config.torch_threads is not None:
         torch.set_num_threads(config.torch_threads)
@@ -327,9 +374,15 @@ def train(
     total = -(-config.timesteps // per_call) * per_call  # SB3 completes whole rollouts
     model.learn(config.timesteps, callback=[_ProgressBar(total, progress), *callbacks])
     elapsed = time.perf_counter() - start
-    model.save(folder / "model.zip")
+    model.logger.close()  # progress.csv complete on disk before the folder is swapped in
+    model.save(folder / "model.zip")  # SB3's format, to resume training; evaluation ignores it
+    network = network_from_tensors(
+        actor_tensors(model, config.algo), config.algo, config.net_arch, folder / "model.zip"
+    )
+    normalization = None
     if isinstance(env, VecNormalize):
-        env.save(str(folder / "vecnormalize.pkl"))
+        rms = cast(RunningMeanStd, env.obs_rms)
+        normalization = Normalization(rms.mean.copy(), rms.var.copy(), env.epsilon, env.clip_obs)
     record = {
         "config": config.to_json(),
         "num_envs": venv.num_envs,
@@ -338,8 +391,7 @@ def train(
         "vessel_steps_per_second": round(model.num_timesteps / elapsed),
         "versions": _versions(),
     }
-    (folder / "config.json").write_text(json.dumps(record, indent=2) + "\n")
-    return folder
+    write_agent(folder, record, network, normalization)
 
 
 def _versions() -> dict[str, str]:

@@ -120,6 +120,8 @@ class FleetVecEnv(VecEnv):
         policy_options: dict[str, Any] | None = None,
         **overrides: Any,
     ) -> None:
+        if not isinstance(stagger, bool | np.bool_):
+            raise ValueError(f"stagger must be True or False, got {stagger!r}.")
         self.scenario = make_scenario(scenario, **overrides)
         if isinstance(num_fleets, bool) or int(num_fleets) != num_fleets or num_fleets < 1:
             raise ValueError(f"num_fleets must be an integer >= 1, got {num_fleets!r}.")
@@ -153,9 +155,16 @@ class FleetVecEnv(VecEnv):
         Returns:
             The fleets' seeds (length B; SB3 documents one per sub-env, and a fleet
             is the unit that shares an episode here).
+
+        Raises:
+            ValueError: ``seed`` is not a non-negative integer (the seeds are unchanged).
         """
         if seed is None:
             seed = int(np.random.default_rng().integers(np.iinfo(np.uint32).max))
+        elif (
+            isinstance(seed, bool | np.bool_) or not isinstance(seed, int | np.integer) or seed < 0
+        ):
+            raise ValueError(f"seed must be an integer >= 0 or None, got {seed!r}.")
         self._fleet_seeds = [int(seed) + k for k in range(self.num_fleets)]
         return list(self._fleet_seeds)
 
@@ -179,14 +188,25 @@ class FleetVecEnv(VecEnv):
         return self._flat(self._inputs).copy()
 
     def step_async(self, actions: NDArray[np.floating]) -> None:
-        """Store the actions (num_envs, k) for ``step_wait``."""
-        array = np.asarray(actions, dtype=np.float64)
+        """Store the actions (num_envs, k) for ``step_wait``.
+
+        Raises:
+            ValueError: Another shape (a transposed array is not reshaped), complex
+                or non-numeric values, or NaN/inf; nothing is stored.
+        """
+        raw = np.asarray(actions)
         expected = (self.num_envs, self.controller.action_size)
-        if array.shape != expected and array.size == np.prod(expected):
-            array = array.reshape(expected)
-        if array.shape != expected:
+        if raw.shape != expected:
             raise ValueError(
-                f"actions must have shape (num_envs, k) = {expected}, got {array.shape}."
+                f"actions must have shape (num_envs, k) = {expected}, got {raw.shape}; "
+                "one row per slot (slot = fleet * n + vessel)."
+            )
+        if not (np.issubdtype(raw.dtype, np.floating) or np.issubdtype(raw.dtype, np.integer)):
+            raise ValueError(f"actions must be real numbers, got dtype {raw.dtype}.")
+        array = raw.astype(np.float64)
+        if not np.all(np.isfinite(array)):
+            raise ValueError(
+                "actions must be finite (no NaN or +-inf); they are clipped to [-1, 1]."
             )
         self._actions = array.reshape(self.num_fleets, self.n, -1)
 

@@ -56,8 +56,14 @@ class PolicyInterface(abc.ABC):
     def reset_fleets(self, fleets: ArrayLike) -> None:
         """Forget the internal states of the fleets in a (B,) mask (or index list)."""
 
-    def act(self, observations: Mapping[str, ArrayLike]) -> dict[str, NDArray[np.float32]]:
-        """Actions for the ParallelEnv: one float32 array (4 + m,) per agent.
+    def act(self, observations: Mapping[str, ArrayLike]) -> dict[str, NDArray[np.float64]]:
+        """Actions for the ParallelEnv: one float64 array (4 + m,) per agent.
+
+        float64, not the action space's float32: the env applies float64 commands
+        exactly, so a loop over ``env.step(policy.act(obs))`` follows the same
+        trajectory as ``FleetSim`` driven by ``act_batch``, bit for bit (rounding
+        to float32 would move the fleet by about 1e-11 m per step;
+        ``docs/environment.md``, "Precision").
 
         Raises:
             ValueError: Missing or unexpected agents, or a bad observation.
@@ -70,7 +76,7 @@ class PolicyInterface(abc.ABC):
                 f"unexpected {extra}."
             )
         actions = self.act_batch(np.stack([np.asarray(observations[a]) for a in self.agents])[None])
-        return {a: actions[0, i].astype(np.float32) for i, a in enumerate(self.agents)}
+        return {a: actions[0, i].copy() for i, a in enumerate(self.agents)}
 
     def predict(
         self,

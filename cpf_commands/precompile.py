@@ -23,6 +23,7 @@ __all__ = ["precompile_main"]
 def precompile_main(argv: Sequence[str] | None = None) -> int:
     """``cpf-precompile``: see ``cpf-precompile --help``."""
     parser = argparse.ArgumentParser(
+        allow_abbrev=False,
         prog="cpf-precompile",
         description="Compile (or load from the cache) every numba kernel of the simulator, "
         "so that later processes start without compiling. Set NUMBA_CACHE_DIR to the "

@@ -231,6 +231,7 @@ def speed_main(argv: Sequence[str] | None = None) -> int:
     from baselines import POLICIES
 
     parser = argparse.ArgumentParser(
+        allow_abbrev=False,
         prog="cpf-speed",
         description="Throughput of the simulator, the PettingZoo env and a policy (after a "
         "warm-up that compiles the kernels), and the wall time of one whole episode.",

@@ -1,8 +1,9 @@
 """``cpf-train``: train a residual (or from-scratch) agent with Stable-Baselines3.
 
 Familiar to RL Baselines3 Zoo users: ``--algo``, ``--scenario`` (the env),
-``--seed``, ``--timesteps`` (``-n``), an output folder with the model, the
-``VecNormalize`` statistics and the exact configuration. The folder loads
+``--seed``, ``--timesteps`` (``-n``), an output folder with the network's
+weights (safetensors), the normalization statistics and the exact
+configuration (JSON), tied by a manifest of hashes (``agents.agent_folder``). The folder loads
 with ``agents.load_policy(DIR)`` and is accepted wherever a policy name is
 (``cpf-bench --policies nn_dsc DIR``, ``cpf-run --policy DIR``).
 
@@ -32,10 +33,12 @@ def _parser() -> argparse.ArgumentParser:
 
     defaults = TrainConfig()
     parser = argparse.ArgumentParser(
+        allow_abbrev=False,
         prog="cpf-train",
         description="Train PPO or SAC on FleetVecEnv (one slot per vessel, parameter sharing): "
         "a residual on top of an analytic policy, or from scratch (--base none). Writes "
-        "model.zip, vecnormalize.pkl, config.json and progress.csv to --out.",
+        "the agent (policy.safetensors, normalization.json, config.json, manifest.json: data "
+        "only), SB3's model.zip (to resume training) and progress.csv to --out.",
         formatter_class=argparse.ArgumentDefaultsHelpFormatter,
     )
     parser.add_argument("--algo", default=defaults.algo, choices=["ppo", "sac"])
@@ -94,6 +97,7 @@ def train_main(argv: Sequence[str] | None = None) -> int:
     parser = _parser()
     args = parser.parse_args(argv)
     from agents.training import TrainConfig, train
+    from cpf_env.atomic import FolderLockedError
 
     try:
         config = TrainConfig(
@@ -118,8 +122,10 @@ def train_main(argv: Sequence[str] | None = None) -> int:
         parser.error(str(error))
     try:
         folder = train(config, args.out, progress=not args.quiet, overwrite=args.force)
-    except FileExistsError as error:
+    except (FileExistsError, ValueError, FolderLockedError) as error:
         parser.error(str(error))
+    except OSError as error:  # disk full: the staging folder is removed, --out is unchanged
+        parser.error(f"could not write the agent to {args.out}: {error}")
     record = json.loads((folder / "config.json").read_text())
     print(
         f"trained {config.algo} on {config.scenario} (base {config.base}) for "

@@ -31,20 +31,35 @@ from cpf_commands.bench.episodes import run_episodes
 from cpf_commands.bench.marl_eval import write_marl_eval
 from cpf_commands.bench.report import HEADLINE, CellResult, episodes_csv, summarize, summary_csv
 from cpf_commands.common.arguments import add_scenarios_argument
+from cpf_commands.common.outputs import claim_output_folder, foreign_files
 from cpf_commands.common.policies import (
     BenchPolicy,
     PolicySpec,
+    TrustedAgentFolder,
     policy_argument,
     policy_label,
     resolve_policy,
+    trusting_pickles,
 )
 from cpf_commands.common.ray_runtime import add_address_argument, start_ray
+from cpf_env import atomic
 from cpf_env.envs.parallel import make_scenario
 from cpf_env.scenarios import Scenario
 from cpf_env.scenarios.splits import EVALUATION_SEED, SPLITS, split_scenario
 from cpf_env.scenarios.suite import is_deterministic, list_suite
 
-__all__ = ["BASE_SEED", "bench_main", "run_bench", "run_cell", "write_outputs"]
+__all__ = ["BASE_SEED", "OUTPUT_FILES", "bench_main", "run_bench", "run_cell", "write_outputs"]
+
+#: The files cpf-bench writes to --out (nothing else may be there: it is replaced whole).
+OUTPUT_FILES = frozenset(
+    ("episodes.csv", "summary.csv", "summary.md", *(f"{metric}.png" for metric, _ in HEADLINE))
+)
+#: Memory per fleet and step of an episode's recorded series (15 float64 series, rounded up).
+SERIES_BYTES_PER_STEP = 16 * 8
+#: Memory per vessel of a fleet's simulator and policy state (generous).
+STATE_BYTES_PER_VESSEL = 8 * 1024
+#: Disk space per episode of the outputs (a row of episodes.csv, generous).
+OUTPUT_BYTES_PER_EPISODE = 1024
 
 #: First evaluation seed (training refuses seeds from here on: ``cpf_env.scenarios.splits``).
 BASE_SEED = EVALUATION_SEED
@@ -78,9 +93,12 @@ def write_outputs(
 ) -> list[dict[str, object]]:
     """Write episodes.csv, summary.csv, summary.md and one PNG per headline metric to ``out``.
 
+    The folder is built beside ``out`` and replaces it whole (``cpf_env.atomic``):
+    a run killed while writing leaves the previous results.
+
     Args:
         cells: The results.
-        out: Output folder (created).
+        out: Output folder (created or replaced; it must hold only cpf-bench outputs).
         command: The command line recorded in summary.md.
         reference: The policy scores are relative to.
         skipped: (policy, scenario) -> why it was not run, listed in summary.md.
@@ -90,16 +108,19 @@ def write_outputs(
         The summary rows.
     """
     directory = Path(out)
-    directory.mkdir(parents=True, exist_ok=True)
+    others = foreign_files(directory, OUTPUT_FILES)
+    if others:
+        raise ValueError(f"{directory} holds files cpf-bench did not write: {others[:5]}.")
     rows = summarize(cells, reference)
-    (directory / "episodes.csv").write_text(episodes_csv(cells))
-    (directory / "summary.csv").write_text(summary_csv(rows))
-    text = views.markdown(rows, cells, command, reference, skipped or {})
-    (directory / "summary.md").write_text(text)
-    if figures:
-        for metric, title in HEADLINE:
-            drawing = views.figure(rows, cells, metric, title)
-            drawing.savefig(directory / f"{metric}.png", dpi=100, metadata={"Software": None})
+    with atomic.staged_folder(directory) as staging:  # all files or none, no stale figure
+        atomic.write_text(staging / "episodes.csv", episodes_csv(cells))
+        atomic.write_text(staging / "summary.csv", summary_csv(rows))
+        text = views.markdown(rows, cells, command, reference, skipped or {})
+        atomic.write_text(staging / "summary.md", text)
+        if figures:
+            for metric, title in HEADLINE:
+                drawing = views.figure(rows, cells, metric, title)
+                drawing.savefig(staging / f"{metric}.png", dpi=100, metadata={"Software": None})
     return rows
 
 
@@ -175,6 +196,8 @@ def _absolute(spec: PolicySpec) -> PolicySpec:
     """An agent folder given by a relative path made absolute (Ray workers run elsewhere)."""
     from baselines import POLICIES
 
+    if isinstance(spec, TrustedAgentFolder):
+        return spec  # already absolute; keeps the user's trust
     if isinstance(spec, Path) or (isinstance(spec, str) and spec not in POLICIES):
         return Path(spec).resolve()
     return spec
@@ -312,6 +335,7 @@ def _parser() -> argparse.ArgumentParser:
 
     parser = argparse.ArgumentParser(
         prog="cpf-bench",
+        allow_abbrev=False,
         description="Run policies x scenarios x paired seeds in batched simulators and write "
         "episodes.csv, summary.csv, summary.md and figures: means and interquartile means "
         "with 95 % bootstrap intervals, failures counted, scores relative to nn_dsc.",
@@ -346,6 +370,13 @@ def _parser() -> argparse.ArgumentParser:
     )
     parser.add_argument(
         "--out", default="outputs/bench", help="output folder (default: outputs/bench)"
+    )
+    parser.add_argument("--force", action="store_true", help="replace the results already in --out")
+    parser.add_argument(
+        "--trust-pickle",
+        action="store_true",
+        help="allow old SB3 agent folders (model.zip, vecnormalize.pkl): unpickling them runs "
+        "any code their author put in them; only for folders you trust",
     )
     parser.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
     parser.add_argument(
@@ -396,14 +427,56 @@ def _command(args: argparse.Namespace) -> str:
     return shlex.join(parts)
 
 
+def _claim_output(args: argparse.Namespace) -> atomic.FolderLock:
+    """Refuse a run whose memory or output folder would fail it, before it starts; lock --out."""
+    if args.seeds < 1:
+        raise ValueError(f"--seeds must be >= 1, got {args.seeds}.")
+    horizons = [args.steps or make_scenario(name).max_steps for name in args.scenarios]
+    fleets = max(make_scenario(name).n for name in args.scenarios)
+    needed = args.seeds * (max(horizons) * SERIES_BYTES_PER_STEP + fleets * STATE_BYTES_PER_VESSEL)
+    available = _available_memory()
+    if available is not None and needed > available:
+        raise ValueError(
+            f"--seeds {args.seeds} needs about {needed / 2**30:.1f} GiB of memory for one "
+            f"(policy, scenario) cell ({max(horizons)} steps), but {available / 2**30:.1f} GiB "
+            "are available; lower --seeds or --steps."
+        )
+    return claim_output_folder(
+        args.out,
+        OUTPUT_FILES,
+        args.force,
+        "cpf-bench",
+        needed_bytes=OUTPUT_BYTES_PER_EPISODE
+        * args.seeds
+        * len(args.policies)
+        * len(args.scenarios),
+    )
+
+
+def _available_memory() -> int | None:
+    """Bytes of memory available to a new allocation (Linux: MemAvailable), or None if unknown."""
+    try:
+        with open("/proc/meminfo") as handle:
+            for line in handle:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    return None
+
+
 def bench_main(argv: Sequence[str] | None = None) -> int:
     """``cpf-bench``: see ``cpf-bench --help``."""
     parser = _parser()
     args = parser.parse_args(argv)
     start = time.perf_counter()
     try:
+        lock = _claim_output(args)
+    except ValueError as error:
+        parser.error(str(error))
+    try:
         cells = run_bench(
-            args.policies,
+            trusting_pickles(args.policies) if args.trust_pickle else args.policies,
             args.scenarios,
             seeds=args.seeds,
             base_seed=args.base_seed,
@@ -417,10 +490,14 @@ def bench_main(argv: Sequence[str] | None = None) -> int:
             reference=args.reference,
             split=args.split,
         )
+        if args.marl_eval is not None:
+            write_marl_eval(cells, args.marl_eval)
     except (ValueError, FileNotFoundError, ImportError, ConnectionError) as error:
         parser.error(str(error))
-    if args.marl_eval is not None:
-        write_marl_eval(cells, args.marl_eval)
+    except OSError as error:  # disk full while writing: the previous results are intact
+        parser.error(f"could not write the results to {args.out}: {error}")
+    finally:
+        lock.release()
     elapsed = time.perf_counter() - start
     table = views.terminal_table(cells, _reference(args.reference, _labelled(args.policies)))
     if table:

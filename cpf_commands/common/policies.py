@@ -7,6 +7,10 @@ labelled and evaluated the same way. A policy specification is one of:
 * a name of ``baselines.POLICIES`` (``"nn_dsc"``, ``"dsc"``, ...);
 * a path to a ``cpf-train --out`` folder, loaded by ``agents.load_policy``
   (imported only then, so the analytic side never needs the learning stack);
+  the folder holds data only; an old SB3 folder (pickles) is refused unless
+  wrapped in ``TrustedAgentFolder`` (the commands' ``--trust-pickle``);
+* a path to a ``.onnx`` file written by ``cpf-export``, run by onnxruntime
+  (``agents.onnx_policy``; the ``onnx`` extra);
 * a ready policy object (``cpf_env.envs.policy.FleetPolicy``: ``act_batch``,
   ``reset``, ``diagnostics``) for programmatic use;
 * a callable ``scenario -> policy object``, for a policy that must be built
@@ -21,7 +25,7 @@ Example:
 from __future__ import annotations
 
 import argparse
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -33,9 +37,11 @@ __all__ = [
     "BenchPolicy",
     "FleetPolicy",
     "PolicySpec",
+    "TrustedAgentFolder",
     "policy_argument",
     "policy_label",
     "resolve_policy",
+    "trusting_pickles",
 ]
 
 
@@ -46,12 +52,51 @@ BenchPolicy = FleetPolicy
 PolicySpec = str | Path | FleetPolicy | Callable[[Scenario], FleetPolicy]
 
 
+class TrustedAgentFolder(str):
+    """An agent folder whose pickles the user vouches for (``--trust-pickle``).
+
+    A string (the folder's absolute path, so that Ray workers find it and the
+    commands treat it as any folder argument) that ``resolve_policy`` loads
+    with ``load_policy(..., trust_pickle=True)``: an old SB3 folder is then
+    unpickled (with a warning), which runs any code its author put in it. A
+    data-only folder loads as without the flag.
+
+    Args:
+        path: The folder.
+        label: Its name in tables (default: ``path`` as given).
+    """
+
+    label: str
+
+    def __new__(cls, path: str | Path, label: str | None = None) -> TrustedAgentFolder:  # noqa: D102
+        folder = super().__new__(cls, str(Path(path).resolve()))
+        folder.label = label if label is not None else policy_label(str(path))
+        return folder
+
+
+def trusting_pickles(specs: Sequence[str]) -> list[str]:
+    """A command's policy arguments with every agent folder wrapped in ``TrustedAgentFolder``."""
+    from baselines import POLICIES
+
+    return [
+        spec if spec in POLICIES or not Path(spec).is_dir() else TrustedAgentFolder(spec)
+        for spec in specs
+    ]
+
+
+def _is_onnx(spec: str | Path) -> bool:
+    """Whether ``spec`` names an existing ``.onnx`` file."""
+    return str(spec).endswith(".onnx") and Path(spec).is_file()
+
+
 def policy_label(spec: PolicySpec) -> str:
     """The name a policy goes by in tables and file names.
 
     A baseline's name, a trained agent's path as given (without a trailing
     slash), or an object's ``name`` attribute (else its class name).
     """
+    if isinstance(spec, TrustedAgentFolder):
+        return spec.label
     if isinstance(spec, Path):
         return str(spec)
     if isinstance(spec, str):
@@ -63,10 +108,10 @@ def _check_name(spec: str | Path) -> None:
     """Raise ValueError unless ``spec`` is a baseline name or an existing folder."""
     from baselines import POLICIES
 
-    if str(spec) not in POLICIES and not Path(spec).is_dir():
+    if str(spec) not in POLICIES and not Path(spec).is_dir() and not _is_onnx(spec):
         raise ValueError(
-            f"policy {str(spec)!r} is neither a baseline ({', '.join(sorted(POLICIES))}) "
-            "nor an existing cpf-train --out folder."
+            f"policy {str(spec)!r} is neither a baseline ({', '.join(sorted(POLICIES))}), "
+            "an existing cpf-train --out folder nor a cpf-export .onnx file."
         )
 
 
@@ -109,6 +154,15 @@ def resolve_policy(spec: PolicySpec, scenario: str | Scenario, **options: Any) -
         )
     if isinstance(spec, str | Path):
         _check_name(spec)
+        if _is_onnx(spec):
+            try:
+                from agents.onnx_policy import load_onnx_policy
+            except ImportError as error:
+                raise ValueError(
+                    f"{str(spec)!r} is an ONNX policy, which needs onnxruntime and the learning "
+                    "extra: pip install 'cpf_env[rl,onnx]'."
+                ) from error
+            return load_onnx_policy(spec, resolved)
         try:
             from agents import load_policy
         except ImportError as error:
@@ -116,7 +170,7 @@ def resolve_policy(spec: PolicySpec, scenario: str | Scenario, **options: Any) -
                 f"{str(spec)!r} is a folder, but loading trained agents needs "
                 "agents.load_policy (the learning extra: pip install 'cpf_env[rl]')."
             ) from error
-        return load_policy(Path(spec), resolved)
+        return load_policy(Path(spec), resolved, trust_pickle=isinstance(spec, TrustedAgentFolder))
     if isinstance(spec, FleetPolicy):
         return spec
     if callable(spec):

@@ -10,6 +10,15 @@ ran here), with ``--address HOST:6379`` a cluster's head node, with
 that does not answer is an error, reported after a few seconds rather than
 waited on.
 
+A local instance listens on 127.0.0.1 only (GCS, raylet, object manager,
+runtime-env agent; no dashboard), so nothing on the network can reach it, and
+Ray's token file (``~/.ray/auth_token``) is made private (0600) before Ray
+reads it. Ray itself replaces 127.0.0.1 by the machine's outward address
+(``services.resolve_ip_for_localhost``); ``_loopback_only`` suspends that
+for the duration of ``ray.init``, a private Ray function that the ``ray``
+tests check by listing the instance's listening sockets. What a cluster needs
+before anyone joins one is in ``docs/scaling.md``.
+
 Workers inherit two settings from the command's environment: ``NUMBA_CACHE_DIR``
 (where the compiled kernels are cached; see ``cpf_env.sim.precompile``) and the
 numba thread count, set to the CPUs each task reserves so that concurrent
@@ -19,13 +28,17 @@ tasks do not oversubscribe the cores.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import socket
+from collections.abc import Iterator
+from pathlib import Path
 from types import ModuleType
 from typing import Any
 
 __all__ = [
     "add_address_argument",
+    "private_token_file",
     "require_ray",
     "resolve_address",
     "start_ray",
@@ -38,6 +51,69 @@ _INSTALL = (
 
 #: Seconds to wait for a cluster's address to accept a connection.
 PROBE_SECONDS = 5.0
+
+#: The only address a local Ray instance listens on.
+LOOPBACK = "127.0.0.1"
+
+#: Ray's token file (``ray._private.authentication``'s default path).
+TOKEN_FILE = Path("~/.ray/auth_token")
+
+
+def private_token_file(path: Path | None = None) -> Path | None:
+    """Create Ray's token file readable by its owner only (0600), or make it so.
+
+    Ray writes the file with the default permissions (0644 under the usual
+    umask), so another user of the machine could read the token. A missing
+    file is created here with a token from Ray's own generator, with 0600
+    from the start; an existing one of ours is restricted to 0600.
+
+    Args:
+        path: The file; default: ``RAY_AUTH_TOKEN_PATH`` if set, else ``~/.ray/auth_token``.
+
+    Returns:
+        The token file's path, or None if ``RAY_AUTH_TOKEN`` gives the token (no file).
+    """
+    if path is None:
+        if os.environ.get("RAY_AUTH_TOKEN"):
+            return None
+        path = Path(os.environ.get("RAY_AUTH_TOKEN_PATH") or TOKEN_FILE)
+    token = path.expanduser()
+    token.parent.mkdir(mode=0o700, parents=True, exist_ok=True)
+    if not token.exists():
+        from ray._private.authentication.authentication_token_generator import (
+            generate_new_authentication_token,
+        )
+
+        with contextlib.suppress(FileExistsError):  # another process was first
+            descriptor = os.open(token, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+            with os.fdopen(descriptor, "w") as handle:
+                handle.write(generate_new_authentication_token())
+    if token.stat().st_uid == os.getuid() and token.stat().st_mode & 0o077:
+        token.chmod(0o600)
+    return token
+
+
+@contextlib.contextmanager
+def _loopback_only() -> Iterator[None]:
+    """A private token file, and ``ray.init(_node_ip_address="127.0.0.1")`` keeping loopback.
+
+    Raises:
+        ImportError: This Ray lacks the functions used (a Ray release that moved them).
+    """
+    try:
+        from ray._private import services
+    except ImportError as error:
+        raise ImportError(
+            "this Ray release lacks ray._private.services, which cpf_env uses to keep a local "
+            f"Ray instance on {LOOPBACK}; install a supported Ray: {_INSTALL}."
+        ) from error
+    private_token_file()
+    resolve = services.resolve_ip_for_localhost
+    services.resolve_ip_for_localhost = lambda host: host
+    try:
+        yield
+    finally:
+        services.resolve_ip_for_localhost = resolve
 
 
 def require_ray() -> ModuleType:
@@ -137,8 +213,17 @@ def start_ray(address: str | None, cpus_per_task: int = 1, quiet: bool = False) 
         "log_to_driver": not quiet,
         "logging_level": "error" if quiet else "warning",
     }
-    if address == "local":
+    local = address == "local"
+    if local:
         options["include_dashboard"] = False
+        options["_node_ip_address"] = LOOPBACK
+    with _loopback_only() if local else contextlib.nullcontext():
+        _init(ray, address, options)
+    return ray
+
+
+def _init(ray: ModuleType, address: str, options: dict[str, Any]) -> None:
+    """``ray.init`` with Ray's connection errors turned into the command's messages."""
     try:
         ray.init(address=address, **options)
     except ConnectionError as error:
@@ -149,4 +234,3 @@ def start_ray(address: str | None, cpus_per_task: int = 1, quiet: bool = False) 
         ) from error
     except ModuleNotFoundError as error:  # Ray Client's gRPC dependency
         raise ImportError(f"--address {address} needs Ray Client; {_INSTALL}.") from error
-    return ray

@@ -15,7 +15,7 @@ from collections.abc import Sequence
 from typing import Any
 
 from cpf_commands.common.arguments import positive_int
-from cpf_commands.common.policies import policy_argument
+from cpf_commands.common.policies import policy_argument, trusting_pickles
 from cpf_env import scenarios
 
 __all__ = ["run_main"]
@@ -30,6 +30,7 @@ def _run_parser(prog: str = "cpf-run") -> argparse.ArgumentParser:
 
     parser = argparse.ArgumentParser(
         prog=prog,
+        allow_abbrev=False,
         description="Run a scenario with a policy; write Figs. 3-7, metrics.json and "
         "trajectory.npz; print the paper's claims with the measured values (on the paper's "
         "scenarios wang2014 and wang2014_fine), else the run's own metrics. Without "
@@ -40,7 +41,14 @@ def _run_parser(prog: str = "cpf-run") -> argparse.ArgumentParser:
         "--policy",
         default="nn_dsc",
         type=policy_argument,
-        help=f"a baseline ({', '.join(sorted(POLICIES))}) or a cpf-train --out folder",
+        help=f"a baseline ({', '.join(sorted(POLICIES))}), a cpf-train --out folder or a "
+        "cpf-export .onnx file",
+    )
+    parser.add_argument(
+        "--trust-pickle",
+        action="store_true",
+        help="allow an old SB3 agent folder (model.zip, vecnormalize.pkl): unpickling it runs "
+        "any code its author put in it; only for folders you trust",
     )
     parser.add_argument(
         "--leakage",
@@ -95,7 +103,7 @@ def run_main(argv: Sequence[str] | None = None, prog: str = "cpf-run") -> int:
     try:
         metrics, claims = reproduce(
             args.scenario,
-            args.policy,
+            trusting_pickles([args.policy])[0] if args.trust_pickle else args.policy,
             seed=args.seed,
             steps=args.steps,
             out=args.out,

@@ -52,6 +52,7 @@ _OUTPUT_ENGINE = "RAY_AIR_NEW_OUTPUT"
 
 def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
+        allow_abbrev=False,
         prog="cpf-sweep",
         description="Train residual (or from-scratch) agents over scenarios x seeds x settings "
         "with Ray Tune, one batched simulator per trial, and summarize them against their "

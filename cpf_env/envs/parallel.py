@@ -206,15 +206,24 @@ class CooperativePathFollowingEnv(ParallelEnv):
         self._index = {agent: i for i, agent in enumerate(self.possible_agents)}
         self._views = FleetViews(self.scenario, render_mode)
         self.np_random, _ = seeding.np_random()
+        # per-instance caches: a class-level functools.cache would keep every env alive
+        self._observation_spaces: dict[str, spaces.Box] = {}
+        self._action_spaces: dict[str, spaces.Box] = {}
 
-    @functools.cache  # noqa: B019 - one space object per agent, by design
     def observation_space(self, agent: str) -> spaces.Box:
         """Local observation space of ``agent`` (the same object on every call)."""
-        self._check_agent(agent)
-        return observation_box(self.layout.size)
+        if agent not in self._observation_spaces:
+            self._check_agent(agent)
+            self._observation_spaces[agent] = observation_box(self.layout.size)
+        return self._observation_spaces[agent]
 
-    @functools.cache  # noqa: B019
     def action_space(self, agent: str) -> spaces.Box:
+        """Action space of ``agent`` (the same object on every call): forces, rate, message."""
+        if agent not in self._action_spaces:
+            self._action_spaces[agent] = self._make_action_space(agent)
+        return self._action_spaces[agent]
+
+    def _make_action_space(self, agent: str) -> spaces.Box:
         """Action space of ``agent``: force limits, rate bound, message bound."""
         i = self._check_agent(agent)
         s = self.scenario

@@ -104,6 +104,7 @@ class TorchRLFleetEnv(EnvBase):
         num_fleets: B, the number of fleets simulated together (the batch size).
         info_level: ``"none"`` (default, the hot path) or ``"minimal"``: also output
             the four errors of each vessel under ``("vessel", "info")``.
+        device: Must be the CPU (accepted for TorchRL's signature; see the error).
         **overrides: ``Scenario`` field overrides, as in ``cpf_env.parallel_env``.
 
     Attributes:
@@ -114,7 +115,7 @@ class TorchRLFleetEnv(EnvBase):
         info_level: The detail level.
 
     Raises:
-        ValueError: A bad ``num_fleets`` or ``info_level`` (or a bad override).
+        ValueError: A bad ``num_fleets``, ``info_level`` or ``device`` (or a bad override).
     """
 
     def __init__(
@@ -122,8 +123,15 @@ class TorchRLFleetEnv(EnvBase):
         scenario: str | Scenario = "wang2014",
         num_fleets: int = 64,
         info_level: str = "none",
+        device: str | torch.device = "cpu",
         **overrides: Any,
     ) -> None:
+        if torch.device(device).type != "cpu":
+            raise ValueError(
+                f"TorchRLFleetEnv runs on the CPU (the simulator is compiled CPU code), got "
+                f"device={device!r}; move its outputs with a transform, e.g. "
+                f"env.append_transform(DeviceCastTransform({str(device)!r})), or td.to(...)."
+            )
         if isinstance(num_fleets, bool) or int(num_fleets) != num_fleets or num_fleets < 1:
             raise ValueError(f"num_fleets must be an integer >= 1, got {num_fleets!r}.")
         if info_level not in _INFO_LEVELS:
@@ -173,9 +181,15 @@ class TorchRLFleetEnv(EnvBase):
     # --- EnvBase interface ----------------------------------------------------------------
 
     def _set_seed(self, seed: int | None) -> None:
-        """Fleet k draws its next episodes from ``default_rng(seed + k)``; None: fresh entropy."""
+        """Fleet k draws its next episodes from ``default_rng(seed + k)``; None: fresh entropy.
+
+        Raises:
+            ValueError: ``seed`` is not a non-negative integer (nothing is reseeded).
+        """
         if seed is None:
             seed = int(np.random.default_rng().integers(np.iinfo(np.uint32).max))
+        elif isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
+            raise ValueError(f"seed must be an integer >= 0 or None, got {seed!r}.")
         for k in range(self.num_fleets):
             self.sim.rngs[k] = np.random.default_rng(int(seed) + k)
 
@@ -231,6 +245,18 @@ class TorchRLFleetEnv(EnvBase):
         if tensordict is None:
             return None
         masks = [tensordict.get(key, None) for key in ("_reset", (GROUP, "_reset"))]
+        for key, mask in zip(("'_reset'", f"({GROUP!r}, '_reset')"), masks, strict=True):
+            if mask is None:
+                continue
+            if mask.dtype != torch.bool:
+                raise ValueError(
+                    f"the {key} mask must be a bool tensor, got {mask.dtype}; nothing was reset."
+                )
+            if mask.numel() % self.num_fleets or mask.shape[0] != self.num_fleets:
+                raise ValueError(
+                    f"the {key} mask must have B = {self.num_fleets} rows, got "
+                    f"{list(mask.shape)}; nothing was reset."
+                )
         given = [mask.reshape(self.num_fleets, -1).any(-1) for mask in masks if mask is not None]
         if not given:
             return None

@@ -34,7 +34,6 @@ Example:
 
 from __future__ import annotations
 
-import functools
 from typing import Any
 
 import numpy as np
@@ -91,19 +90,24 @@ class ResidualWrapper(BaseParallelWrapper):
         )
         self.controller = ResidualController(env.unwrapped.scenario, base_policy, 1, config)
         self._inputs = np.zeros((1, env.unwrapped.scenario.n, self.controller.input_size))
+        # per-instance caches: a class-level functools.cache would keep every env alive
+        self._observation_spaces: dict[str, spaces.Box] = {}
+        self._action_spaces: dict[str, spaces.Box] = {}
 
-    @functools.cache  # noqa: B019 - one space object per agent, by design
     def observation_space(self, agent: str) -> spaces.Box:
-        """Local observation plus extras, float32 with finite bounds."""
-        self.env.observation_space(agent)  # validates the agent name
-        size = self.controller.input_size
-        return observation_box(size)
+        """Local observation plus extras, float32 with finite bounds (one object per agent)."""
+        if agent not in self._observation_spaces:
+            self.env.observation_space(agent)  # validates the agent name
+            self._observation_spaces[agent] = observation_box(self.controller.input_size)
+        return self._observation_spaces[agent]
 
-    @functools.cache  # noqa: B019
     def action_space(self, agent: str) -> spaces.Box:
-        """The correction, ``Box(-1, 1, (k,))`` float32."""
-        self.env.action_space(agent)  # validates the agent name
-        return spaces.Box(-1.0, 1.0, shape=(self.controller.action_size,), dtype=np.float32)
+        """The correction, ``Box(-1, 1, (k,))`` float32 (one object per agent)."""
+        if agent not in self._action_spaces:
+            self.env.action_space(agent)  # validates the agent name
+            size = (self.controller.action_size,)
+            self._action_spaces[agent] = spaces.Box(-1.0, 1.0, shape=size, dtype=np.float32)
+        return self._action_spaces[agent]
 
     def reset(
         self, seed: int | None = None, options: dict[str, Any] | None = None
@@ -127,7 +131,8 @@ class ResidualWrapper(BaseParallelWrapper):
         command = self.controller.compose(correction)
         used = (self.controller.base_actions[0].copy(), self.controller.residual[0].copy())
         env_actions = {
-            agent: command[0, i].astype(np.float32) for i, agent in enumerate(self.env.agents)
+            agent: command[0, i]
+            for i, agent in enumerate(self.env.agents)  # float64: exact
         }
         observations, rewards, terminations, truncations, infos = self.env.step(env_actions)
         self._inputs = self.controller.observe(self._stack(observations))

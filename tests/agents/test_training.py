@@ -10,7 +10,7 @@ import pytest
 from conftest import ROOT
 from stable_baselines3.common.evaluation import evaluate_policy
 from stable_baselines3.common.monitor import Monitor
-from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
+from stable_baselines3.common.vec_env import VecMonitor
 
 from agents import TrainConfig, load_policy, train
 from agents.training import ALGORITHMS, build_model, make_env
@@ -39,7 +39,8 @@ def test_train_and_load_round_trip(tmp_path: Path, algo: str, base: str) -> None
     record = json.loads((folder / "config.json").read_text())
     assert record["timesteps_done"] >= 320
     assert TrainConfig.from_json(record["config"]) == config
-    assert (folder / "vecnormalize.pkl").is_file() and (folder / "progress.csv").is_file()
+    assert (folder / "progress.csv").is_file() and not (folder / "vecnormalize.pkl").exists()
+    assert (folder / "manifest.json").is_file() and (folder / "policy.safetensors").is_file()
 
     policy = load_policy(folder)
     sim = FleetSim(policy.scenario, num_fleets=3)
@@ -48,10 +49,10 @@ def test_train_and_load_round_trip(tmp_path: Path, algo: str, base: str) -> None
     assert actions.shape == (3, 5, 5) and np.all(np.isfinite(actions))
     again = load_policy(folder).act_batch(obs)
     assert np.array_equal(actions, again)  # deterministic, reproducible after loading
-    # the same numbers through SB3's own objects: VecNormalize.load and Model.load
+    # the same numbers through SB3's own Model.load (it unpickles model.zip, which this test
+    # wrote itself) and VecNormalize's evaluation formula written out by hand
     venv = make_env(config, num_fleets=3)
-    stats = VecNormalize.load(str(folder / "vecnormalize.pkl"), venv)
-    stats.training = False
+    statistics = json.loads((folder / "normalization.json").read_text())
     model = ALGORITHMS[algo].load(folder / "model.zip", device="cpu")
     controller = ResidualController(
         policy.scenario,
@@ -60,10 +61,10 @@ def test_train_and_load_round_trip(tmp_path: Path, algo: str, base: str) -> None
         venv.controller.config,
     )
     inputs = controller.observe(obs).reshape(15, -1).astype(np.float32)
-    action, _ = model.predict(stats.normalize_obs(inputs), deterministic=True)
-    np.testing.assert_allclose(
-        actions, controller.compose(action.reshape(3, 5, -1)), rtol=1e-6, atol=1e-6
-    )
+    mean, var = np.array(statistics["mean"]), np.array(statistics["var"])
+    normalized = np.clip((inputs - mean) / np.sqrt(var + 1e-8), -10.0, 10.0).astype(np.float32)
+    action, _ = model.predict(normalized, deterministic=True)
+    np.testing.assert_array_equal(actions, controller.compose(action.reshape(3, 5, -1)))
     if base == "nn_dsc":
         base_actions = make_policy("nn_dsc", policy.scenario).act_batch(obs)
         residual = actions[..., :3] - base_actions[..., :3]
@@ -111,6 +112,15 @@ def test_cpf_train_command(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -
         train_main(argv)  # the folder holds a model: refused, not overwritten
     assert "already holds a trained model" in capsys.readouterr().err
     assert train_main([*argv, "--force"]) == 0
+    assert sorted(p.name for p in tmp_path.iterdir()) == [".cli.lock", "cli"]  # no staging left
+    for bad, message in ((["--out", ""], "output folder is empty"),
+                         (["--seed", str(2**32)], "seed must be"),
+                         (["--log-std-init", "1e6"], "log_std_init")):  # fmt: skip
+        with pytest.raises(SystemExit):
+            train_main([*argv[:-3], *bad, "--quiet"] if bad[0] == "--out" else
+                       [*argv, *bad, "--force"])  # fmt: skip
+        assert message in capsys.readouterr().err
+    assert sorted(p.name for p in tmp_path.iterdir()) == [".cli.lock", "cli"]  # nothing created
     with pytest.raises(SystemExit):
         train_main(["--out", str(out), "--scale", "0"])
     assert "residual scale" in capsys.readouterr().err
@@ -164,14 +174,16 @@ def test_a_trained_policy_acts_the_same_whatever_the_torch_threads() -> None:
         ("learning_rate", float("nan"), "learning_rate must be a number > 0"),
         ("gamma", 0.0, "gamma must be in"),
         ("gamma", 1.5, "gamma must be in"),
-        ("log_std_init", float("inf"), "log_std_init must be a finite number"),
+        ("log_std_init", float("inf"), "log_std_init must be a number in"),
+        ("log_std_init", 1e6, "log_std_init must be a number in"),
         ("net_arch", (), "net_arch must list layer sizes"),
         ("net_arch", (64, 0), "net_arch must list layer sizes"),
         ("buffer_size", 0, "buffer_size must be an integer >= 1"),
         ("normalize_observations", "yes", "normalize_observations must be true or false"),
         ("scale", -0.1, "scale"),
         ("fleets", 0, "fleets must be an integer >= 1"),
-        ("seed", -1, "seed must be an integer >= 0"),
+        ("seed", -1, "seed must be an integer in"),
+        ("seed", 2**32, "seed must be an integer in"),
     ],
 )
 def test_train_config_rejects_bad_settings_before_any_training(

@@ -205,3 +205,39 @@ def test_observations_are_not_aliased_through_steps_and_auto_resets() -> None:
     assert np.array_equal(kept, snapshot) and np.array_equal(kept_step, step_snapshot)
     assert terminal is not None and np.array_equal(terminal, terminal_snapshot)
     assert not np.array_equal(obs, snapshot)
+
+
+@pytest.mark.parametrize(
+    ("actions", "message"),
+    [
+        (np.zeros((3, 20)), "shape"),  # (k, num_envs): transposed, same number of elements
+        (np.zeros(60), "shape"),
+        (np.zeros((20, 3), dtype=complex), "real numbers"),
+        (np.full((20, 3), np.inf), "finite"),
+        (np.full((20, 3), -np.inf), "finite"),
+        (np.full((20, 3), np.nan), "finite"),
+    ],
+)
+def test_step_async_refuses_what_it_would_misread(actions: np.ndarray, message: str) -> None:
+    env = FleetVecEnv("wang2014", num_fleets=4, max_steps=5)
+    env.reset()
+    stored = env._actions.copy()
+    with pytest.raises(ValueError, match=message):
+        env.step_async(actions)
+    np.testing.assert_array_equal(env._actions, stored)
+
+
+def test_seed_refuses_what_is_not_a_seed_and_keeps_the_last_one() -> None:
+    env = FleetVecEnv("bench_mild", num_fleets=2, max_steps=5)
+    assert env.seed(7) == [7, 8]
+    for bad in (-1, 1.7, True, "3"):
+        with pytest.raises(ValueError, match="seed must be an integer"):
+            env.seed(bad)  # type: ignore[arg-type]
+    first = env.reset()
+    env.seed(7)
+    np.testing.assert_array_equal(env.reset(), first)  # the refused calls left seed 7 in place
+
+
+def test_stagger_must_be_a_bool() -> None:
+    with pytest.raises(ValueError, match="stagger must be True or False"):
+        FleetVecEnv("wang2014", num_fleets=2, stagger="no")  # type: ignore[arg-type]

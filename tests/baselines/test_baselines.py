@@ -67,8 +67,8 @@ def test_act_dict_equals_act_batch(name):
         actions = by_dict.act(observations)
         batch = by_batch.act_batch(np.stack([observations[a] for a in env.possible_agents])[None])
         for i, agent in enumerate(env.possible_agents):
-            assert actions[agent].dtype == np.float32 and actions[agent].shape == (5,)
-            np.testing.assert_array_equal(actions[agent], batch[0, i].astype(np.float32))
+            assert actions[agent].dtype == np.float64 and actions[agent].shape == (5,)
+            np.testing.assert_array_equal(actions[agent], batch[0, i])
         observations, *_ = env.step(actions)
 
 
@@ -303,3 +303,22 @@ def test_lone_vessel_without_neighbour_slots(name):
         observations, _, terminations, _, infos = env.step(policy.act(observations))
     assert not terminations["vessel_0"]
     assert infos["vessel_0"]["path_error"] < 0.01
+
+
+def test_the_readmes_act_loop_follows_fleetsim_bit_for_bit():
+    """README's ``env.step(policy.act(observations))`` loop against FleetSim + act_batch."""
+    env = cpf_env.parallel_env("bench_lossy_links", max_steps=400)
+    policy = baselines.make_policy("nn_dsc", env)
+    observations, _ = env.reset(seed=11)
+    sim = FleetSim(env.scenario, num_fleets=1)
+    reference = baselines.make_policy("nn_dsc", env.scenario)
+    obs = sim.reset(seeds=[11])
+    steps = 0
+    while env.agents:
+        observations, *_ = env.step(policy.act(observations))
+        obs = sim.step(reference.act_batch(obs))
+        steps += 1
+        np.testing.assert_array_equal(env.sim.arrays.eta, sim.arrays.eta)
+        np.testing.assert_array_equal(np.stack([observations[a] for a in env.agents or
+                                                env.possible_agents]), obs[0])  # fmt: skip
+    assert steps == 400

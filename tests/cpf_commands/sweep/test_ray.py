@@ -140,7 +140,54 @@ def test_a_trial_trains_exactly_as_train_does(tmp_path) -> None:
         config = spec.config({"scenario": "bench_mild", "seed": seed})
         assert config.torch_threads == 2  # the CPUs each trial reserves
         train(config, tmp_path / f"here{seed}", progress=False)
+        # SB3's model.zip is a pickle; both were written by this test's own training runs
         swept = PPO.load(tmp_path / "sweep" / "trials" / f"bench_mild-seed{seed}" / "model.zip")
         here = PPO.load(tmp_path / f"here{seed}" / "model.zip")
         for name, value in here.policy.state_dict().items():
             assert torch.equal(swept.policy.state_dict()[name], value), (seed, name)
+
+
+_LISTENING_SOCKETS = """
+import os, subprocess
+from cpf_commands.common.ray_runtime import start_ray
+ray = start_ray(None, quiet=True)
+assert ray.get(ray.remote(lambda: 1 + 1).remote()) == 2
+session = ray._private.worker._global_node.get_session_dir_path()
+pids = {str(os.getpid())}
+for name in filter(str.isdigit, os.listdir("/proc")):
+    try:
+        if session in open(f"/proc/{name}/cmdline").read():
+            pids.add(name)
+    except OSError:
+        pass
+listing = subprocess.run(["ss", "-ltnpH"], capture_output=True, text=True, check=True).stdout
+for line in listing.splitlines():
+    if any(f"pid={pid}," in line for pid in pids):
+        print(line.split()[3])
+ray.shutdown()
+"""
+
+
+def test_the_local_instance_listens_on_loopback_only_and_its_token_is_private(tmp_path) -> None:
+    """Every TCP socket the local instance's processes listen on is bound to 127.0.0.1.
+
+    In a fresh process, since Ray reads its token once per process.
+    """
+    token = tmp_path / "auth_token"
+    environment = {**os.environ, "RAY_AUTH_TOKEN_PATH": str(token), "NUMBA_NUM_THREADS": "1"}
+    for name in ("RAY_AUTH_TOKEN", "RAY_ADDRESS"):
+        environment.pop(name, None)
+    run = subprocess.run(
+        [sys.executable, "-c", _LISTENING_SOCKETS],
+        env=environment,
+        capture_output=True,
+        text=True,
+        timeout=300,
+        check=False,
+    )
+    assert run.returncode == 0, run.stderr[-2000:]
+    addresses = run.stdout.split()
+    assert len(addresses) >= 3, addresses  # GCS, raylet, driver at least
+    for address in addresses:
+        assert address.rsplit(":", 1)[0] in ("127.0.0.1", "[::ffff:127.0.0.1]"), addresses
+    assert token.stat().st_mode & 0o777 == 0o600

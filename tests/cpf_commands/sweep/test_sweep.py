@@ -5,6 +5,7 @@ The runs on Ray itself are in ``test_ray.py`` (marker ``ray``).
 
 from __future__ import annotations
 
+import contextlib
 import fcntl
 import importlib
 import json
@@ -107,7 +108,7 @@ def test_every_combination_is_one_trial_with_its_own_folder_name() -> None:
         (["bench_mild"], [0], ["fleets=0"], "fleets must be an integer >= 1"),
         (["bench_mild"], [0], ["scale=0.1,0.10"], r"scale: values repeat \(\[0.1, 0.1\]\)"),
         (["bench_mild"], [0], ["net_arch=64,64"], r"values repeat.*net_arch=\[\[64,64\]\]"),
-        (["bench_mild"], [-1], [], "seed must be an integer >= 0"),
+        (["bench_mild"], [-1], [], "seed must be an integer in"),
     ],
 )
 def test_a_bad_sweep_is_refused_before_any_trial_starts(
@@ -312,6 +313,9 @@ def test_a_second_sweep_on_the_same_out_is_refused_while_one_runs(tmp_path, monk
     ray.tune = types.ModuleType("ray.tune")  # type: ignore[attr-defined]
     monkeypatch.setitem(sys.modules, "ray", ray)
     monkeypatch.setattr("cpf_env.sim.precompile.precompile", lambda scenario_names: None)
+    monkeypatch.setattr(  # the stand-in ray has no internals to keep on localhost
+        "cpf_commands.common.ray_runtime._loopback_only", contextlib.nullcontext
+    )
     monkeypatch.delenv("RAY_ADDRESS", raising=False)
     spec = SweepSpec(("bench_mild",), (0,), fixed={"timesteps": 100})
     with open(tmp_path / ".lock", "w") as running:  # as the first cpf-sweep holds it

@@ -445,3 +445,29 @@ def test_env_equals_fleet_k_of_a_batched_sim(name: str) -> None:
                 assert np.array_equal(getattr(env.sim.arrays, field)[0], value[k]), (
                     f"fleet {k}: {field} differs at step {step}"
                 )
+
+
+def test_closed_envs_are_freed_after_their_spaces_were_asked_for() -> None:
+    """200 make/close cycles leave no env alive (the spaces are cached per instance)."""
+    import gc
+    import weakref
+
+    from baselines import make_policy
+    from cpf_env.envs.wrappers import ResidualWrapper
+
+    alive = []
+    for _ in range(200):
+        env = cpf_env.parallel_env("wang2014")
+        inner = cpf_env.parallel_env("wang2014")
+        wrapped = ResidualWrapper(inner, make_policy("nn_dsc", inner.scenario))
+        for agent in env.possible_agents:
+            assert env.observation_space(agent) is env.observation_space(agent)
+            env.action_space(agent)
+            assert wrapped.action_space(agent) is wrapped.action_space(agent)
+            wrapped.observation_space(agent)
+        env.close()
+        wrapped.close()
+        alive += [weakref.ref(env), weakref.ref(wrapped), weakref.ref(inner)]
+        del env, wrapped, inner
+    gc.collect()
+    assert sum(ref() is not None for ref in alive) == 0

@@ -273,3 +273,24 @@ def test_observations_are_not_aliased() -> None:
         step, td = env.step_and_maybe_reset(with_action(td, actions))
     assert torch.equal(kept, snapshot)
     assert not torch.equal(step["next", GROUP, "observation"], snapshot)
+
+
+def test_a_float_reset_mask_is_refused_before_any_fleet_resets() -> None:
+    env = TorchRLFleetEnv("bench_mild", num_fleets=3)
+    env.set_seed(0)
+    env.reset()
+    before = env.sim.arrays.eta.copy()
+    with pytest.raises(ValueError, match="must be a bool tensor"):
+        env.reset(TensorDict({"_reset": torch.tensor([[1.0], [0.0], [0.0]])}, batch_size=[3]))
+    np.testing.assert_array_equal(env.sim.arrays.eta, before)
+
+
+def test_a_gpu_device_is_refused_with_what_to_do() -> None:
+    with pytest.raises(ValueError, match="runs on the CPU"):
+        TorchRLFleetEnv("wang2014", num_fleets=2, device="cuda")
+
+
+def test_a_fractional_seed_is_refused() -> None:
+    env = TorchRLFleetEnv("bench_mild", num_fleets=2)
+    with pytest.raises(ValueError, match="seed must be an integer"):
+        env.set_seed(1.5)  # type: ignore[arg-type]

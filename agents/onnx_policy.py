@@ -1,0 +1,231 @@
+"""A trained agent as an ONNX graph: export, and a policy that runs it with onnxruntime.
+
+``export_onnx(folder, out)`` writes one graph holding everything between the
+learner's raw inputs and its correction:
+
+- input ``inputs`` (B, n, k) float32: the learner's inputs in their own units
+  (what ``ResidualController.observe`` gives), n the training scenario's
+  fleet size (the residual range is per vessel);
+- the saved normalization (``(x - mean) / sqrt(var + eps)``, clipped);
+- the actor (``agents.agent_folder.PolicyNetwork``);
+- output ``action`` (B, n, a) float32 in [-1, 1] (clipped or tanh-squashed);
+- output ``residual`` (B, n, a) float32: the correction in physical units, the
+  action times the residual range (``residual_range``: ``scale`` x each
+  vessel's force limits (N, N, N m) and, in ``force_and_rate`` mode,
+  ``scale`` x theta_dot_max (1/s)), which the base's command is added to.
+
+The training configuration (``config.json``) is stored in the graph's
+metadata (key ``cpf_config``), so a ``.onnx`` file is a policy on its own:
+``load_onnx_policy(path, scenario)`` rebuilds the base policy and runs the
+graph with onnxruntime, and ``cpf-bench --policies nn_dsc agent.onnx`` takes
+it. Deploying needs onnxruntime and the base controller, not torch. ONNX
+holds data only (protobuf), so loading one runs no code.
+
+Needs the optional extra: ``pip install -e ".[onnx]"``.
+"""
+
+from __future__ import annotations
+
+import json
+import warnings
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from numpy.typing import NDArray
+
+from agents.agent_folder import AgentFolderError, Normalization, PolicyNetwork, read_agent
+from agents.loading import TrainedPolicy
+from agents.training import TrainConfig
+from cpf_env import atomic
+from cpf_env.envs.parallel import make_scenario
+from cpf_env.scenarios import Scenario
+
+__all__ = ["OnnxActor", "export_onnx", "load_onnx_policy", "residual_range"]
+
+_INSTALL = 'this needs the optional ONNX extra: pip install -e ".[onnx]" (onnx and onnxruntime)'
+
+
+def residual_range(config: TrainConfig, scenario: Scenario) -> NDArray[np.float32]:
+    """(n, a) correction per unit of action, per vessel, as ``ResidualController.compose``.
+
+    Forces in N, N, N m (``scale`` x each vessel's force limits) and, in
+    ``force_and_rate`` mode, the rate in 1/s (``scale`` x theta_dot_max); in
+    ``kinematic`` mode the offsets in m, m, rad.
+    """
+    from cpf_env.envs.residual import ResidualConfig, ResidualController
+
+    if config.base == "none":
+        residual = ResidualConfig(mode="force_and_rate", scale=1.0)
+    else:
+        residual = config.residual_config()
+    if residual.mode == "kinematic":
+        offsets = np.asarray(residual.kinematic_scale, dtype=np.float64)
+        return np.tile(offsets, (scenario.n, 1)).astype(np.float32)
+    controller = ResidualController(scenario, None, 1, residual)
+    limits = np.asarray(controller._tau_scale, dtype=np.float64)  # (n, 3)
+    if residual.mode == "force_and_rate":
+        rate = np.full((scenario.n, 1), controller._theta_dot_max)
+        limits = np.concatenate([limits, rate], axis=1)
+    return (residual.scale * limits).astype(np.float32)
+
+
+class _Graph(torch.nn.Module):
+    """Normalization, actor and residual scaling as one module to trace."""
+
+    def __init__(
+        self, network: PolicyNetwork, normalization: Normalization | None, scale: NDArray[Any]
+    ) -> None:
+        super().__init__()
+        self.network = network
+        self.normalize = normalization is not None
+        self.mean = torch.zeros(0, dtype=torch.float64)
+        self.std = torch.ones(0, dtype=torch.float64)
+        self.clip = 0.0
+        if normalization is not None:
+            self.mean = torch.tensor(normalization.mean, dtype=torch.float64)
+            self.std = torch.sqrt(torch.tensor(normalization.var + normalization.epsilon))
+            self.clip = float(normalization.clip)
+        self.scale = torch.tensor(scale, dtype=torch.float32)
+
+    def forward(self, rows: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        latent = rows
+        if self.normalize:  # in float64 like VecNormalize, then back to float32
+            scaled = (rows.to(torch.float64) - self.mean) / self.std
+            latent = torch.clamp(scaled, -self.clip, self.clip).to(torch.float32)
+        action = self.network(latent)
+        return action, action * self.scale
+
+
+def export_onnx(folder: str | Path, out: str | Path, checks: int = 1000) -> float:
+    """Export an agent folder to ONNX and check it against the torch policy.
+
+    Args:
+        folder: A data-only agent folder (``cpf-train`` output).
+        out: The ``.onnx`` file to write (atomically).
+        checks: Random inputs (drawn around the saved statistics) on which the
+            ONNX actions are compared with torch's.
+
+    Returns:
+        The largest absolute difference between the ONNX and torch actions.
+
+    Raises:
+        ImportError: onnx or onnxruntime is missing.
+        AgentFolderError: The folder is not a valid agent folder.
+    """
+    try:
+        import onnx
+    except ImportError as error:
+        raise ImportError(_INSTALL) from error
+    source = Path(folder)
+    record, network, normalization = read_agent(source)
+    config = TrainConfig.from_json(record["config"])
+    scenario = make_scenario(config.scenario, **config.scenario_overrides())
+    graph = _Graph(network, normalization, residual_range(config, scenario)).eval()
+    example = torch.zeros(1, scenario.n, network.input_size, dtype=torch.float32)
+    target = Path(out)
+    staging = target.with_name(f".{target.name}.export.tmp")
+    try:
+        with warnings.catch_warnings():
+            # the TorchScript exporter: the torch.export one needs onnxscript, not a dependency
+            warnings.simplefilter("ignore", DeprecationWarning)
+            torch.onnx.export(
+                graph,
+                (example,),
+                str(staging),
+                input_names=["inputs"],
+                output_names=["action", "residual"],
+                dynamic_axes={"inputs": {0: "B"}, "action": {0: "B"}, "residual": {0: "B"}},
+                dynamo=False,
+            )
+        model = onnx.load(str(staging))
+    finally:
+        staging.unlink(missing_ok=True)
+    entry = model.metadata_props.add()
+    entry.key, entry.value = "cpf_config", json.dumps(record)
+    onnx.checker.check_model(model)
+    atomic.write_bytes(target, model.SerializeToString())
+    rows = _check_inputs(network.input_size, normalization, checks)
+    with torch.no_grad():
+        expected = network(torch.from_numpy(_normalized(rows, normalization))).numpy()
+    got = OnnxActor(target)(rows)
+    return float(np.max(np.abs(got - expected)))
+
+
+def _normalized(rows: NDArray[np.float32], normalization: Normalization | None) -> NDArray[Any]:
+    """The torch policy's normalization (``TorchActor``), the reference of the check."""
+    return rows if normalization is None else normalization.apply(rows)
+
+
+def _check_inputs(size: int, normalization: Normalization | None, count: int) -> NDArray[Any]:
+    """(count, size) float32 inputs spread over twice the saved standard deviations."""
+    rng = np.random.default_rng(0)
+    noise = rng.normal(size=(count, size))
+    if normalization is None:
+        return noise.astype(np.float32)
+    spread = 2.0 * np.sqrt(normalization.var + normalization.epsilon)
+    return (normalization.mean + spread * noise).astype(np.float32)
+
+
+class OnnxActor:
+    """The ``action`` output of an exported graph, run by onnxruntime on one thread.
+
+    Rows are grouped by fleet, n at a time (n: the graph's fleet size), as
+    ``TrainedPolicy`` orders them.
+
+    Args:
+        path: The ``.onnx`` file.
+    """
+
+    def __init__(self, path: str | Path) -> None:
+        try:
+            import onnxruntime
+        except ImportError as error:
+            raise ImportError(_INSTALL) from error
+        options = onnxruntime.SessionOptions()
+        options.intra_op_num_threads = options.inter_op_num_threads = 1
+        try:
+            self.session = onnxruntime.InferenceSession(
+                str(path), options, providers=["CPUExecutionProvider"]
+            )
+        except Exception as error:  # onnxruntime raises its own error types
+            raise AgentFolderError(f"{path} is not a loadable ONNX model: {error}") from None
+        metadata = self.session.get_modelmeta().custom_metadata_map
+        if "cpf_config" not in metadata:
+            raise AgentFolderError(f"{path} was not written by cpf-export (no cpf_config).")
+        self.record: dict[str, Any] = json.loads(metadata["cpf_config"])
+        _, self.n, self.input_size = self.session.get_inputs()[0].shape
+        self.action_size = int(self.session.get_outputs()[0].shape[2])
+
+    def __call__(self, rows: NDArray[np.float32]) -> NDArray[np.float32]:
+        """(R, k) float32 raw inputs, R a multiple of n -> (R, a) float32 actions in [-1, 1]."""
+        fleets = np.ascontiguousarray(rows, dtype=np.float32).reshape(-1, self.n, self.input_size)
+        (action,) = self.session.run(["action"], {"inputs": fleets})
+        return np.asarray(action, dtype=np.float32).reshape(-1, self.action_size)
+
+
+def load_onnx_policy(path: str | Path, scenario: str | Scenario | None = None) -> TrainedPolicy:
+    """A policy from a ``cpf-export`` file: the base policy plus the graph's correction.
+
+    Args:
+        path: The ``.onnx`` file.
+        scenario: Evaluation scenario; default: the training scenario.
+
+    Raises:
+        ImportError: onnxruntime is missing.
+        AgentFolderError: Not a ``cpf-export`` file.
+        ValueError: The scenario's observations do not fit the network.
+    """
+    actor = OnnxActor(path)
+    config = TrainConfig.from_json(actor.record["config"])
+    if scenario is None:
+        resolved = make_scenario(config.scenario, **config.scenario_overrides())
+    else:
+        resolved = make_scenario(scenario)
+    if resolved.n != actor.n:
+        raise ValueError(
+            f"{path} was exported for fleets of {actor.n} vessels but scenario "
+            f"{resolved.name!r} has {resolved.n}; evaluate the agent folder instead."
+        )
+    return TrainedPolicy(Path(path).name, config, actor, resolved)

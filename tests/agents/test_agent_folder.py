@@ -1,0 +1,201 @@
+"""The data-only agent folder: no code runs on load, every file checked, old folders need trust."""
+
+from __future__ import annotations
+
+import base64
+import json
+import pickle
+import shutil
+import zipfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+from conftest import ROOT
+
+from agents import load_policy
+from agents.agent_folder import AgentFolderError
+from agents.legacy import convert_sb3_folder
+from cpf_commands.bench.cli import bench_main
+from cpf_commands.run.cli import run_main
+from cpf_env import FleetSim
+
+AGENT = ROOT / "results/residual_rl/agents/residual_ppo_bench_lossy_links_5m_s0"
+
+
+class _Payload:
+    """Unpickling this creates the marker file: the proof that a pickle ran code."""
+
+    def __init__(self, marker: Path) -> None:
+        self.marker = marker
+
+    def __reduce__(self) -> tuple[object, tuple[str, str]]:
+        return (open, (str(self.marker), "w"))
+
+
+def _malicious_folder(root: Path, marker: Path, which: str) -> Path:
+    """An old-style SB3 folder whose ``which`` file ("pkl" or "zip") runs the payload."""
+    folder = root / f"evil_{which}"
+    folder.mkdir()
+    shutil.copy(AGENT / "config.json", folder / "config.json")
+    (folder / "vecnormalize.pkl").write_bytes(pickle.dumps(_Payload(marker)))
+    serialized = base64.b64encode(pickle.dumps(_Payload(marker))).decode()
+    data = {"policy_class": {":type:": "<class 'type'>", ":serialized:": serialized}}
+    with zipfile.ZipFile(folder / "model.zip", "w") as archive:
+        archive.writestr("data", json.dumps(data))
+    if which == "zip":
+        (folder / "vecnormalize.pkl").unlink()
+    return folder
+
+
+@pytest.mark.parametrize("which", ["pkl", "zip"])
+def test_a_malicious_old_folder_runs_no_code_without_the_trust_flag(
+    tmp_path: Path, which: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    marker = tmp_path / "payload_ran"
+    folder = _malicious_folder(tmp_path, marker, which)
+    with pytest.raises(AgentFolderError, match="trust-pickle"):
+        load_policy(folder)
+    with pytest.raises(SystemExit):
+        bench_main(["--policies", "nn_dsc", str(folder), "--scenarios", "bench_lossy_links",
+                    "--seeds", "1", "--steps", "2", "--out", str(tmp_path / "b")])  # fmt: skip
+    assert "trust-pickle" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        run_main(["--scenario", "bench_lossy_links", "--policy", str(folder), "--steps", "2",
+                  "--out", str(tmp_path / "r"), "--quiet", "--no-figures"])  # fmt: skip
+    assert "trust-pickle" in capsys.readouterr().err
+    assert not marker.exists()
+    # the payload is real: with the flag the pickle runs (then the folder is refused)
+    with pytest.warns(UserWarning, match="runs any code"), pytest.raises(AgentFolderError):
+        load_policy(folder, trust_pickle=True)
+    assert marker.exists()
+
+
+def _copy(tmp_path: Path) -> Path:
+    folder = tmp_path / "agent"
+    shutil.copytree(AGENT, folder)
+    return folder
+
+
+@pytest.mark.parametrize(
+    ("name", "edit"),
+    [
+        ("config.json", lambda text: text.replace('"scale": 0.2', '"scale": 0.3')),
+        ("config.json", lambda text: text.replace('"mode": "force"', '"mode": "force_and_rate"')),
+        ("normalization.json", lambda text: text.replace("[", "[1.0, ", 1)),
+        ("policy.safetensors", None),
+    ],
+)
+def test_an_edited_file_is_an_error_naming_it(tmp_path: Path, name: str, edit: object) -> None:
+    folder = _copy(tmp_path)
+    path = folder / name
+    if edit is None:
+        path.write_bytes(path.read_bytes()[:-10])  # truncated
+    else:
+        path.write_text(edit(path.read_text()))  # type: ignore[operator]
+    with pytest.raises(AgentFolderError, match=name.replace(".", r"\.")):
+        load_policy(folder)
+
+
+def test_a_missing_file_is_an_error_naming_it(tmp_path: Path) -> None:
+    folder = _copy(tmp_path)
+    (folder / "normalization.json").unlink()
+    with pytest.raises(AgentFolderError, match=r"normalization\.json is missing"):
+        load_policy(folder)
+
+
+def test_a_consistent_forgery_of_the_statistics_is_caught(tmp_path: Path) -> None:
+    """Statistics of another size, with the manifest's hash updated to match."""
+    import hashlib
+
+    folder = _copy(tmp_path)
+    statistics = json.loads((folder / "normalization.json").read_text())
+    statistics["mean"], statistics["var"] = statistics["mean"][:-1], statistics["var"][:-1]
+    data = (json.dumps(statistics) + "\n").encode()
+    (folder / "normalization.json").write_bytes(data)
+    manifest = json.loads((folder / "manifest.json").read_text())
+    manifest["files"]["normalization.json"]["sha256"] = hashlib.sha256(data).hexdigest()
+    (folder / "manifest.json").write_text(json.dumps(manifest))
+    with pytest.raises(AgentFolderError, match="statistics for 25 inputs"):
+        load_policy(folder)
+
+
+def test_the_converted_agent_acts_as_sb3_did(tmp_path: Path) -> None:
+    """The committed agent, rewritten from its SB3 zip: SB3's predict gives the same bits.
+
+    The SB3 model is rebuilt from the converted weights (no pickle is read), run through
+    SB3's own ``predict`` on inputs normalized by VecNormalize's formula written out here.
+    """
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.vec_env import VecMonitor
+
+    from agents.training import TrainConfig, build_model, make_env
+
+    policy = load_policy(AGENT)
+    record = json.loads((AGENT / "config.json").read_text())
+    config = TrainConfig.from_json({**record["config"], "fleets": 1})
+    model = build_model(config, VecMonitor(make_env(config)))
+    assert isinstance(model, PPO)
+    network = policy.actor.network  # type: ignore[attr-defined]
+    layers = [m for m in model.policy.mlp_extractor.policy_net if isinstance(m, torch.nn.Linear)]
+    with torch.no_grad():
+        for mine, theirs in zip(network.hidden, layers, strict=True):
+            theirs.weight.copy_(mine.weight)
+            theirs.bias.copy_(mine.bias)
+        model.policy.action_net.weight.copy_(network.output.weight)
+        model.policy.action_net.bias.copy_(network.output.bias)
+    statistics = json.loads((AGENT / "normalization.json").read_text())
+    rows = np.random.default_rng(3).normal(size=(1000, network.input_size)) * 3
+    rows = (np.array(statistics["mean"]) + rows * np.sqrt(statistics["var"])).astype(np.float32)
+    normalized = (rows - np.array(statistics["mean"])) / np.sqrt(np.array(statistics["var"]) + 1e-8)
+    expected, _ = model.predict(np.clip(normalized, -10, 10).astype(np.float32), deterministic=True)
+    np.testing.assert_array_equal(policy.actor(rows), expected)  # type: ignore[attr-defined]
+
+
+def test_an_old_folder_loads_with_trust_and_converts_to_the_same_actions(tmp_path: Path) -> None:
+    """A tiny SB3 folder written the old way (model.zip + vecnormalize.pkl) by this test."""
+    from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
+
+    from agents.training import TrainConfig, build_model, make_env
+
+    config = TrainConfig(scenario="bench_mild", fleets=2, n_steps=16, net_arch=(8,))
+    env = VecNormalize(VecMonitor(make_env(config)), norm_reward=False)
+    env.reset()
+    for _ in range(5):  # some statistics
+        env.step(np.zeros((env.num_envs, 3), dtype=np.float32))
+    model = build_model(config, env)
+    with torch.no_grad():
+        model.policy.action_net.bias.fill_(0.3)  # a non-zero residual
+    old = tmp_path / "old"
+    old.mkdir()
+    model.save(old / "model.zip")
+    env.save(str(old / "vecnormalize.pkl"))  # SB3's pickle, written and trusted by this test
+    (old / "config.json").write_text(json.dumps({"config": config.to_json()}))
+    with pytest.warns(UserWarning, match="unpickles"):
+        trusted = load_policy(old, trust_pickle=True)
+    with pytest.warns(UserWarning, match="unpickles"):
+        new = convert_sb3_folder(old, tmp_path / "new")
+    assert not (new / "model.zip").exists() and not (new / "vecnormalize.pkl").exists()
+    converted = load_policy(new)
+    obs = FleetSim(converted.scenario, num_fleets=2).reset(seeds=[1, 2])
+    actions = trusted.act_batch(obs)
+    np.testing.assert_array_equal(converted.act_batch(obs), actions)
+    env.training = False  # SB3's own route: VecNormalize.normalize_obs and Model.predict
+    rows = trusted._controller.observe(obs).reshape(10, -1).astype(np.float32)  # type: ignore[union-attr]
+    expected, _ = model.predict(env.normalize_obs(rows), deterministic=True)
+    assert np.all(expected > 0.2)
+    np.testing.assert_array_equal(trusted.actor(rows), expected)  # type: ignore[attr-defined]
+
+
+def test_an_old_folder_without_its_statistics_is_refused(tmp_path: Path) -> None:
+    from stable_baselines3.common.vec_env import VecMonitor
+
+    from agents.training import TrainConfig, build_model, make_env
+
+    config = TrainConfig(scenario="bench_mild", fleets=2, n_steps=16, net_arch=(8,))
+    model = build_model(config, VecMonitor(make_env(config)))
+    model.save(tmp_path / "model.zip")
+    (tmp_path / "config.json").write_text(json.dumps({"config": config.to_json()}))
+    with pytest.warns(UserWarning), pytest.raises(AgentFolderError, match="unnormalized"):
+        load_policy(tmp_path, trust_pickle=True)

@@ -1,0 +1,124 @@
+"""cpf-bench's output folder: refused before the run when it cannot be written, replaced whole."""
+
+from __future__ import annotations
+
+import errno
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from cpf_commands.bench import cli
+from cpf_commands.bench.cli import bench_main
+from cpf_env import atomic
+
+QUICK = ["--policies", "nn_dsc", "--scenarios", "wang2014", "--seeds", "1", "--steps", "3",
+         "--quiet"]  # fmt: skip
+
+
+def _refused(argv: list[str], capsys: pytest.CaptureFixture[str]) -> str:
+    with pytest.raises(SystemExit) as raised:
+        bench_main(argv)
+    assert raised.value.code == 2
+    return capsys.readouterr().err
+
+
+def test_results_are_replaced_only_with_force_and_stale_figures_go(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "bench"
+    assert bench_main([*QUICK, "--out", str(out)]) == 0
+    figures = sorted(p.name for p in out.glob("*.png"))
+    assert figures
+    assert "--force" in _refused([*QUICK, "--out", str(out), "--no-figures"], capsys)
+    assert sorted(p.name for p in out.glob("*.png")) == figures  # refused: untouched
+    assert bench_main([*QUICK, "--out", str(out), "--no-figures", "--force"]) == 0
+    assert not list(out.glob("*.png"))
+    assert sorted(p.name for p in out.iterdir()) == ["episodes.csv", "summary.csv", "summary.md"]
+
+
+def test_a_symlinked_summary_is_not_followed(tmp_path: Path) -> None:
+    out = tmp_path / "bench"
+    assert bench_main([*QUICK, "--out", str(out), "--no-figures"]) == 0
+    victim = tmp_path / "victim.txt"
+    victim.write_text("keep me")
+    (out / "summary.md").unlink()
+    (out / "summary.md").symlink_to(victim)
+    assert bench_main([*QUICK, "--out", str(out), "--no-figures", "--force"]) == 0
+    assert victim.read_text() == "keep me"
+    assert not (out / "summary.md").is_symlink()
+
+
+def test_a_folder_with_other_files_is_never_replaced(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    (tmp_path / "thesis.tex").write_text("precious")
+    assert "did not write (thesis.tex)" in _refused(
+        [*QUICK, "--out", str(tmp_path), "--force"], capsys
+    )
+    assert (tmp_path / "thesis.tex").read_text() == "precious"
+
+
+def test_an_unwritable_out_and_too_many_seeds_are_refused_before_the_run(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    ran: list[object] = []
+    monkeypatch.setattr(cli, "run_bench", lambda *a, **k: ran.append(a))
+    blocker = tmp_path / "file"
+    blocker.write_text("")
+    assert "cannot write" in _refused([*QUICK, "--out", str(blocker / "out")], capsys)
+    start = time.perf_counter()
+    message = _refused(["--seeds", "1000000", "--scenarios", "bench_mild", "--out",
+                        str(tmp_path / "o"), "--quiet"], capsys)  # fmt: skip
+    assert time.perf_counter() - start < 5.0
+    # 1e6 fleets x (2000 steps x 16 series x 8 B + 5 vessels x 8 KiB) = 2.9696e11 B
+    assert "--seeds 1000000 needs about 276.6 GiB" in message
+    monkeypatch.setattr(atomic.shutil, "disk_usage", lambda path: type("U", (), {"free": 10}))
+    assert "MiB free" in _refused([*QUICK, "--out", str(tmp_path / "o")], capsys)
+    assert ran == []
+
+
+def test_disk_full_while_writing_keeps_the_old_results(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    out = tmp_path / "bench"
+    assert bench_main([*QUICK, "--out", str(out), "--no-figures"]) == 0
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    real = atomic.write_text
+
+    def full(path: Path, text: str) -> None:
+        if Path(path).name == "summary.md":
+            raise OSError(errno.ENOSPC, "No space left on device")
+        real(path, text)
+
+    monkeypatch.setattr(atomic, "write_text", full)
+    err = _refused([*QUICK, "--out", str(out), "--no-figures", "--force", "--seeds", "2"], capsys)
+    assert "could not write the results" in err and "No space" in err
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == [".bench.lock", "bench"]
+
+
+_HOLD = """
+import sys, time
+from cpf_env import atomic
+with atomic.FolderLock(sys.argv[1]):
+    print("locked", flush=True)
+    time.sleep(60)
+"""
+
+
+def test_a_second_bench_on_the_same_out_is_refused(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "bench"
+    holder = subprocess.Popen(
+        [sys.executable, "-c", _HOLD, str(out)], stdout=subprocess.PIPE, text=True
+    )
+    try:
+        assert holder.stdout is not None and holder.stdout.readline().strip() == "locked"
+        assert "being written by another cpf-bench" in _refused([*QUICK, "--out", str(out)], capsys)
+    finally:
+        holder.kill()
+        holder.wait()
