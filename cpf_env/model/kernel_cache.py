@@ -108,6 +108,8 @@ def _stamp_of(py_file: str) -> str | None:
         return None
     for directory, sources in _STAMPED.items():
         if path.is_relative_to(directory):
+            if not sources:
+                return _digest()
             digest = hashlib.sha256(_digest().encode())
             for source in sources:
                 digest.update(source.read_bytes())
