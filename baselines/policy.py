@@ -240,12 +240,15 @@ class Policy(PolicyInterface):
         vectors = np.empty((5, rows, self.n, 3))  # one allocation per shape, C-contiguous slices
         scalars = np.empty((3, rows, self.n))
         out = PolicyOutputs(
-            np.empty((rows, self.n, self.act_dim)),
-            *vectors[:3],  # nn_output, nubar_dot, alpha
-            scalars[0],  # speed_estimate
-            *vectors[3:],  # aux_state, tau_command
-            scalars[1],  # omega_s
-            scalars[2],  # gamma
+            actions=np.empty((rows, self.n, self.act_dim)),
+            nn_output=vectors[0],
+            nubar_dot=vectors[1],
+            alpha=vectors[2],
+            speed_estimate=scalars[0],
+            aux_state=vectors[3],
+            tau_command=vectors[4],
+            omega_s=scalars[1],
+            gamma=scalars[2],
         )
         if self.kinetics == KINETICS_PYTHON:
             self._act_in_python(batch, index, states, out)
