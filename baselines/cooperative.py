@@ -22,8 +22,13 @@ the vessel's own estimate and its neighbours' and the leader's, stable for
 any dt. The estimate a vessel broadcasts at step k is vhat_i(k + 1), so that
 at step k + 1 every vessel combines values of the same instant.
 
-Sums are written as explicit left-to-right loops (``contract``) so that a
-fleet's numbers do not depend on how many fleets are in the batch.
+The equations run compiled, once, in ``baselines.kernels`` (``_cooperate``),
+their sums as explicit left-to-right loops so that a fleet's numbers do not
+depend on how many fleets are in the batch. This module keeps the
+Python-facing pieces: the parsed observation (``LocalObservation``) and the
+layer's output (``CooperativeStep``) that a kinetic part written in Python
+receives, and the numerical helpers the policies use to build their
+coefficients.
 """
 
 from __future__ import annotations
@@ -33,39 +38,15 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from baselines.gains import CooperativeGains
-from cpf_env.scenarios import SpeedSchedule
 from cpf_env.sim.observation import ObsLayout
 
 __all__ = [
-    "CooperativeLayer",
     "CooperativeStep",
     "LocalObservation",
-    "contract",
     "exponential_euler",
 ]
 
 Array = NDArray[np.float64]
-
-
-def contract(a: ArrayLike, b: ArrayLike) -> Array:
-    """Sum of a * b over the last axis, accumulated left to right.
-
-    Unlike ``np.sum``/``matmul``, the summation order never depends on the
-    batch shape, so batched and single-fleet runs agree bit for bit.
-
-    Args:
-        a: Shape (..., L).
-        b: Shape broadcastable with a, (..., L).
-
-    Returns:
-        The broadcast shape without its last axis.
-    """
-    a, b = np.broadcast_arrays(np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64))
-    total = np.zeros(a.shape[:-1])
-    for q in range(a.shape[-1]):
-        total = total + a[..., q] * b[..., q]
-    return total
 
 
 def exponential_euler(rate: ArrayLike, dt: float) -> tuple[Array, Array]:
@@ -161,79 +142,3 @@ class CooperativeStep:
     gamma: Array
     gamma_next: Array
     theta_dot: Array
-
-
-class CooperativeLayer:
-    """Path-variable synchronization [34] and distributed speed estimation [35].
-
-    Args:
-        gains: k3, k4, k5, k6.
-        dt: Control period (s).
-        leader_speed: None to estimate v0 with eq. [35] (the paper). A schedule
-            makes every vessel use v0(t) directly, t = steps * dt on the
-            policy's own clock: knowledge outside the local observation, for
-            the ``nn_dsc_global_v0`` ablation only.
-    """
-
-    def __init__(
-        self, gains: CooperativeGains, dt: float, leader_speed: SpeedSchedule | None = None
-    ) -> None:
-        self.gains = gains
-        self.dt = float(dt)
-        self.leader_speed = leader_speed
-        schedule = leader_speed or SpeedSchedule()
-        self._v0_times, self._v0_values = np.array(schedule.times), np.array(schedule.values)
-        self._gamma_decay, self._gamma_gain = exponential_euler(gains.k4, self.dt)
-
-    def step(
-        self, obs: LocalObservation, vhat: Array, gamma: Array, steps: NDArray[np.int64]
-    ) -> CooperativeStep:
-        """Compute the commands of this step and the states of the next.
-
-        Args:
-            obs: Local observations at step k.
-            vhat: (B, n) speed estimates at step k (ignored with a global v0).
-            gamma: (B, n) auxiliary states at step k.
-            steps: (B,) control steps since each fleet's reset (the policy's clock).
-
-        Returns:
-            The step's commands and next states; inputs are not modified.
-        """
-        g = self.gains
-        sync = -contract(obs.weight, obs.dtheta)  # s_i, with theta_j - theta_i as received
-        mu = contract(obs.z1, obs.t1)
-        error = sync - mu
-        omega_s = -g.k3 * error - gamma  # [34]
-        gamma_next = self._gamma_decay * gamma + self._gamma_gain * error  # [34], exact
-        if self.leader_speed is None:
-            vhat, vhat_dot, vhat_next = self._estimate(obs, vhat)
-        else:
-            vhat, vhat_next = (self._schedule(steps + k, obs.theta.shape) for k in (0, 1))
-            vhat_dot = np.zeros_like(vhat)
-        return CooperativeStep(
-            vhat=vhat,
-            vhat_dot=vhat_dot,
-            vhat_next=vhat_next,
-            sync=sync,
-            mu=mu,
-            omega_s=omega_s,
-            gamma=gamma,
-            gamma_next=gamma_next,
-            theta_dot=vhat + omega_s,  # [12]
-        )
-
-    def _estimate(self, obs: LocalObservation, vhat: Array) -> tuple[Array, Array, Array]:
-        """Distributed estimator [35]: (vhat, vhat', vhat at the next step)."""
-        g = self.gains
-        degree = contract(obs.weight, np.ones_like(obs.weight))
-        neighbours = contract(obs.weight, obs.message)  # sum_j a_ij vhat_j
-        leader = g.k6 * obs.leader
-        vhat_dot = -g.k5 * (degree * vhat - neighbours) - leader * (vhat - obs.v0)  # [35]
-        decay, gain = exponential_euler(g.k5 * degree + leader, self.dt)
-        vhat_next = decay * vhat + gain * (g.k5 * neighbours + leader * obs.v0)  # [35], exact
-        return vhat, vhat_dot, vhat_next
-
-    def _schedule(self, steps: NDArray[np.int64], shape: tuple[int, ...]) -> Array:
-        """v0 of the schedule at steps * dt, broadcast to ``shape`` (B, n)."""
-        index = np.searchsorted(self._v0_times, steps * self.dt, side="right") - 1
-        return np.broadcast_to(self._v0_values[np.maximum(index, 0)][:, None], shape).copy()

@@ -53,22 +53,20 @@ from __future__ import annotations
 from typing import Any, ClassVar, cast
 
 import numpy as np
-from numpy.typing import NDArray
 
-from baselines.cooperative import (
-    CooperativeStep,
-    LocalObservation,
-    contract,
-    exponential_euler,
-)
+from baselines.cooperative import exponential_euler
 from baselines.gains import NNDSCGains
-from baselines.policy import Array, Policy, virtual_control
+from baselines.kernels import KINETICS_NN_DSC
+from baselines.policy import Policy
 
 __all__ = ["DSCPolicy", "GlobalSpeedPolicy", "NNDSCPolicy", "NoAuxPolicy"]
 
 
 class NNDSCPolicy(Policy):
     """NN-based adaptive DSC with saturation auxiliary system (the paper's controller).
+
+    The equations above run compiled (``baselines.kernels``); this class turns
+    the gains into their kernel form.
 
     Args:
         env: A ParallelEnv, FleetSim, Scenario or scenario name.
@@ -88,88 +86,35 @@ class NNDSCPolicy(Policy):
 
     name = "nn_dsc"
     gains_type = NNDSCGains
+    kinetics = KINETICS_NN_DSC
     #: Include the NN term What^T sigma(xi) in tau0 and adapt What.
     use_nn: ClassVar[bool] = True
     #: Include the saturation auxiliary system (otherwise e2 = z2).
     use_aux: ClassVar[bool] = True
 
-    def __init__(self, env: object, **options: Any) -> None:
-        super().__init__(env, **options)
+    def _kinetic_constants(self) -> dict[str, Any]:
+        """K1, K2, the DSC filter, the auxiliary system and the weight law in kernel form."""
         g = cast(NNDSCGains, self.gains)
-        self._k1, self._k2 = np.array(g.K1), np.array(g.K2)
-        self._rho = g.rho
-        self._input_weights = g.input_weights()
-        self._filter_decay, _ = exponential_euler(1.0 / g.rho, self.dt)
-        self._aux_decay, self._aux_gain = exponential_euler(np.array(g.K_pi), self.dt)
-        self._leak_decay, leak_gain = exponential_euler(g.leakage_rate(), self.dt)
-        self._adapt_gain = g.Gamma_W * leak_gain
-
-    def _kinetic_states(self) -> dict[str, tuple[int, ...]]:
-        """DSC filter, auxiliary state, NN weights, last command."""
+        filter_decay, _ = exponential_euler(1.0 / g.rho, self.dt)
+        aux_decay, aux_gain = exponential_euler(np.array(g.K_pi), self.dt)
+        leak_decay, leak_gain = exponential_euler(g.leakage_rate(), self.dt)
         return {
-            "nubar": (3,),
-            "pi": (3,),
-            "weights": (self._input_weights.shape[0], 3),
-            "tau0": (3,),
+            "use_nn": self.use_nn,
+            "use_aux": self.use_aux,
+            "k1": np.array(g.K1),
+            "k2": np.array(g.K2),
+            "rho": float(g.rho),
+            "filter_decay": float(filter_decay),
+            "aux_decay": aux_decay,
+            "aux_gain": aux_gain,
+            "leak_decay": float(leak_decay),
+            "adapt_gain": float(g.Gamma_W * leak_gain),
+            "input_weights": g.input_weights(),
         }
 
-    def _kinetics(
-        self,
-        obs: LocalObservation,
-        cooperation: CooperativeStep,
-        states: dict[str, Array],
-        started: NDArray[np.bool_],
-    ) -> tuple[Array, dict[str, Array]]:
-        """Command [29] of step k; advances nubar, pi, What to step k + 1."""
-        first = ~started[:, None, None]
-        alpha = virtual_control(self._k1, obs.z1, obs.t1, cooperation.vhat)  # [15]
-        nubar = np.where(first, alpha, states["nubar"])  # [18], nubar(0) = alpha(0)
-        nubar_dot = (alpha - nubar) / self._rho  # [18]
-        z2 = obs.nu - nubar
-        if self.use_aux:
-            tau_tilde = np.where(first, 0.0, obs.tau_applied - states["tau0"])
-            pi = self._aux_decay * states["pi"] + self._aux_gain * tau_tilde  # [21], exact
-        else:
-            pi = np.zeros_like(z2)
-        e2 = z2 - pi
-        if self.use_nn:
-            nn_output, weights_next = self._network(obs.nu, nubar_dot, e2, states["weights"])
-        else:
-            nn_output, weights_next = np.zeros_like(z2), states["weights"]
-        tau0 = -self._k2 * e2 - obs.z1 + nn_output  # [29]
-        states["nubar"] = self._filter_decay * nubar + (1.0 - self._filter_decay) * alpha  # exact
-        states["pi"] = pi
-        states["weights"] = weights_next
-        states["tau0"] = tau0
-        return tau0, {
-            "nn_output": nn_output,
-            "nubar_dot": nubar_dot,
-            "alpha": alpha,
-            "aux_state": pi,
-        }
-
-    def _network(
-        self, nu: Array, nubar_dot: Array, e2: Array, weights: Array
-    ) -> tuple[Array, Array]:
-        """NN output What^T sigma(xi) [28] and the weights at the next step [30].
-
-        Args:
-            nu: (B, n, 3) velocities.
-            nubar_dot: (B, n, 3) DSC filter derivative.
-            e2: (B, n, 3) compensated velocity error.
-            weights: (B, n, l, 3) What at step k.
-
-        Returns:
-            ((B, n, 3) output in N, N, N m; (B, n, l, 3) What at step k + 1).
-        """
-        xi = np.concatenate([np.ones((*nu.shape[:-1], 1)), nu, nubar_dot], axis=-1)
-        sigma = np.tanh(contract(xi[..., None, :], self._input_weights))  # (B, n, l)
-        output = contract(np.swapaxes(weights, -1, -2), sigma[..., None, :])  # What^T sigma
-        # [30], exact for sigma e2^T held over the step (leakage rate Gamma_W k_W or k_W).
-        weights_next = self._leak_decay * weights - self._adapt_gain * (
-            sigma[..., :, None] * e2[..., None, :]
-        )
-        return output, weights_next
+    def _hidden_units(self) -> int:
+        """The NN size l (What has shape (l, 3) per vessel)."""
+        return cast(NNDSCGains, self.gains).hidden
 
 
 class DSCPolicy(NNDSCPolicy):

@@ -17,22 +17,39 @@ Interface (``baselines.interface.PolicyInterface``, shared with trained agents):
 
 Action of vessel i: [tau0 (3, N, N, N m, before saturation), theta_dot (1/s),
 vhat_i(k + 1) (m/s), 0 ...]: the env saturates tau0 and integrates theta.
+
+The equations run compiled (``baselines.kernels``): a policy here holds the
+gains in kernel form (``PolicyConstants``), the internal states of B fleets
+(``PolicyStates``) and the bookkeeping around them (validation, partial
+fleets, restarts). A subclass either names a compiled kinetic part
+(``kinetics``) or writes its own in Python (``_kinetic_states`` and
+``_kinetics``, after the compiled cooperative layer; ``docs/extending.md``).
 """
 
 from __future__ import annotations
 
-import abc
 from typing import Any, ClassVar
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from baselines.cooperative import CooperativeLayer, CooperativeStep, LocalObservation
+from baselines.cooperative import CooperativeStep, LocalObservation, exponential_euler
 from baselines.gains import CooperativeGains
 from baselines.interface import PolicyInterface
+from baselines.kernels import (
+    KINETICS_PYTHON,
+    CooperativeOutputs,
+    PolicyConstants,
+    PolicyOutputs,
+    PolicyStates,
+    act_rows_parallel,
+    act_rows_serial,
+    cooperative_rows,
+)
 from cpf_env import scenarios
+from cpf_env.model.vessel import PARAM_SIZE
 from cpf_env.scenarios import Scenario
-from cpf_env.sim.fleet import observation_layout
+from cpf_env.sim.fleet import PARALLEL_MIN_FLEETS, observation_layout
 
 __all__ = ["DIAGNOSTICS", "Policy", "resolve_scenario", "virtual_control"]
 
@@ -86,11 +103,13 @@ def virtual_control(k1: Array, z1: Array, t1: Array, vhat: Array) -> Array:
     return -k1 * z1 + t1 * vhat[..., None]
 
 
-class Policy(PolicyInterface, abc.ABC):
-    """Base class: the cooperative layer, state bookkeeping and the input layouts.
+class Policy(PolicyInterface):
+    """Base class: gains in kernel form, the internal states and their bookkeeping.
 
-    Subclasses give the kinetic part (the force command) through
-    ``_kinetic_states`` and ``_kinetics``.
+    A subclass sets ``kinetics`` to a compiled kinetic part of
+    ``baselines.kernels`` and fills its coefficients in ``_kinetic_constants``,
+    or leaves ``KINETICS_PYTHON`` and implements ``_kinetic_states`` and
+    ``_kinetics`` in numpy (they then run after the compiled cooperative layer).
 
     Args:
         env: Where the scenario comes from (see ``resolve_scenario``).
@@ -113,6 +132,11 @@ class Policy(PolicyInterface, abc.ABC):
     gains_type: ClassVar[type[CooperativeGains]] = CooperativeGains
     #: True: every vessel uses v0 from the scenario's schedule instead of estimating it.
     global_speed: ClassVar[bool] = False
+    #: The kinetic part: one of ``baselines.kernels.KINETICS_*``.
+    kinetics: ClassVar[int] = KINETICS_PYTHON
+    #: True: each neighbour's received theta_j is advanced by its packet age x dt x its
+    #: communicated speed estimate (``baselines.delay_compensated``).
+    delay_compensation: ClassVar[bool] = False
 
     def __init__(self, env: object, **options: Any) -> None:
         self.scenario = resolve_scenario(env)
@@ -128,20 +152,26 @@ class Policy(PolicyInterface, abc.ABC):
                 f"policy {self.name!r} broadcasts its speed estimate and needs "
                 "Scenario.message_size >= 1."
             )
-        schedule = self.scenario.v0_schedule if self.global_speed else None
-        self.cooperation = CooperativeLayer(self.gains, self.dt, schedule)
         self.diagnostics: dict[str, Array] = {}
-        self._states: dict[str, Array] | None = None
-        self._started = np.zeros(0, dtype=bool)
-        self._steps = np.zeros(0, dtype=np.int64)
+        self._constants = self._build_constants()
+        self._states: PolicyStates | None = None
+        self._python_states: dict[str, Array] = {}
+        self._all_fleets = np.zeros(0, dtype=np.int64)
 
     # --- the kinetic part, given by subclasses -------------------------------------------
 
-    @abc.abstractmethod
-    def _kinetic_states(self) -> dict[str, tuple[int, ...]]:
-        """Internal states of the kinetic part: name -> shape per vessel (all start at 0)."""
+    def _kinetic_constants(self) -> dict[str, Any]:
+        """Coefficients of a compiled kinetic part: fields of ``PolicyConstants``."""
+        return {}
 
-    @abc.abstractmethod
+    def _hidden_units(self) -> int:
+        """Number l of NN hidden units whose weights the states hold (0: no NN)."""
+        return 0
+
+    def _kinetic_states(self) -> dict[str, tuple[int, ...]]:
+        """Python kinetic part: internal states, name -> shape per vessel (all start at 0)."""
+        return {}
+
     def _kinetics(
         self,
         obs: LocalObservation,
@@ -149,7 +179,7 @@ class Policy(PolicyInterface, abc.ABC):
         states: dict[str, Array],
         started: NDArray[np.bool_],
     ) -> tuple[Array, dict[str, Array]]:
-        """Force command of step k; advances the kinetic states in ``states`` to step k + 1.
+        """Python kinetic part: the force command of step k; advances ``states`` to k + 1.
 
         Args:
             obs: Local observations at step k.
@@ -161,6 +191,10 @@ class Policy(PolicyInterface, abc.ABC):
             tau0 (B, n, 3) in N, N, N m, and the diagnostics "nn_output", "nubar_dot",
             "alpha", "aux_state".
         """
+        raise NotImplementedError(
+            f"policy {type(self).__name__} names no compiled kinetic part (kinetics) and "
+            "implements no _kinetics: give one of the two."
+        )
 
     # --- interface ------------------------------------------------------------------------
 
@@ -173,8 +207,7 @@ class Policy(PolicyInterface, abc.ABC):
         """
         del seed
         self._states = None
-        self._started = np.zeros(0, dtype=bool)
-        self._steps = np.zeros(0, dtype=np.int64)
+        self._python_states = {}
         self.diagnostics = {}
 
     def act_batch(self, obs: ArrayLike, fleets: ArrayLike | None = None) -> Array:
@@ -198,16 +231,32 @@ class Policy(PolicyInterface, abc.ABC):
         """
         batch = self._validate(obs)
         if fleets is None:
-            return self._act(batch, self._states_for(batch.shape[0]), self._started, self._steps)
-        index = self._fleet_index(fleets, batch.shape[0])
-        full = self._states_for(self._started.shape[0])
-        states = {key: value[index] for key, value in full.items()}
-        started, steps = self._started[index], self._steps[index]
-        actions = self._act(batch, states, started, steps)
-        for key, value in states.items():
-            full[key][index] = value
-        self._started[index], self._steps[index] = started, steps
-        return actions
+            states = self._states_for(batch.shape[0])
+            index = self._all_fleets
+        else:
+            index = self._fleet_index(fleets, batch.shape[0])
+            states = self._states_for(self._all_fleets.shape[0])
+        rows = batch.shape[0]
+        vectors = np.empty((5, rows, self.n, 3))  # one allocation per shape, C-contiguous slices
+        scalars = np.empty((3, rows, self.n))
+        out = PolicyOutputs(
+            actions=np.empty((rows, self.n, self.act_dim)),
+            nn_output=vectors[0],
+            nubar_dot=vectors[1],
+            alpha=vectors[2],
+            speed_estimate=scalars[0],
+            aux_state=vectors[3],
+            tau_command=vectors[4],
+            omega_s=scalars[1],
+            gamma=scalars[2],
+        )
+        if self.kinetics == KINETICS_PYTHON:
+            self._act_in_python(batch, index, states, out)
+        else:
+            kernel = act_rows_parallel if rows >= PARALLEL_MIN_FLEETS else act_rows_serial
+            kernel(self._constants, states, batch, index, out)
+        self.diagnostics = {name: getattr(out, name) for name in DIAGNOSTICS}
+        return out.actions
 
     def reset_fleets(self, fleets: ArrayLike) -> None:
         """Restart the internal states of some fleets; the others are untouched.
@@ -218,7 +267,7 @@ class Policy(PolicyInterface, abc.ABC):
         """
         if self._states is None:
             return
-        num_fleets = self._started.shape[0]
+        num_fleets = self._all_fleets.shape[0]
         mask = np.asarray(fleets)
         if mask.dtype != bool:
             index = self._fleet_index(mask, mask.shape[0] if mask.ndim == 1 else -1)
@@ -228,48 +277,83 @@ class Policy(PolicyInterface, abc.ABC):
             raise ValueError(
                 f"fleets must be a mask of shape ({num_fleets},) or indices, got {mask.shape}."
             )
-        for key, array in self._states.items():  # new arrays: past diagnostics stay intact
-            self._states[key] = np.where(mask.reshape(-1, *[1] * (array.ndim - 1)), 0.0, array)
-        self._started[mask] = False
-        self._steps[mask] = 0
-
-    def _act(
-        self,
-        batch: Array,
-        states: dict[str, Array],
-        started: NDArray[np.bool_],
-        steps: NDArray[np.int64],
-    ) -> Array:
-        """One step for the fleets whose states are given; updates them in place."""
-        local = self._local(batch)
-        cooperation = self.cooperation.step(local, states["vhat"], states["gamma"], steps)
-        tau0, kinetic = self._kinetics(local, cooperation, states, started.copy())
-        states["vhat"], states["gamma"] = cooperation.vhat_next, cooperation.gamma_next
-        started[:] = True
-        steps += 1
-        actions = np.zeros((*batch.shape[:2], self.act_dim))
-        actions[..., :3] = tau0
-        actions[..., 3] = cooperation.theta_dot
-        if self.act_dim > 4:
-            actions[..., 4] = cooperation.vhat_next
-        self.diagnostics = {
-            **kinetic,
-            "speed_estimate": cooperation.vhat,
-            "tau_command": tau0,
-            "omega_s": cooperation.omega_s,
-            "gamma": cooperation.gamma,
-        }
-        return actions
+        for array in (*self._states, *self._python_states.values()):
+            array[mask] = 0  # started -> False, steps -> 0, every state -> 0
 
     # --- helpers --------------------------------------------------------------------------
 
-    def _local(self, batch: Array) -> LocalObservation:
-        """The local observations (B, n, obs_dim) parsed into named arrays."""
-        return LocalObservation.parse(self.layout, batch)
+    def _build_constants(self) -> PolicyConstants:
+        """The gains and fixed coefficients in kernel form (cooperative part + kinetic part)."""
+        g = self.gains
+        gamma_decay, gamma_gain = exponential_euler(g.k4, self.dt)
+        schedule = self.scenario.v0_schedule
+        fields: dict[str, Any] = {
+            "kinetics": self.kinetics,
+            "use_nn": False,
+            "use_aux": False,
+            "global_speed": self.global_speed,
+            "delay_compensation": self.delay_compensation,
+            "n_slots": self.layout.n_slots,
+            "slot_size": self.layout.slot_size,
+            "msg_size": self.layout.msg_size,
+            "dt": self.dt,
+            "k1": np.zeros(3),
+            "k2": np.zeros(3),
+            "k3": float(g.k3),
+            "k5": float(g.k5),
+            "k6": float(g.k6),
+            "gamma_decay": float(gamma_decay),
+            "gamma_gain": float(gamma_gain),
+            "rho": 1.0,
+            "filter_decay": 0.0,
+            "aux_decay": np.zeros(3),
+            "aux_gain": np.zeros(3),
+            "leak_decay": 0.0,
+            "adapt_gain": 0.0,
+            "input_weights": np.zeros((0, 7)),
+            "mass": np.zeros((self.n, 3, 3)),
+            "hydro_params": np.zeros((self.n, PARAM_SIZE)),
+            "v0_times": np.array(schedule.times, dtype=np.float64),
+            "v0_values": np.array(schedule.values, dtype=np.float64),
+        }
+        fields.update(self._kinetic_constants())
+        return PolicyConstants(**fields)
+
+    def _act_in_python(
+        self, batch: Array, index: NDArray[np.int64], states: PolicyStates, out: PolicyOutputs
+    ) -> None:
+        """The compiled cooperative layer, then the subclass's ``_kinetics`` in numpy."""
+        rows = batch.shape[0]
+        cooperation = CooperativeOutputs(*(np.empty((rows, self.n)) for _ in range(9)))
+        cooperative_rows(self._constants, states, batch, index, cooperation)
+        kinetic_states = {key: value[index] for key, value in self._python_states.items()}
+        local = LocalObservation.parse(self.layout, batch)
+        tau0, kinetic = self._kinetics(
+            local,
+            CooperativeStep(**cooperation._asdict()),
+            kinetic_states,
+            states.started[index].copy(),
+        )
+        for key, value in kinetic_states.items():
+            self._python_states[key][index] = value
+        states.vhat[index], states.gamma[index] = cooperation.vhat_next, cooperation.gamma_next
+        states.started[index] = True
+        states.steps[index] += 1
+        out.actions[...] = 0.0
+        out.actions[..., :3] = tau0
+        out.actions[..., 3] = cooperation.theta_dot
+        if self.act_dim > 4:
+            out.actions[..., 4] = cooperation.vhat_next
+        for name in ("nn_output", "nubar_dot", "alpha", "aux_state"):
+            getattr(out, name)[...] = kinetic[name]
+        out.speed_estimate[...] = cooperation.vhat
+        out.tau_command[...] = tau0
+        out.omega_s[...] = cooperation.omega_s
+        out.gamma[...] = cooperation.gamma
 
     def _validate(self, obs: ArrayLike) -> Array:
-        """Check (B, n, obs_dim) and finiteness; return a float64 array."""
-        batch = np.asarray(obs, dtype=np.float64)
+        """Check (B, n, obs_dim) and finiteness; return a C-contiguous float64 array."""
+        batch = np.ascontiguousarray(obs, dtype=np.float64)
         if batch.ndim != 3 or batch.shape[1:] != (self.n, self.obs_dim) or batch.shape[0] < 1:
             raise ValueError(
                 f"observations must have shape (B, n, obs_dim) = (B, {self.n}, {self.obs_dim}) "
@@ -286,7 +370,7 @@ class Policy(PolicyInterface, abc.ABC):
     def _fleet_index(self, fleets: ArrayLike, rows: int) -> NDArray[np.int64]:
         """Validate fleet indices against the allocated batch and the number of rows."""
         index = np.asarray(fleets)
-        num_fleets = self._started.shape[0] if self._states is not None else 0
+        num_fleets = self._all_fleets.shape[0] if self._states is not None else 0
         if (
             index.ndim != 1
             or index.shape[0] != rows
@@ -301,16 +385,27 @@ class Policy(PolicyInterface, abc.ABC):
             )
         return index.astype(np.int64)
 
-    def _states_for(self, num_fleets: int) -> dict[str, Array]:
+    def _states_for(self, num_fleets: int) -> PolicyStates:
         """The internal states, allocated (zeros) on first use; a new B needs a reset."""
         if self._states is None:
-            shapes = {"vhat": (), "gamma": (), **self._kinetic_states()}
-            self._states = {k: np.zeros((num_fleets, self.n, *s)) for k, s in shapes.items()}
-            self._started = np.zeros(num_fleets, dtype=bool)
-            self._steps = np.zeros(num_fleets, dtype=np.int64)
-        elif self._started.shape[0] != num_fleets:
+            shape = (num_fleets, self.n)
+            self._states = PolicyStates(
+                vhat=np.zeros(shape),
+                gamma=np.zeros(shape),
+                nubar=np.zeros((*shape, 3)),
+                pi=np.zeros((*shape, 3)),
+                weights=np.zeros((*shape, self._hidden_units(), 3)),
+                tau0=np.zeros((*shape, 3)),
+                started=np.zeros(num_fleets, dtype=bool),
+                steps=np.zeros(num_fleets, dtype=np.int64),
+            )
+            self._python_states = {
+                key: np.zeros((*shape, *s)) for key, s in self._kinetic_states().items()
+            }
+            self._all_fleets = np.arange(num_fleets, dtype=np.int64)
+        elif self._all_fleets.shape[0] != num_fleets:
             raise ValueError(
-                f"this policy holds internal states for B = {self._started.shape[0]} fleets but "
-                f"got B = {num_fleets}; call reset() before changing the number of fleets."
+                f"this policy holds internal states for B = {self._all_fleets.shape[0]} fleets "
+                f"but got B = {num_fleets}; call reset() before changing the number of fleets."
             )
         return self._states

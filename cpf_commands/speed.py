@@ -10,7 +10,11 @@ Measures, after a warm-up that triggers numba compilation:
 * the training path: ``agents.FleetVecEnv.step`` with a zero residual on the
   policy, for the same batch sizes (needs the ``rl`` extra; skipped without it);
 * one whole episode of the scenario with the policy (B = 1), in seconds: for
-  ``wang2014``, the paper's 150 s simulation.
+  ``wang2014``, the paper's 150 s simulation;
+* with ``--contention B``: ``FleetSim.step`` and ``FleetVecEnv.step`` at batch B
+  alone and then next to one busy competitor process (a Python loop spinning on
+  one core, as a neighbour on a shared machine would), in the same run, so
+  that their ratio shows how the kernels' threads share a busy machine.
 
 Prints a table (or JSON with ``--json``: one record per line of the table,
 with ``seconds`` added on the episode's). Numbers depend on the machine and
@@ -20,9 +24,12 @@ on ``NUMBA_NUM_THREADS``; report them with the command that produced them.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
+import subprocess
+import sys
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -66,6 +73,40 @@ def _episode_seconds(scenario: str, policy: str, steps: int | None) -> tuple[flo
     return time.perf_counter() - start, int(sim.arrays.step[0]), sim.n
 
 
+@contextlib.contextmanager
+def busy_competitor() -> Iterator[subprocess.Popen[bytes]]:
+    """One other process spinning on a core while the block runs (a busy neighbour)."""
+    process = subprocess.Popen([sys.executable, "-c", "while True: pass"])
+    try:
+        time.sleep(0.5)  # let it start spinning
+        yield process
+    finally:
+        process.kill()
+        process.wait()
+
+
+def _contended_steps(
+    scenario: str, policy: str, batch: int
+) -> list[tuple[str, Callable[[], object], int]]:
+    """(label, one step, n) of ``FleetSim.step`` and ``FleetVecEnv.step`` at batch B."""
+    task = cpf_env.scenarios.get(scenario)
+    sim = FleetSim(task, num_fleets=batch)
+    sim.reset(seeds=list(range(batch)))
+    held = np.zeros((batch, task.n, sim.act_dim))
+
+    def sim_step() -> None:
+        sim.step(held)
+        if sim.truncated.any() or sim.arrays.terminated.any():
+            sim.reset()
+
+    steps: list[tuple[str, Callable[[], object], int]] = [("FleetSim.step", sim_step, task.n)]
+    vec = _training_env(scenario, policy, batch)
+    if vec is not None:
+        zero = np.zeros((vec.num_envs, vec.controller.action_size), dtype=np.float32)
+        steps.append((f"FleetVecEnv.step (residual on {policy})", lambda: vec.step(zero), vec.n))
+    return steps
+
+
 def _training_env(scenario: str, policy: str, batch: int) -> FleetVecEnv | None:
     """A reset ``FleetVecEnv`` (residual on ``policy``), or None without the ``rl`` extra."""
     try:
@@ -85,6 +126,7 @@ def measure(
     min_seconds: float = 2.0,
     episode_steps: int | None = None,
     progress: bool = False,
+    contention: Sequence[int] = (),
 ) -> list[dict[str, object]]:
     """Measure throughputs; returns one row per (component, B).
 
@@ -96,11 +138,15 @@ def measure(
         episode_steps: Length of the timed whole episode (default: the scenario's
             ``max_steps``).
         progress: Show a progress bar (stderr), one tick per measurement.
+        contention: Batch sizes at which ``FleetSim.step`` and ``FleetVecEnv.step``
+            are timed alone and next to ``busy_competitor()``.
     """
     from baselines import make_policy
 
     rows: list[dict[str, object]] = []
-    bar = tqdm(total=4 * len(fleets) + 2, disable=not progress, desc="cpf-speed")
+    bar = tqdm(
+        total=4 * len(fleets) + 2 + 4 * len(contention), disable=not progress, desc="cpf-speed"
+    )
 
     def add(component: str, batch: int, n: int, per_second: float) -> None:
         rows.append(
@@ -164,6 +210,13 @@ def measure(
         bar.set_postfix_str(f"FleetVecEnv.step, B = {batch}")
         add(f"FleetVecEnv.step (residual on {policy})", batch, vec.n, _rate(vec_step, min_seconds))
         bar.update()
+    for batch in contention:
+        for component, contended, n in _contended_steps(scenario, policy, batch):
+            for label in ("alone", "1 busy competitor"):
+                with contextlib.nullcontext() if label == "alone" else busy_competitor():
+                    bar.set_postfix_str(f"{component}, B = {batch}, {label}")
+                    add(f"{component}, {label}", batch, n, _rate(contended, min_seconds))
+                    bar.update()
     bar.set_postfix_str("whole episode")
     seconds, steps, n = _episode_seconds(scenario, policy, episode_steps)
     add(f"{scenario} episode ({steps} steps), {policy}", 1, n, steps / seconds)
@@ -215,6 +268,15 @@ def speed_main(argv: Sequence[str] | None = None) -> int:
         metavar="N",
         help="length of the timed episode (default: the scenario's max_steps)",
     )
+    parser.add_argument(
+        "--contention",
+        type=int,
+        nargs="*",
+        default=[],
+        metavar="B",
+        help="also time FleetSim.step and FleetVecEnv.step at these batch sizes alone and next "
+        "to one busy competitor process (e.g. --contention 256)",
+    )
     parser.add_argument("--json", action="store_true", help="print JSON instead of a table")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     args = parser.parse_args(argv)
@@ -225,6 +287,7 @@ def speed_main(argv: Sequence[str] | None = None) -> int:
         args.seconds,
         episode_steps=args.episode_steps,
         progress=not args.quiet,
+        contention=args.contention,
     )
     if args.json:
         print(json.dumps(rows, indent=2))

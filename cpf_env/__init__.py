@@ -14,7 +14,16 @@ Scenarios: ``cpf_env.scenarios.list_scenarios()``; the benchmark suite:
 
 from __future__ import annotations
 
+import os
 from typing import Any
+
+# numba's OpenMP threads (GNU libgomp) wait for work by spinning: next to another busy process
+# on the same cores they steal its time and each other's. Passive waiting degrades gracefully
+# (measured on 2 cores with one busy competitor, B = 256: FleetSim.step kept 34 % of its quiet
+# rate spinning, 48 % waiting passively; FleetVecEnv.step 35 % and 76 %). It is set before the
+# first parallel kernel starts the threads, unless the user chose: OMP_WAIT_POLICY=ACTIVE on a
+# dedicated machine (docs/scaling.md, "Threads").
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 # First: numba picks a kernel's cache key when it compiles the decorator (kernel_cache).
 from cpf_env.model import kernel_cache  # noqa: F401  # isort: skip

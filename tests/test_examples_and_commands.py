@@ -8,7 +8,7 @@ import pytest
 
 from baselines import POLICIES
 from cpf_commands.run.experiment import run_episode
-from cpf_commands.speed import measure, speed_main
+from cpf_commands.speed import busy_competitor, measure, speed_main
 from cpf_env import scenarios
 from cpf_env.sim.metrics import episode_metrics
 
@@ -49,6 +49,20 @@ def test_speed_measure_reports_every_component():
             row["steps_per_s"] * row["B"] * 5, abs=0.05 * row["B"] * 5 + 0.05
         )
         assert row["steps_per_s"] > 0
+
+
+def test_speed_contention_rows_and_the_competitor_is_gone():
+    with busy_competitor() as competitor:
+        assert competitor.poll() is None  # spinning
+    assert competitor.poll() is not None  # ended with the block
+    rows = measure("wang2014", fleets=(), min_seconds=0.01, episode_steps=5, contention=(2,))
+    labels = [row["component"] for row in rows if row["B"] == 2]
+    assert labels == [
+        "FleetSim.step, alone",
+        "FleetSim.step, 1 busy competitor",
+        "FleetVecEnv.step (residual on nn_dsc), alone",
+        "FleetVecEnv.step (residual on nn_dsc), 1 busy competitor",
+    ]
 
 
 def test_speed_command_prints_json(capsys):

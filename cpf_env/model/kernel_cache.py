@@ -21,8 +21,12 @@ function's cache locator when it decorates it), so ``cpf_env/__init__.py``
 imports it first; importing any kernel module imports ``cpf_env`` first, so
 the key is always in place. It lives in ``cpf_env.model``, the lowest layer,
 so that every layer with kernels may import it. Functions of other packages
-keep numba's own stamp. A locator list forced through numba's
-``NUMBA_CACHE_LOCATOR_CLASSES`` setting bypasses this key.
+keep numba's own stamp, unless their package asks for this key with
+``stamp_package`` (the compiled analytic policies of ``baselines`` inline
+``cpf_env.model.vessel`` and read ``cpf_env.sim.observation``'s layout): then
+their stamp is the digest of ``KERNEL_SOURCES`` and of the sources they name.
+A locator list forced through numba's ``NUMBA_CACHE_LOCATOR_CLASSES`` setting
+bypasses this key.
 """
 
 from __future__ import annotations
@@ -35,7 +39,13 @@ from typing import Any
 from numba.core import caching
 from numba.core.caching import _CacheLocator
 
-__all__ = ["KERNEL_MODULES", "KERNEL_SOURCES", "install", "kernel_sources_digest"]
+__all__ = [
+    "KERNEL_MODULES",
+    "KERNEL_SOURCES",
+    "install",
+    "kernel_sources_digest",
+    "stamp_package",
+]
 
 #: The modules of ``cpf_env`` that define numba kernels (a test keeps this list complete).
 KERNEL_MODULES = (
@@ -73,6 +83,40 @@ def kernel_sources_digest(package_directory: Path = _PACKAGE_DIRECTORY) -> str:
     return digest.hexdigest()
 
 
+#: Package folders whose cached kernels carry the digest: folder -> its own extra sources.
+_STAMPED: dict[Path, tuple[Path, ...]] = {_PACKAGE_DIRECTORY: ()}
+
+
+def stamp_package(directory: Path, sources: tuple[Path, ...]) -> None:
+    """Key the cached kernels defined under ``directory`` on ``KERNEL_SOURCES`` and ``sources``.
+
+    Call it before the package's kernels are decorated (at the top of the
+    module that defines them).
+
+    Args:
+        directory: The package folder whose kernels get the key.
+        sources: Its own files the kernels compile from.
+    """
+    _STAMPED[directory.resolve()] = tuple(path.resolve() for path in sources)
+
+
+def _stamp_of(py_file: str) -> str | None:
+    """The stamp of a function defined in ``py_file``; None outside every stamped package."""
+    try:
+        path = Path(py_file).resolve()
+    except OSError:
+        return None
+    for directory, sources in _STAMPED.items():
+        if path.is_relative_to(directory):
+            if not sources:
+                return _digest()
+            digest = hashlib.sha256(_digest().encode())
+            for source in sources:
+                digest.update(source.read_bytes())
+            return digest.hexdigest()
+    return None
+
+
 class _KernelSourcesLocator(_CacheLocator):
     """numba's own locator of a ``cpf_env`` function, stamped with the kernel sources' digest."""
 
@@ -94,19 +138,16 @@ class _KernelSourcesLocator(_CacheLocator):
 
     @classmethod
     def from_function(cls, py_func: Any, py_file: str) -> _KernelSourcesLocator | None:
-        """Wrap the locator numba would pick, for functions defined in this package only."""
-        try:
-            inside = Path(py_file).resolve().is_relative_to(_PACKAGE_DIRECTORY)
-        except OSError:
-            return None
-        if not inside:
+        """Wrap the locator numba would pick, for functions of the stamped packages only."""
+        stamp = _stamp_of(py_file)
+        if stamp is None:
             return None
         for locator_class in _CACHE_IMPL._locator_classes:
             if locator_class is cls:
                 continue
             inner = locator_class.from_function(py_func, py_file)
             if inner is not None:
-                return cls(inner, _digest())
+                return cls(inner, stamp)
         return None
 
 

@@ -95,9 +95,9 @@ def test_a_fleet_reset_leaves_the_other_fleets_base_states_alone() -> None:
     base = env.controller.base
     for _ in range(5):
         env.step(np.zeros((env.num_envs, 3), np.float32))
-    before = {key: value.copy() for key, value in base._states.items()}  # type: ignore[attr-defined]
+    before = {key: value.copy() for key, value in base._states._asdict().items()}  # type: ignore[attr-defined]
     env.controller.reset_fleets(np.array([False, True, False]))
-    for key, value in base._states.items():  # type: ignore[attr-defined]
+    for key, value in base._states._asdict().items():  # type: ignore[attr-defined]
         assert np.array_equal(value[[0, 2]], before[key][[0, 2]]), key
         assert not np.any(value[1]), key
 

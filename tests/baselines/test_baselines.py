@@ -8,7 +8,6 @@ import pytest
 
 import baselines
 import cpf_env
-from baselines.backstepping import alpha_derivative
 from baselines.cooperative import LocalObservation
 from baselines.policy import virtual_control
 from cpf_env import scenarios
@@ -196,6 +195,19 @@ def test_evaluate_policy_on_the_centralized_gym_env():
     np.testing.assert_allclose(rewards[0], total, rtol=1e-5)
 
 
+def _apply_s(x: np.ndarray) -> np.ndarray:
+    """S x for S = [[0, -1, 0], [1, 0, 0], [0, 0, 0]], x of shape (..., 3)."""
+    return np.stack([-x[..., 1], x[..., 0], np.zeros_like(x[..., 0])], axis=-1)
+
+
+def _alpha_derivative(k1, obs: LocalObservation, theta_dot, vhat, vhat_dot) -> np.ndarray:
+    """Independent transcription of backstepping's analytic alpha' ([13]-[15], Remark 1)."""
+    r = obs.nu[..., 2:3]
+    z1_dot = -r * _apply_s(obs.z1) + obs.nu - obs.t1 * theta_dot[..., None]
+    t1_dot = -r * _apply_s(obs.t1) + obs.t2 * theta_dot[..., None]
+    return -k1 * z1_dot + t1_dot * vhat[..., None] + obs.t1 * vhat_dot[..., None]
+
+
 def _synthetic_observation(t: float, path) -> tuple[LocalObservation, float, float]:
     """Local observation along a smooth made-up trajectory; returns (obs, theta', vhat)."""
     eta = np.array([0.8 * t - 0.5, 2.0 + 0.3 * np.sin(t), 0.2 + 0.4 * np.cos(0.7 * t)])
@@ -228,7 +240,7 @@ def test_backstepping_alpha_dot_matches_finite_differences_of_alpha():
     for t in np.linspace(0.0, 6.0, 13):
         obs, theta_dot, vhat = _synthetic_observation(t, path)
         vhat_dot = 0.2 * np.cos(2.0 * t)
-        analytic = alpha_derivative(
+        analytic = _alpha_derivative(
             k1, obs, np.full((1, 1), theta_dot), np.full((1, 1), vhat), np.full((1, 1), vhat_dot)
         )
         alpha = []
@@ -252,6 +264,25 @@ def test_backstepping_alpha_dot_along_the_closed_loop():
     difference = (alpha[1:] - alpha[:-1]) / s.dt
     scale = np.abs(alpha_dot).max(axis=(0, 1))
     assert np.all(np.abs(difference - alpha_dot[:-1]).max(axis=(0, 1)) < 0.02 * scale)
+
+
+def test_backstepping_kernel_alpha_dot_equals_the_transcription():
+    """The compiled alpha' is the formula checked above, on the inputs the policy used."""
+    s = scenarios.get("lossy_links")
+    sim = FleetSim(s, num_fleets=2)
+    policy = baselines.make_policy("backstepping", sim)
+    g = policy.gains
+    obs = sim.reset(seeds=[1, 2])
+    for _ in range(200):
+        local = LocalObservation.parse(policy.layout, obs.astype(np.float64))
+        actions = policy.act_batch(obs)
+        vhat = policy.diagnostics["speed_estimate"]
+        degree = local.weight.sum(axis=-1)
+        neighbours = (local.weight * local.message).sum(axis=-1)
+        vhat_dot = -g.k5 * (degree * vhat - neighbours) - g.k6 * local.leader * (vhat - local.v0)
+        expected = _alpha_derivative(np.array(g.K1), local, actions[..., 3], vhat, vhat_dot)
+        np.testing.assert_allclose(policy.diagnostics["nubar_dot"], expected, rtol=1e-9, atol=1e-12)
+        obs = sim.step(actions)
 
 
 @pytest.mark.parametrize("name", NAMES)

@@ -209,19 +209,38 @@ def test_weight_law_rates(leakage, rate, static):
 
 
 def test_weight_update_is_the_exact_step_of_either_law():
-    """One step of [30], sigma e2^T held: e^{-a dt} What - Gamma_W (1 - e^{-a dt})/a sigma e2^T."""
+    """One step of [30], sigma e2^T held: e^{-a dt} What - Gamma_W (1 - e^{-a dt})/a sigma e2^T.
+
+    Set What at step k, act once, and rebuild sigma and e2 from the observation and
+    the diagnostics (e2 = nu - nubar - pi, nubar = alpha - rho nubar_dot).
+    """
     s = scenarios.get("wang2014")
     rng = np.random.default_rng(0)
-    weights = rng.normal(size=(1, s.n, 20, 3))
-    nu, nubar_dot, e2 = (rng.normal(size=(1, s.n, 3)) for _ in range(3))
+    sim = FleetSim(s)
+    obs = sim.reset(seeds=[0])
     for leakage, a in (("gamma_scaled", 100.0), ("plain", 1.0)):
         policy = baselines.make_policy("nn_dsc", s, leakage=leakage)
-        _output, following = policy._network(nu, nubar_dot, e2, weights)
-        xi = np.concatenate([np.ones((1, s.n, 1)), nu, nubar_dot], axis=-1)
+        following = sim.step(policy.act_batch(obs))  # allocates the states, step 0
+        weights = rng.normal(size=(1, s.n, 20, 3))
+        policy._states.weights[...] = weights  # type: ignore[union-attr]
+        policy.act_batch(following)
+        d = policy.diagnostics
+        nu = following[..., 0:3].astype(np.float64)
+        xi = np.concatenate([np.ones((1, s.n, 1)), nu, d["nubar_dot"]], axis=-1)
         sigma = np.tanh(xi @ policy.gains.input_weights().T)
+        nubar = d["alpha"] - policy.gains.rho * d["nubar_dot"]
+        e2 = nu - nubar - d["aux_state"]
+        np.testing.assert_allclose(
+            d["nn_output"], np.einsum("bnlq,bnl->bnq", weights, sigma), rtol=1e-12
+        )
         decay = np.exp(-a * s.dt)
         expected = decay * weights - 100.0 * (1 - decay) / a * sigma[..., None] * e2[..., None, :]
-        np.testing.assert_allclose(following, expected, rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(
+            policy._states.weights,
+            expected,
+            rtol=1e-9,
+            atol=1e-12,  # type: ignore[union-attr]
+        )
 
 
 def test_unknown_weight_law_is_rejected():
