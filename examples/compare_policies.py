@@ -21,8 +21,8 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from baselines import NNDSCGains, make_policy
-from cpf_commands.bench.cli import run_bench
 from cpf_commands.bench.report import CellResult
+from cpf_commands.bench.run import run_bench
 from cpf_commands.common.policies import BenchPolicy
 from cpf_env import scenarios
 from cpf_env.scenarios import Scenario

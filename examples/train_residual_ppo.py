@@ -87,7 +87,7 @@ def train_runs(
 
 def evaluate(runs: Path, results: Path, seeds: int, scenarios: Sequence[str]) -> None:
     """Bench the analytic policies and the trained runs on unseen seeds, two rewards."""
-    from cpf_commands.bench.cli import run_bench
+    from cpf_commands.bench.run import run_bench
     from cpf_env import scenarios as registry
     from cpf_env.scenarios.reward_weights import RewardWeights
 

@@ -1,6 +1,6 @@
 """``cpf-bench``: policies x scenarios x paired seeds, batched, with statistics.
 
-``cli`` is the command and holds ``run_bench``, its Python entry point;
+``run`` holds ``run_bench``, the Python entry point, and ``cli`` the command around it;
 ``episodes`` runs every seed of one (policy, scenario) cell in one batched
 simulator and reduces each episode to its metrics; ``stats`` holds the
 interval estimators; ``report`` builds the summary rows and ``views`` the

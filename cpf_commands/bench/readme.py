@@ -24,8 +24,8 @@ from statistics import NormalDist
 import numpy as np
 
 from baselines import POLICIES
-from cpf_commands.bench.cli import run_bench
 from cpf_commands.bench.report import CellResult
+from cpf_commands.bench.run import run_bench
 from cpf_commands.bench.verdict import verdicts
 from cpf_commands.bench.views import markdown_table
 from cpf_env.scenarios.suite import list_suite

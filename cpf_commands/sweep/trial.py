@@ -22,8 +22,8 @@ import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback
 
 from agents.training import TrainConfig, train
-from cpf_commands.bench.cli import run_bench
 from cpf_commands.bench.report import summarize
+from cpf_commands.bench.run import run_bench
 from cpf_commands.sweep.report import trial_state, write_evaluation
 from cpf_commands.sweep.spec import SweepSpec, trial_name
 

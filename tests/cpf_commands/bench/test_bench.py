@@ -10,10 +10,11 @@ from conftest import ROOT
 
 import agents
 from baselines import POLICIES, make_policy
-from cpf_commands.bench import cli as bench
 from cpf_commands.bench import report as bench_report
-from cpf_commands.bench.cli import BASE_SEED, bench_main, run_bench
+from cpf_commands.bench import run as bench_run
+from cpf_commands.bench.cli import bench_main
 from cpf_commands.bench.episodes import METRICS, run_episodes
+from cpf_commands.bench.run import BASE_SEED, run_bench
 from cpf_commands.common.policies import policy_label, resolve_policy
 from cpf_commands.run.cli import run_main
 from cpf_commands.run.experiment import run_episode
@@ -375,7 +376,7 @@ def test_bench_ray_sends_each_cell_to_ray_with_agent_folders_made_absolute(
         started.append((address, cpus_per_task))
         return ray
 
-    monkeypatch.setattr(bench, "start_ray", start_ray)
+    monkeypatch.setattr(bench_run, "start_ray", start_ray)
     monkeypatch.chdir(folder.parent)  # the agent is given relative to here
     argv = ["--policies", "nn_dsc", folder.name, "--scenarios", "bench_mild", "bench_saturation"]
     argv += ["--seeds", "2", "--steps", "20", "--no-figures", "--quiet"]

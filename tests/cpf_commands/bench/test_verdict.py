@@ -6,8 +6,9 @@ import numpy as np
 import pytest
 
 from cpf_commands.bench import verdict as verdicts_module
-from cpf_commands.bench.cli import bench_main, run_bench
+from cpf_commands.bench.cli import bench_main
 from cpf_commands.bench.report import CellResult
+from cpf_commands.bench.run import run_bench
 from cpf_commands.bench.verdict import GUARDED, verdict
 from cpf_env.sim.fleet_metrics import METRICS
 

@@ -21,7 +21,7 @@ pytest.importorskip("ray.tune")
 from conftest import ROOT
 
 from agents import load_policy
-from cpf_commands.bench.cli import run_bench
+from cpf_commands.bench.run import run_bench
 from cpf_commands.sweep.cli import run_sweep, sweep_main
 from cpf_commands.sweep.report import EVALUATION_FILE
 from cpf_commands.sweep.spec import SweepSpec, trial_name

@@ -1,0 +1,328 @@
+"""Running the benchmark: policies x scenarios x paired seeds, and writing its outputs.
+
+Every policy (a baseline name, a ``cpf-train --out`` folder, an ``.onnx`` file
+or a policy object, all through ``cpf_commands.common.policies.resolve_policy``)
+runs every scenario on the same evaluation seeds ``base_seed + k`` (paired
+episodes), all seeds of a (policy, scenario) in one batched simulator
+(``cpf_commands.bench.episodes``). A scenario in which nothing is random
+(``cpf_env.scenarios.suite.is_deterministic``) runs one episode: its seeds would all
+give the same one. ``write_outputs`` fills the output folder with
+``episodes.csv``, ``summary.csv``, ``summary.md`` and one figure per headline
+metric; ``cpf_commands.bench.cli`` is the command around it.
+
+Example:
+    >>> from cpf_commands.bench.run import run_bench
+    >>> cells = run_bench(["nn_dsc"], ["bench_mild"], seeds=2, steps=20, out=None)
+    >>> cells[0].seeds, cells[0].metrics["cost"].shape
+    ((10000, 10001), (2,))
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+
+from tqdm.auto import tqdm
+
+from cpf_commands.bench import views
+from cpf_commands.bench.episodes import run_episodes
+from cpf_commands.bench.report import HEADLINE, CellResult, episodes_csv, summarize, summary_csv
+from cpf_commands.common.outputs import foreign_files
+from cpf_commands.common.policies import (
+    BenchPolicy,
+    PolicySpec,
+    TrustedAgentFolder,
+    policy_label,
+    resolve_policy,
+)
+from cpf_commands.common.ray_runtime import start_ray
+from cpf_env import atomic
+from cpf_env.envs.parallel import make_scenario
+from cpf_env.scenarios import Scenario
+from cpf_env.scenarios.splits import EVALUATION_SEED, SPLITS, split_scenario
+from cpf_env.scenarios.suite import is_deterministic
+
+__all__ = [
+    "BASE_SEED",
+    "DEFAULT_REFERENCE",
+    "OUTPUT_FILES",
+    "labelled_policies",
+    "reference_label",
+    "run_bench",
+    "run_cell",
+    "write_outputs",
+]
+
+#: The files cpf-bench writes to --out (nothing else may be there: it is replaced whole).
+OUTPUT_FILES = frozenset(
+    ("episodes.csv", "summary.csv", "summary.md", *(f"{metric}.png" for metric, _ in HEADLINE))
+)
+#: First evaluation seed (training refuses seeds from here on: ``cpf_env.scenarios.splits``).
+BASE_SEED = EVALUATION_SEED
+#: The reference policy when none is given and it runs.
+DEFAULT_REFERENCE = "nn_dsc"
+
+
+def labelled_policies(
+    policies: Sequence[PolicySpec] | Mapping[str, PolicySpec],
+) -> dict[str, PolicySpec]:
+    """Label -> specification, refusing two policies with the same label."""
+    if isinstance(policies, Mapping):
+        return dict(policies)
+    labelled: dict[str, PolicySpec] = {}
+    for spec in policies:
+        label = policy_label(spec)
+        if label in labelled:
+            raise ValueError(
+                f"two policies are labelled {label!r}; pass a mapping label -> policy to "
+                "tell them apart."
+            )
+        labelled[label] = spec
+    return labelled
+
+
+def write_outputs(
+    cells: Sequence[CellResult],
+    out: str | Path,
+    command: str,
+    reference: str = "nn_dsc",
+    skipped: Mapping[tuple[str, str], str] | None = None,
+    figures: bool = True,
+) -> list[dict[str, object]]:
+    """Write episodes.csv, summary.csv, summary.md and one PNG per headline metric to ``out``.
+
+    The folder is built beside ``out`` and replaces it whole (``cpf_env.atomic``):
+    a run killed while writing leaves the previous results.
+
+    Args:
+        cells: The results.
+        out: Output folder (created or replaced; it must hold only cpf-bench outputs).
+        command: The command line recorded in summary.md.
+        reference: The policy scores are relative to.
+        skipped: (policy, scenario) -> why it was not run, listed in summary.md.
+        figures: Write the PNG figures.
+
+    Returns:
+        The summary rows.
+    """
+    directory = Path(out)
+    others = foreign_files(directory, OUTPUT_FILES)
+    if others:
+        raise ValueError(f"{directory} holds files cpf-bench did not write: {others[:5]}.")
+    rows = summarize(cells, reference)
+    with atomic.staged_folder(directory) as staging:  # all files or none, no stale figure
+        atomic.write_text(staging / "episodes.csv", episodes_csv(cells))
+        atomic.write_text(staging / "summary.csv", summary_csv(rows))
+        text = views.markdown(rows, cells, command, reference, skipped or {})
+        atomic.write_text(staging / "summary.md", text)
+        if figures:
+            for metric, title in HEADLINE:
+                drawing = views.figure(rows, cells, metric, title)
+                drawing.savefig(staging / f"{metric}.png", dpi=100, metadata={"Software": None})
+    return rows
+
+
+def _build(
+    labelled: dict[str, PolicySpec], tasks: Sequence[Scenario]
+) -> tuple[dict[tuple[str, str], BenchPolicy], dict[tuple[str, str], str]]:
+    """Each policy built for each scenario, and the (label, scenario) pairs that did not fit.
+
+    Raises:
+        ValueError: A policy that fits none of the scenarios (the first reason).
+    """
+    built: dict[tuple[str, str], BenchPolicy] = {}
+    skipped: dict[tuple[str, str], str] = {}
+    for label, spec in labelled.items():
+        reasons = []
+        for task in tasks:
+            try:
+                built[(label, task.name)] = resolve_policy(spec, task)
+            except ValueError as error:
+                skipped[(label, task.name)] = str(error)
+                reasons.append(str(error))
+        if len(reasons) == len(tasks):
+            raise ValueError(reasons[0])
+    return built, skipped
+
+
+def _episode_seeds(task: Scenario, seeds: int, base_seed: int) -> tuple[int, ...]:
+    """Evaluation seeds of a scenario: one episode if nothing in it is random."""
+    return tuple(base_seed + k for k in range(1 if is_deterministic(task) else seeds))
+
+
+#: One cell to run: policy label, its specification, the scenario, the seeds.
+_Job = tuple[str, PolicySpec, Scenario, tuple[int, ...]]
+
+
+def run_cell(
+    label: str, spec: PolicySpec, task: Scenario, seeds: tuple[int, ...], steps: int | None
+) -> CellResult:
+    """One (policy, scenario) cell: build the policy, run its episodes, measure them."""
+    return _measure(label, resolve_policy(spec, task), task, seeds, steps)
+
+
+def _measure(
+    label: str,
+    policy: BenchPolicy,
+    task: Scenario,
+    seeds: tuple[int, ...],
+    steps: int | None,
+    progress: tqdm | None = None,
+) -> CellResult:
+    """Run a built policy's episodes on ``task`` and measure them."""
+    metrics = run_episodes(policy, task, seeds, steps=steps, progress=progress)
+    return CellResult(label, task.name, seeds, is_deterministic(task), metrics)
+
+
+def _run_here(
+    jobs: Sequence[_Job],
+    built: dict[tuple[str, str], BenchPolicy],
+    steps: int | None,
+    progress: bool,
+) -> list[CellResult]:
+    """The cells one after the other in this process, with a progress bar over steps."""
+    total = sum(task.max_steps if steps is None else int(steps) for *_, task, _ in jobs)
+    cells = []
+    with tqdm(total=total, disable=not progress, unit="step", desc="cpf-bench") as bar:
+        for label, _, task, seeds in jobs:
+            bar.set_postfix_str(f"{label} on {task.name}")
+            cells.append(_measure(label, built[(label, task.name)], task, seeds, steps, bar))
+    return cells
+
+
+def _absolute(spec: PolicySpec) -> PolicySpec:
+    """An agent folder given by a relative path made absolute (Ray workers run elsewhere)."""
+    from baselines import POLICIES
+
+    if isinstance(spec, TrustedAgentFolder):
+        return spec  # already absolute; keeps the user's trust
+    if isinstance(spec, Path) or (isinstance(spec, str) and spec not in POLICIES):
+        return Path(spec).resolve()
+    return spec
+
+
+def _run_on_ray(
+    jobs: Sequence[_Job], steps: int | None, address: str | None, progress: bool
+) -> list[CellResult]:
+    """The cells as Ray tasks (one CPU each), on local Ray or the cluster at ``address``.
+
+    Each task builds its policy from the specification and runs the same
+    ``run_cell`` as a local run, so the results are identical. A trained
+    agent's folder is passed as an absolute path (relative to this process's
+    working directory) and must be readable at that path on every node.
+    """
+    ray = start_ray(address, cpus_per_task=1, quiet=not progress)
+    try:
+        remote = ray.remote(num_cpus=1)(run_cell)
+        futures = [
+            remote.remote(label, _absolute(spec), task, seeds, steps)
+            for label, spec, task, seeds in jobs
+        ]
+        pending = list(futures)
+        with tqdm(total=len(futures), disable=not progress, unit="cell", desc="cpf-bench") as bar:
+            while pending:
+                ready, pending = ray.wait(pending, num_returns=1)
+                bar.update(len(ready))
+        try:
+            return list(ray.get(futures))
+        except ray.exceptions.RayTaskError as error:  # a worker's own error, not Ray's wrapper
+            if isinstance(error.cause, ValueError | FileNotFoundError):
+                raise error.cause from None
+            raise
+    finally:
+        ray.shutdown()
+
+
+def run_bench(
+    policies: Sequence[PolicySpec] | Mapping[str, PolicySpec],
+    scenario_names: Sequence[str | Scenario],
+    seeds: int = 10,
+    base_seed: int = BASE_SEED,
+    steps: int | None = None,
+    out: str | Path | None = None,
+    command: str = "",
+    progress: bool = False,
+    figures: bool = True,
+    distribute: bool = False,
+    address: str | None = None,
+    reference: str | None = None,
+    split: str = "test",
+) -> list[CellResult]:
+    """Run every policy on every scenario for ``seeds`` paired seeds, and write the outputs.
+
+    Args:
+        policies: Policy specifications (see ``resolve_policy``), or a mapping
+            label -> specification.
+        scenario_names: Registered scenario names or ``Scenario`` objects.
+        seeds: Episodes per (policy, scenario) (one on a deterministic scenario).
+        base_seed: Episode k is reset with seed ``base_seed + k``.
+        steps: Horizon override (default: each scenario's ``max_steps``).
+        out: Output folder; None writes nothing.
+        command: The command line recorded in summary.md.
+        progress: Show a progress bar (stderr).
+        figures: Write the PNG figures.
+        distribute: Run the (policy, scenario) cells as Ray tasks (needs the
+            ``ray`` extra); the results are identical to a local run.
+        address: Ray address for ``distribute`` (None: a local Ray instance).
+        reference: Label of the policy every other is compared with (paired
+            differences, P(beats), verdicts), one of ``policies``; None: ``nn_dsc``
+            if it runs, else the first policy.
+        split: ``test`` (the scenarios as named, on the evaluation seeds) or
+            ``shift`` (each suite scenario's ``_shift`` variant, outside its
+            training ranges; ``cpf_env.scenarios.splits``).
+
+    Returns:
+        One ``CellResult`` per (policy, scenario), policies outermost. A policy
+        that cannot be built for a scenario (a trained agent whose observation
+        layout differs) skips it; summary.md lists what was skipped and why.
+
+    Raises:
+        ValueError: Unknown scenario or policy, a policy that fits none of the
+            scenarios, fewer than one seed, a bad horizon, or ``out`` is a file.
+    """
+    if int(seeds) < 1:
+        raise ValueError(f"seeds must be >= 1, got {seeds}.")
+    if steps is not None and int(steps) < 1:
+        raise ValueError(f"steps must be >= 1, got {steps}.")
+    if out is not None and Path(out).exists() and not Path(out).is_dir():
+        raise ValueError(f"--out {out} is a file; give a folder (it is created if needed).")
+    if split not in SPLITS:
+        raise ValueError(f"unknown split {split!r}; choose one of {list(SPLITS)}.")
+    if split == "shift":
+        scenario_names = [_shifted(name) for name in scenario_names]
+    tasks = [make_scenario(name) for name in scenario_names]
+    labelled = labelled_policies(policies)
+    reference = reference_label(reference, labelled)
+    if reference not in labelled:
+        raise ValueError(
+            f"--reference {reference} is not among the policies {sorted(labelled)}; add it to "
+            "--policies or choose one of them."
+        )
+    built, skipped = _build(labelled, tasks)
+    jobs = [
+        (label, labelled[label], task, _episode_seeds(task, seeds, base_seed))
+        for label in labelled
+        for task in tasks
+        if (label, task.name) in built
+    ]
+    if distribute:
+        cells = _run_on_ray(jobs, steps, address, progress)
+    else:
+        cells = _run_here(jobs, built, steps, progress)
+    if out is not None:
+        write_outputs(cells, out, command, reference=reference, skipped=skipped, figures=figures)
+    return cells
+
+
+def reference_label(reference: str | None, labelled: Mapping[str, PolicySpec]) -> str:
+    """The reference's label: as given, else nn_dsc if it runs, else the first policy."""
+    if reference is not None:
+        return policy_label(reference)
+    return DEFAULT_REFERENCE if DEFAULT_REFERENCE in labelled else next(iter(labelled))
+
+
+def _shifted(name: str | Scenario) -> Scenario:
+    """The shift split of a suite scenario given by name."""
+    if not isinstance(name, str):
+        raise ValueError("--split shift needs suite scenario names, not Scenario objects.")
+    return split_scenario(name, "shift")
