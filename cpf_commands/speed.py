@@ -11,6 +11,8 @@ Measures, after a warm-up that triggers numba compilation:
   policy, for the same batch sizes (needs the ``rl`` extra; skipped without it);
 * one whole episode of the scenario with the policy (B = 1), in seconds: for
   ``wang2014``, the paper's 150 s simulation;
+* with ``--bench-seeds N``: the wall time of ``cpf-bench``'s default evaluation
+  (every baseline on the benchmark suite, N paired seeds, no files written);
 * with ``--contention B``: ``FleetSim.step`` and ``FleetVecEnv.step`` at batch B
   alone and then next to one busy competitor process (a Python loop spinning on
   one core, as a neighbour on a shared machine would), in the same run, so
@@ -85,6 +87,17 @@ def busy_competitor() -> Iterator[subprocess.Popen[bytes]]:
         process.wait()
 
 
+def _bench_seconds(seeds: int) -> tuple[float, int]:
+    """Wall time (s) of ``cpf-bench``'s default policies on the suite, and its episodes."""
+    from baselines import POLICIES
+    from cpf_commands.bench.run import run_bench
+    from cpf_env.scenarios.suite import list_suite
+
+    start = time.perf_counter()
+    cells = run_bench(list(POLICIES), list_suite(), seeds=seeds, out=None, figures=False)
+    return time.perf_counter() - start, sum(len(cell.seeds) for cell in cells)
+
+
 def _contended_steps(
     scenario: str, policy: str, batch: int
 ) -> list[tuple[str, Callable[[], object], int]]:
@@ -127,6 +140,7 @@ def measure(
     episode_steps: int | None = None,
     progress: bool = False,
     contention: Sequence[int] = (),
+    bench_seeds: int = 0,
 ) -> list[dict[str, object]]:
     """Measure throughputs; returns one row per (component, B).
 
@@ -140,12 +154,15 @@ def measure(
         progress: Show a progress bar (stderr), one tick per measurement.
         contention: Batch sizes at which ``FleetSim.step`` and ``FleetVecEnv.step``
             are timed alone and next to ``busy_competitor()``.
+        bench_seeds: If > 0, time ``cpf-bench``'s default evaluation with this many seeds.
     """
     from baselines import make_policy
 
     rows: list[dict[str, object]] = []
     bar = tqdm(
-        total=4 * len(fleets) + 2 + 4 * len(contention), disable=not progress, desc="cpf-speed"
+        total=4 * len(fleets) + 2 + 4 * len(contention) + (bench_seeds > 0),
+        disable=not progress,
+        desc="cpf-speed",
     )
 
     def add(component: str, batch: int, n: int, per_second: float) -> None:
@@ -217,6 +234,12 @@ def measure(
                     bar.set_postfix_str(f"{component}, B = {batch}, {label}")
                     add(f"{component}, {label}", batch, n, _rate(contended, min_seconds))
                     bar.update()
+    if bench_seeds > 0:
+        bar.set_postfix_str("cpf-bench default run")
+        seconds, episodes = _bench_seconds(bench_seeds)
+        add(f"cpf-bench default ({episodes} episodes)", 1, 0, episodes / seconds)
+        rows[-1]["seconds"] = seconds
+        bar.update()
     bar.set_postfix_str("whole episode")
     seconds, steps, n = _episode_seconds(scenario, policy, episode_steps)
     add(f"{scenario} episode ({steps} steps), {policy}", 1, n, steps / seconds)
@@ -277,6 +300,14 @@ def speed_main(argv: Sequence[str] | None = None) -> int:
         help="also time FleetSim.step and FleetVecEnv.step at these batch sizes alone and next "
         "to one busy competitor process (e.g. --contention 256)",
     )
+    parser.add_argument(
+        "--bench-seeds",
+        type=int,
+        default=0,
+        metavar="N",
+        help="also time cpf-bench's default evaluation (every baseline, the suite) with N "
+        "seeds, e.g. 10 (default: 0, not timed)",
+    )
     parser.add_argument("--json", action="store_true", help="print JSON instead of a table")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     args = parser.parse_args(argv)
@@ -288,6 +319,7 @@ def speed_main(argv: Sequence[str] | None = None) -> int:
         episode_steps=args.episode_steps,
         progress=not args.quiet,
         contention=args.contention,
+        bench_seeds=args.bench_seeds,
     )
     if args.json:
         print(json.dumps(rows, indent=2))

@@ -65,6 +65,27 @@ def test_speed_contention_rows_and_the_competitor_is_gone():
     ]
 
 
+def test_speed_times_the_default_bench(monkeypatch):
+    import types
+
+    from cpf_commands.bench import run as bench_run
+
+    calls = []
+
+    def fake_run_bench(policies, scenarios, seeds, out, figures):
+        calls.append((tuple(policies), tuple(scenarios), seeds, out, figures))
+        return [types.SimpleNamespace(seeds=(0,) * seeds) for _ in range(3)]
+
+    monkeypatch.setattr(bench_run, "run_bench", fake_run_bench)
+    rows = measure("wang2014", fleets=(), min_seconds=0.01, episode_steps=5, bench_seeds=4)
+    ((policies, scenarios, seeds, out, figures),) = calls
+    assert seeds == 4 and out is None and not figures and "nn_dsc" in policies
+    assert scenarios[0] == "bench_mild"
+    (bench,) = [row for row in rows if str(row["component"]).startswith("cpf-bench")]
+    assert bench["component"] == "cpf-bench default (12 episodes)"
+    assert bench["steps_per_s"] == pytest.approx(12 / bench["seconds"], rel=1e-2)
+
+
 def test_speed_command_prints_json(capsys):
     argv = ["--fleets", "1", "--seconds", "0.01", "--episode-steps", "5", "--json", "--quiet"]
     assert speed_main(argv) == 0
