@@ -214,6 +214,12 @@ def bench_main(argv: Sequence[str] | None = None) -> int:
     )
     if table:
         print(table)
+    requested = len(args.policies) * len(args.scenarios)
+    if len(cells) < requested:
+        print(
+            f"cpf-bench: {requested - len(cells)} of {requested} (policy, scenario) cells did not "
+            "run (the policy does not fit the scenario); summary.md lists them and why."
+        )
     print(
         f"cpf-bench: {len(args.policies)} policies x {len(args.scenarios)} scenarios in "
         f"{elapsed:.0f} s; results in {args.out}/ (summary.md, summary.csv, episodes.csv)"

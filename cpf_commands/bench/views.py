@@ -9,11 +9,12 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 
+import numpy as np
 from matplotlib.figure import Figure
 from matplotlib.ticker import FuncFormatter
 
 from cpf_commands.bench.report import HEADLINE, CellResult
-from cpf_commands.bench.verdict import RELATIVE_TOLERANCE, Verdict, verdicts
+from cpf_commands.bench.verdict import GUARDED, RELATIVE_TOLERANCE, Verdict, verdicts
 
 __all__ = ["figure", "markdown", "markdown_table", "terminal_table", "verdict_rows"]
 
@@ -47,7 +48,36 @@ def terminal_table(cells: Sequence[CellResult], reference: str) -> str:
     table = [list(VERDICT_HEADER), *body]
     widths = [max(len(row[k]) for row in table) for k in range(len(VERDICT_HEADER))]
     lines = ["  ".join(cell.ljust(w) for cell, w in zip(row, widths, strict=True)) for row in table]
-    return f"against {reference}:\n" + "\n".join(line.rstrip() for line in lines)
+    return f"against {reference}:\n" + "\n".join(
+        [line.rstrip() for line in lines] + _regressions(cells, reference)
+    )
+
+
+#: Units of the guarded metrics' short labels, as printed.
+_UNITS = {"cross-track": " m", "heading": " rad", "formation": " m"}
+
+
+def _regressions(cells: Sequence[CellResult], reference: str) -> list[str]:
+    """One line per verdict with a regressed guarded metric: the means, policy vs reference.
+
+    Final-window means in SI units (m, rad; progress as a fraction of v0 T,
+    failures as a fraction of the episodes).
+    """
+    by_key = {(cell.policy, cell.scenario): cell for cell in cells}
+    label_of = {label: name for name, (label, _, _) in GUARDED.items()}
+    lines = []
+    for result in verdicts(cells, reference):
+        if not result.regressed:
+            continue
+        cell, base = by_key[result.policy, result.scenario], by_key[reference, result.scenario]
+        values = ", ".join(
+            f"{label} {float(np.mean(cell.metrics[label_of[label]])):.3g}"
+            f"{_UNITS.get(label, '')} vs {float(np.mean(base.metrics[label_of[label]])):.3g}"
+            f"{_UNITS.get(label, '')}"
+            for label in result.regressed
+        )
+        lines.append(f"  {result.policy} on {result.scenario}, worse than {reference}: {values}")
+    return lines
 
 
 def _interval(row: dict[str, object] | None, estimate: str = "mean") -> str:

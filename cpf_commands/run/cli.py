@@ -120,7 +120,10 @@ def run_main(argv: Sequence[str] | None = None, prog: str = "cpf-run") -> int:
         f"{metrics['steps']} steps ({metrics['duration_s']:.1f} s simulated) in {elapsed:.1f} s"
     )
     if args.scenario in PAPER_SCENARIOS:
-        print("Claims of Wang, Wang & Peng (2014), measured over the last quarter of the run:")
+        print(
+            "Claims of Wang, Wang & Peng (2014), measured over the last quarter of the run "
+            "(claim 4 over the whole run):"
+        )
         for claim in claims:
             verdict = "holds" if claim.holds else "NOT MET"
             print(

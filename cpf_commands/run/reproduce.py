@@ -214,13 +214,14 @@ def _force_claim(trajectory: Trajectory, vessel: int) -> Claim:
     last_text = "never" if last is None else f"last at {last:.3g} s"
     measured = (
         f"command beyond the limits on {saturated_steps} steps, {last_text} "
-        f"(must saturate, and only before {SATURATION_TRANSIENT:g} s); peak |tau0| / limit "
-        + " / ".join(f"{p:.3g}" for p in peak)
-        + f" (bound {COMMAND_BOUND:g}); applied max |tau| "
-        + " / ".join(f"{t:.3g}" for t in applied)
+        f"(must saturate, and only before {SATURATION_TRANSIENT:g} s); peak of |tau0| divided "
+        "by the limit (surge, sway, yaw) "
+        + ", ".join(f"{p:.3g}" for p in peak)
+        + f" (bound {COMMAND_BOUND:g}); applied max |tau| (surge, sway, yaw) "
+        + ", ".join(f"{t:.3g}" for t in applied)
         + " vs limits "
-        + " / ".join(f"{t:.3g}" for t in limits)
-        + " (structural: the plant clips)"
+        + ", ".join(f"{t:.3g}" for t in limits)
+        + " (structural: the plant clips, so this part cannot fail)"
     )
     return Claim(
         4,

@@ -117,3 +117,14 @@ def test_marl_eval_export_has_the_nested_layout(tmp_path):
     metrics = runs["seed_10000"]["absolute_metrics"]
     assert metrics["return"] == [-metrics["cost"][0]]
     assert "speed_estimate_error_rms" in metrics and len(metrics["cross_track_error_rms"]) == 1
+
+
+def test_terminal_names_the_regressed_metrics_with_their_values():
+    from cpf_commands.bench.views import terminal_table
+
+    heading = np.full(len(SEEDS), 0.03)
+    policy = _cell("p", BASE_COST - 50.0, heading_error_rms_window=heading)
+    text = terminal_table([REFERENCE, policy], "nn_dsc")
+    assert "mixed (worse: heading)" in text
+    assert "p on bench_mild, worse than nn_dsc: heading 0.03 rad vs 0.01 rad" in text
+    assert "worse than" not in terminal_table([REFERENCE, _cell("q", BASE_COST - 50.0)], "nn_dsc")
