@@ -39,12 +39,6 @@ __all__ = [
 
 GYM_ID = "cpf_env/CentralizedFleet-v0"
 PETTINGZOO_ID = "cpf_env/cooperative_path_following-v0"
-_ERRORS = (
-    ("path_error", arrays.ERR_PATH),
-    ("heading_error", arrays.ERR_HEADING),
-    ("sync_error", arrays.ERR_SYNC),
-    ("speed_error", arrays.ERR_SPEED),
-)
 _RENDER_FPS = 20  # default; instances use 1 / dt
 
 
@@ -222,7 +216,7 @@ class CentralizedFleetEnv(gymnasium.Env[NDArray[np.float32], NDArray[np.float32]
 
     def _info(self) -> dict[str, Any]:
         errors = self.sim.arrays.errors[0]
-        return {name: errors[:, k].copy() for name, k in _ERRORS}
+        return {name: errors[:, k].copy() for name, k in arrays.ERROR_KEYS}
 
     def render(self) -> NDArray[np.uint8] | None:
         """Top-down view of the fleet (see ``cpf_env.envs.render``); None in human mode."""
@@ -337,7 +331,7 @@ class CentralizedFleetVectorEnv(VectorEnv[NDArray[np.float32], NDArray[np.float3
     def _infos(self) -> dict[str, Any]:
         errors = self.sim.arrays.errors
         infos: dict[str, Any] = {}
-        for name, k in _ERRORS:
+        for name, k in arrays.ERROR_KEYS:
             infos[name] = errors[:, :, k].copy()
             infos[f"_{name}"] = np.ones(self.num_envs, dtype=bool)
         return infos

@@ -341,12 +341,7 @@ class CooperativePathFollowingEnv(ParallelEnv):
         a = self.sim.arrays
         infos: dict[str, dict[str, Any]] = {}
         for i, agent in enumerate(self.possible_agents):
-            infos[agent] = {
-                "path_error": float(a.errors[0, i, arrays.ERR_PATH]),
-                "heading_error": float(a.errors[0, i, arrays.ERR_HEADING]),
-                "sync_error": float(a.errors[0, i, arrays.ERR_SYNC]),
-                "speed_error": float(a.errors[0, i, arrays.ERR_SPEED]),
-            }
+            infos[agent] = {key: float(a.errors[0, i, k]) for key, k in arrays.ERROR_KEYS}
             if self.info_level == "minimal":
                 continue
             infos[agent] |= {

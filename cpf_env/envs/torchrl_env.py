@@ -65,12 +65,7 @@ __all__ = ["ERROR_KEYS", "GROUP", "TorchRLFleetEnv", "action_bounds"]
 GROUP = "vessel"
 
 #: The per-vessel errors of ``info_level="minimal"``, as (info key, index into ``errors``).
-ERROR_KEYS = (
-    ("path_error", arrays.ERR_PATH),
-    ("heading_error", arrays.ERR_HEADING),
-    ("sync_error", arrays.ERR_SYNC),
-    ("speed_error", arrays.ERR_SPEED),
-)
+ERROR_KEYS = arrays.ERROR_KEYS
 
 _INFO_LEVELS = ("none", "minimal")
 _DONE_KEYS = ("done", "terminated", "truncated")

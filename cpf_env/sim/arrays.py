@@ -13,6 +13,7 @@ from typing import NamedTuple
 import numpy as np
 
 __all__ = [
+    "ERROR_KEYS",
     "ERR_HEADING",
     "ERR_PATH",
     "ERR_SPEED",
@@ -23,6 +24,15 @@ __all__ = [
 
 # Columns of FleetArrays.errors.
 ERR_PATH, ERR_HEADING, ERR_SYNC, ERR_SPEED = 0, 1, 2, 3
+
+
+#: The per-vessel errors as the envs report them: (info key, column of ``FleetArrays.errors``).
+ERROR_KEYS = (
+    ("path_error", ERR_PATH),
+    ("heading_error", ERR_HEADING),
+    ("sync_error", ERR_SYNC),
+    ("speed_error", ERR_SPEED),
+)
 
 
 class FleetArrays(NamedTuple):
