@@ -25,10 +25,10 @@ at step k + 1 every vessel combines values of the same instant.
 The equations run compiled, once, in ``baselines.kernels`` (``_cooperate``),
 their sums as explicit left-to-right loops so that a fleet's numbers do not
 depend on how many fleets are in the batch. This module keeps the
-Python-facing pieces: the parsed observation (``LocalObservation``) and the
-layer's output (``CooperativeStep``) that a kinetic part written in Python
-receives, and the numerical helpers the policies use to build their
-coefficients.
+Python-facing pieces: the parsed observation (``LocalObservation``) that a
+kinetic part written in Python receives (with the layer's output,
+``baselines.kernels.CooperativeOutputs``), and the numerical helpers the
+policies use to build their coefficients.
 """
 
 from __future__ import annotations
@@ -41,7 +41,6 @@ from numpy.typing import ArrayLike, NDArray
 from cpf_env.sim.observation import ObsLayout
 
 __all__ = [
-    "CooperativeStep",
     "LocalObservation",
     "exponential_euler",
 ]
@@ -115,30 +114,3 @@ class LocalObservation:
             dtheta=layout.slot_theta_differences(obs),
             message=message,
         )
-
-
-@dataclass(frozen=True)
-class CooperativeStep:
-    """The cooperative layer's output at one control step, all of shape (B, n).
-
-    Attributes:
-        vhat: Speed estimate vhat_i used at this step (m/s).
-        vhat_dot: Its rate, the right-hand side of eq. [35] (m/s^2); 0 with a global v0.
-        vhat_next: Estimate at the next step, the vessel's message (m/s).
-        sync: s_i = sum_j a_ij (theta_i - theta_j).
-        mu: mu_i = z_i1^T t_i1.
-        omega_s: omega_is, eq. [34] (1/s).
-        gamma: Auxiliary state gamma_i used at this step (1/s).
-        gamma_next: gamma_i at the next step.
-        theta_dot: Commanded path-variable rate vhat_i + omega_is, eq. [12] (1/s).
-    """
-
-    vhat: Array
-    vhat_dot: Array
-    vhat_next: Array
-    sync: Array
-    mu: Array
-    omega_s: Array
-    gamma: Array
-    gamma_next: Array
-    theta_dot: Array

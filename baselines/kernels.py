@@ -136,17 +136,21 @@ class PolicyOutputs(NamedTuple):
 
 
 class CooperativeOutputs(NamedTuple):
-    """The cooperative layer's signals of one step, (R, n) each (see ``CooperativeStep``)."""
+    """The cooperative layer's signals of one step, (R, n) each.
 
-    vhat: np.ndarray
-    vhat_dot: np.ndarray
-    vhat_next: np.ndarray
-    sync: np.ndarray
-    mu: np.ndarray
-    omega_s: np.ndarray
-    gamma: np.ndarray
-    gamma_next: np.ndarray
-    theta_dot: np.ndarray
+    What ``cooperative_rows`` writes, and what a kinetic part written in Python
+    (``Policy._kinetics``) receives as ``cooperation``.
+    """
+
+    vhat: np.ndarray  # speed estimate vhat_i used at this step (m/s)
+    vhat_dot: np.ndarray  # its rate, the right-hand side of [35] (m/s^2); 0 with a global v0
+    vhat_next: np.ndarray  # estimate at the next step, the vessel's message (m/s)
+    sync: np.ndarray  # s_i = sum_j a_ij (theta_i - theta_j)
+    mu: np.ndarray  # mu_i = z_i1^T t_i1
+    omega_s: np.ndarray  # omega_is, [34] (1/s)
+    gamma: np.ndarray  # auxiliary state gamma_i used at this step (1/s)
+    gamma_next: np.ndarray  # gamma_i at the next step
+    theta_dot: np.ndarray  # commanded path-variable rate vhat_i + omega_is, [12] (1/s)
 
 
 @numba.njit(cache=True, inline="always")

@@ -33,7 +33,7 @@ from typing import Any, ClassVar
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from baselines.cooperative import CooperativeStep, LocalObservation, exponential_euler
+from baselines.cooperative import LocalObservation, exponential_euler
 from baselines.gains import CooperativeGains
 from baselines.interface import PolicyInterface
 from baselines.kernels import (
@@ -175,7 +175,7 @@ class Policy(PolicyInterface):
     def _kinetics(
         self,
         obs: LocalObservation,
-        cooperation: CooperativeStep,
+        cooperation: CooperativeOutputs,
         states: dict[str, Array],
         started: NDArray[np.bool_],
     ) -> tuple[Array, dict[str, Array]]:
@@ -330,7 +330,7 @@ class Policy(PolicyInterface):
         local = LocalObservation.parse(self.layout, batch)
         tau0, kinetic = self._kinetics(
             local,
-            CooperativeStep(**cooperation._asdict()),
+            cooperation,
             kinetic_states,
             states.started[index].copy(),
         )
