@@ -98,6 +98,13 @@ def _bench_seconds(seeds: int) -> tuple[float, int]:
     return time.perf_counter() - start, sum(len(cell.seeds) for cell in cells)
 
 
+def _step_or_reset(sim: FleetSim, actions: np.ndarray) -> None:
+    """One step of every fleet; all of them start again once any episode has ended."""
+    sim.step(actions)
+    if sim.truncated.any() or sim.arrays.terminated.any():
+        sim.reset()
+
+
 def _contended_steps(
     scenario: str, policy: str, batch: int
 ) -> list[tuple[str, Callable[[], object], int]]:
@@ -107,12 +114,9 @@ def _contended_steps(
     sim.reset(seeds=list(range(batch)))
     held = np.zeros((batch, task.n, sim.act_dim))
 
-    def sim_step() -> None:
-        sim.step(held)
-        if sim.truncated.any() or sim.arrays.terminated.any():
-            sim.reset()
-
-    steps: list[tuple[str, Callable[[], object], int]] = [("FleetSim.step", sim_step, task.n)]
+    steps: list[tuple[str, Callable[[], object], int]] = [
+        ("FleetSim.step", lambda: _step_or_reset(sim, held), task.n)
+    ]
     vec = _training_env(scenario, policy, batch)
     if vec is not None:
         zero = np.zeros((vec.num_envs, vec.controller.action_size), dtype=np.float32)
@@ -184,9 +188,7 @@ def measure(
         n = sim.n
 
         def sim_step(sim: FleetSim = sim, actions: np.ndarray = actions) -> None:
-            sim.step(actions)
-            if sim.truncated.any() or sim.arrays.terminated.any():
-                sim.reset()
+            _step_or_reset(sim, actions)
 
         def policy_step(reference: object = reference, obs: np.ndarray = obs) -> None:
             reference.act_batch(obs)  # type: ignore[attr-defined]
