@@ -108,13 +108,17 @@ def _stamp_of(py_file: str) -> str | None:
         return None
     for directory, sources in _STAMPED.items():
         if path.is_relative_to(directory):
-            if not sources:
-                return _digest()
-            digest = hashlib.sha256(_digest().encode())
-            for source in sources:
-                digest.update(source.read_bytes())
-            return digest.hexdigest()
+            return _package_stamp(_digest(), sources) if sources else _digest()
     return None
+
+
+@functools.cache
+def _package_stamp(kernel_digest: str, sources: tuple[Path, ...]) -> str:
+    """SHA-256 of the kernel sources' digest and a package's own sources (read once)."""
+    digest = hashlib.sha256(kernel_digest.encode())
+    for source in sources:
+        digest.update(source.read_bytes())
+    return digest.hexdigest()
 
 
 class _KernelSourcesLocator(_CacheLocator):
