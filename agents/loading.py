@@ -87,7 +87,7 @@ def load_policy(
         )
     config = TrainConfig.from_json(record["config"])
     if scenario is None:
-        resolved = make_scenario(config.scenario, **config.scenario_overrides())
+        resolved = make_scenario(config.home_scenario, **config.scenario_overrides())
     else:
         resolved = make_scenario(scenario)
     return TrainedPolicy(folder.name, config, TorchActor(network, normalization), resolved)
@@ -174,7 +174,8 @@ class TrainedPolicy(PolicyInterface):
             raise ValueError(
                 f"scenario {scenario.name!r} gives inputs of size {size} but the "
                 f"network of {name!r} takes {expected}: evaluate it on a scenario with the "
-                f"training scenario's neighbour slots and message size ({config.scenario!r})."
+                f"training scenarios' neighbour slots and message size ({config.home_scenario!r}), "
+                "or train with --neighbour-slots to run on graphs of higher degree."
             )
         if actor.action_size != self._residual.action_size:
             raise AgentFolderError(

@@ -121,7 +121,7 @@ def export_onnx(folder: str | Path, out: str | Path, checks: int = 1000) -> floa
     source = Path(folder)
     record, network, normalization = read_agent(source)
     config = TrainConfig.from_json(record["config"])
-    scenario = make_scenario(config.scenario, **config.scenario_overrides())
+    scenario = make_scenario(config.home_scenario, **config.scenario_overrides())
     graph = _Graph(network, normalization, residual_range(config, scenario)).eval()
     example = torch.zeros(1, scenario.n, network.input_size, dtype=torch.float32)
     target = Path(out)
@@ -220,7 +220,7 @@ def load_onnx_policy(path: str | Path, scenario: str | Scenario | None = None) -
     actor = OnnxActor(path)
     config = TrainConfig.from_json(actor.record["config"])
     if scenario is None:
-        resolved = make_scenario(config.scenario, **config.scenario_overrides())
+        resolved = make_scenario(config.home_scenario, **config.scenario_overrides())
     else:
         resolved = make_scenario(scenario)
     if resolved.n != actor.n:

@@ -50,12 +50,14 @@ from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 from tqdm.auto import tqdm
 
 from agents.agent_folder import Normalization, actor_tensors, network_from_tensors, write_agent
+from agents.mixture_env import MixtureVecEnv
 from agents.vec_env import FleetVecEnv
 from baselines import POLICIES
 from cpf_env import atomic, scenarios
 from cpf_env.envs.residual import ResidualConfig
 from cpf_env.scenarios.reward_weights import REWARD_FORMS
 from cpf_env.scenarios.splits import check_training
+from cpf_env.sim.fleet import observation_layout
 
 __all__ = ["ALGORITHMS", "TrainConfig", "build_model", "make_env", "train"]
 
@@ -80,7 +82,9 @@ class TrainConfig:
 
     Attributes:
         algo: ``"ppo"`` or ``"sac"``.
-        scenario: A registered scenario name.
+        scenario: A registered scenario name, or several (a tuple): a mixture, one
+            group of fleets per scenario (``agents.mixture_env``). The first is the
+            agent's default evaluation scenario (``home_scenario``).
         base: A name of ``baselines.POLICIES``, or ``"none"``: the agent commands
             forces and path-variable rate itself (learning from scratch).
         fleets: Fleets simulated together (num_envs = fleets x n).
@@ -105,10 +109,16 @@ class TrainConfig:
         torch_threads: Threads torch may use; None keeps torch's default (all cores).
             On a quiet 2-core machine 2 threads ran PPO 1.4x faster than 1; on a
             machine shared with other jobs 1 thread was faster.
+        neighbour_slots: Neighbour slots of the learner's input (``ResidualConfig``);
+            None: the largest degree of the training scenarios. An agent with K slots
+            runs on every scenario whose graph has degree <= K.
+        reward_overrides: ``RewardWeights`` fields changed for training only (e.g.
+            ``{"heading": 1.0}``), applied after ``reward_form``; the benchmark's
+            cost stays the scenario's own reward.
     """
 
     algo: str = "ppo"
-    scenario: str = "wang2014"
+    scenario: str | tuple[str, ...] = "wang2014"
     base: str = "nn_dsc"
     fleets: int = 256
     timesteps: int = 2_000_000
@@ -129,16 +139,19 @@ class TrainConfig:
     gradient_steps: int = 4
     buffer_size: int = 1_000_000
     torch_threads: int | None = None
+    neighbour_slots: int | None = None
+    reward_overrides: dict[str, float] = dataclasses.field(default_factory=dict)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "extras", tuple(self.extras))
         object.__setattr__(self, "net_arch", tuple(int(x) for x in self.net_arch))
         if self.algo not in ALGORITHMS:
             raise ValueError(f"algo must be one of {sorted(ALGORITHMS)}, got {self.algo!r}.")
-        if self.scenario not in scenarios.list_scenarios():
-            raise ValueError(
-                f"unknown scenario {self.scenario!r}; choose one of {scenarios.list_scenarios()}."
-            )
+        object.__setattr__(self, "scenario", _scenario_field(self.scenario))
+        object.__setattr__(self, "reward_overrides", dict(self.reward_overrides))
+        if self.neighbour_slots is None and len(self.scenarios) > 1:
+            degrees = [observation_layout(scenarios.get(n)).n_slots for n in self.scenarios]
+            object.__setattr__(self, "neighbour_slots", max(degrees))
         if self.base != "none" and self.base not in POLICIES:
             raise ValueError(
                 f"base must be one of {sorted(POLICIES)} or 'none' (learn from scratch), "
@@ -189,7 +202,19 @@ class TrainConfig:
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"{name} must be true or false, got {getattr(self, name)!r}.")
         if self.base != "none":
-            self.residual_config()  # validates mode, scale and extras
+            self.residual_config()  # validates mode, scale, extras and neighbour slots
+        for name in self.scenarios:
+            self.scenario_overrides(name)  # validates the reward overrides
+
+    @property
+    def scenarios(self) -> tuple[str, ...]:
+        """The training scenarios (one, or the mixture)."""
+        return (self.scenario,) if isinstance(self.scenario, str) else self.scenario
+
+    @property
+    def home_scenario(self) -> str:
+        """The default evaluation scenario: the first training scenario."""
+        return self.scenarios[0]
 
     def residual_config(self) -> ResidualConfig:
         """The ``ResidualConfig`` of this run."""
@@ -198,14 +223,30 @@ class TrainConfig:
             scale=self.scale,
             extras=self.extras,
             hide_residual_from_base=self.hide_residual_from_base,
+            neighbour_slots=self.neighbour_slots,
         )
 
-    def scenario_overrides(self) -> dict[str, Any]:
-        """``Scenario`` overrides of this run (the reward form, if overridden)."""
-        if self.reward_form is None:
+    def scenario_overrides(self, name: str | None = None) -> dict[str, Any]:
+        """``Scenario`` overrides of this run for one training scenario (default: the home one).
+
+        The reward form and the reward overrides, if any.
+
+        Raises:
+            ValueError: A reward override names no ``RewardWeights`` field or has a bad value.
+        """
+        if self.reward_form is None and not self.reward_overrides:
             return {}
-        reward = scenarios.get(self.scenario).reward
-        return {"reward": dataclasses.replace(reward, form=self.reward_form)}
+        reward = scenarios.get(self.home_scenario if name is None else name).reward
+        if self.reward_form is not None:
+            reward = dataclasses.replace(reward, form=self.reward_form)
+        fields = {f.name for f in dataclasses.fields(reward)} - {"form", "team"}
+        unknown = sorted(set(self.reward_overrides) - fields)
+        if unknown:
+            raise ValueError(
+                f"reward_overrides names unknown reward field(s) {unknown}; valid: "
+                f"{sorted(fields)}."
+            )
+        return {"reward": dataclasses.replace(reward, **self.reward_overrides)}
 
     def to_json(self) -> dict[str, Any]:
         """A JSON-ready dict of the fields."""
@@ -221,14 +262,40 @@ class TrainConfig:
         return cls(**data)
 
 
-def make_env(config: TrainConfig, num_fleets: int | None = None) -> FleetVecEnv:
-    """The ``FleetVecEnv`` of a run (``num_fleets`` overrides ``config.fleets``)."""
+def _scenario_field(value: Any) -> str | tuple[str, ...]:
+    """``TrainConfig.scenario`` checked: a registered name, or a tuple of distinct ones."""
+    names = [value] if isinstance(value, str) else list(value)
+    known = scenarios.list_scenarios()
+    unknown = [name for name in names if name not in known]
+    if not names or unknown or len(set(names)) != len(names):
+        raise ValueError(
+            f"scenario must be a registered name or distinct names (a mixture), got {value!r}; "
+            f"choose from {known}."
+        )
+    return names[0] if len(names) == 1 else tuple(names)
+
+
+def make_env(config: TrainConfig, num_fleets: int | None = None) -> FleetVecEnv | MixtureVecEnv:
+    """The vector env of a run (``num_fleets`` overrides ``config.fleets``).
+
+    A ``FleetVecEnv`` for one scenario, a ``MixtureVecEnv`` for several.
+    """
     base = None if config.base == "none" else config.base
+    fleets = config.fleets if num_fleets is None else num_fleets
+    residual = config.residual_config()
+    if len(config.scenarios) > 1:
+        return MixtureVecEnv(
+            config.scenarios,
+            num_fleets=fleets,
+            base_policy=base,
+            residual=residual,
+            scenario_overrides=[config.scenario_overrides(name) for name in config.scenarios],
+        )
     return FleetVecEnv(
-        config.scenario,
-        num_fleets=config.fleets if num_fleets is None else num_fleets,
+        config.home_scenario,
+        num_fleets=fleets,
         base_policy=base,
-        residual=None if base is None else config.residual_config(),
+        residual=residual,
         **config.scenario_overrides(),
     )
 
@@ -250,6 +317,29 @@ class _ProgressBar(BaseCallback):
 
     def _on_training_end(self) -> None:
         self._bar.close()
+
+
+class _ScenarioEpisodes(BaseCallback):
+    """Logs each mixture scenario's mean episodic cost per rollout (``rollout/ep_cost/<name>``).
+
+    Reads the infos of ending slots: ``MixtureVecEnv`` names their scenario and
+    ``VecMonitor`` adds the episode's return (``"episode"["r"]``).
+    """
+
+    def __init__(self) -> None:
+        super().__init__()
+        self._costs: dict[str, list[float]] = {}
+
+    def _on_step(self) -> bool:
+        for info in self.locals.get("infos", ()):
+            if "episode" in info and "scenario" in info:
+                self._costs.setdefault(info["scenario"], []).append(-float(info["episode"]["r"]))
+        return True
+
+    def _on_rollout_end(self) -> None:
+        for name, costs in self._costs.items():
+            self.logger.record(f"rollout/ep_cost/{name}", float(np.mean(costs)))
+        self._costs = {}
 
 
 def build_model(config: TrainConfig, env: VecNormalize | VecMonitor) -> BaseAlgorithm:
@@ -324,7 +414,8 @@ def train(
             (``splits.check_training``).
         cpf_env.atomic.FolderLockedError: Another run is writing ``out``.
     """
-    check_training(config.scenario, range(config.seed, config.seed + config.fleets))
+    for name in config.scenarios:
+        check_training(name, range(config.seed, config.seed + config.fleets))
     folder = _output_folder(out)
     with atomic.FolderLock(folder, "another training run"):
         if folder.exists() and any(folder.iterdir()) and not overwrite:
@@ -372,7 +463,10 @@ def _train_into(
     start = time.perf_counter()
     per_call = config.n_steps * env.num_envs if config.algo == "ppo" else env.num_envs
     total = -(-config.timesteps // per_call) * per_call  # SB3 completes whole rollouts
-    model.learn(config.timesteps, callback=[_ProgressBar(total, progress), *callbacks])
+    own: list[BaseCallback] = [_ProgressBar(total, progress)]
+    if len(config.scenarios) > 1:
+        own.append(_ScenarioEpisodes())
+    model.learn(config.timesteps, callback=[*own, *callbacks])
     elapsed = time.perf_counter() - start
     model.logger.close()  # progress.csv complete on disk before the folder is swapped in
     model.save(folder / "model.zip")  # SB3's format, to resume training; evaluation ignores it

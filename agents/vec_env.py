@@ -97,7 +97,8 @@ class FleetVecEnv(VecEnv):
             outputs the whole command (forces and path-variable rate, as fractions
             of their limits; messages are zero).
         residual: How the correction enters (``ResidualConfig``); default: forces,
-            scale 0.2, no extras. Ignored for ``base_policy=None``.
+            scale 0.2, no extras. With ``base_policy=None`` only its
+            ``neighbour_slots`` is used.
         stagger: Spread the first episode's horizons over the fleets.
         policy_options: Options (gains) for a base policy given by name.
         **overrides: ``Scenario`` field overrides, as in ``cpf_env.parallel_env``.
@@ -129,7 +130,8 @@ class FleetVecEnv(VecEnv):
         self.n = n = self.scenario.n
         base = resolve_base_policy(base_policy, self.scenario, policy_options)
         if base is None:
-            residual = ResidualConfig(mode="force_and_rate", scale=1.0)
+            slots = None if residual is None else residual.neighbour_slots
+            residual = ResidualConfig(mode="force_and_rate", scale=1.0, neighbour_slots=slots)
         self.sim = FleetSim(self.scenario, num_fleets=B)
         self.controller = ResidualController(self.scenario, base, B, residual)
         self.stagger = bool(stagger)

@@ -20,9 +20,39 @@ from collections.abc import Sequence
 
 from cpf_commands.common.arguments import positive_int
 from cpf_env import scenarios
-from cpf_env.scenarios.splits import check_training
+from cpf_env.scenarios.splits import SHIFT_SUFFIX, check_training
+from cpf_env.scenarios.suite import SUITE
 
 __all__ = ["train_main"]
+
+
+def training_scenarios() -> list[str]:
+    """Registered scenarios training may draw from (the held-out ``_shift`` ones excluded)."""
+    return [name for name in scenarios.list_scenarios() if not name.endswith(SHIFT_SUFFIX)]
+
+
+def _scenarios(names: list[str]) -> str | tuple[str, ...]:
+    """``--scenario`` values as ``TrainConfig.scenario``: ``suite`` expands to the suite."""
+    expanded: list[str] = []
+    for name in names:
+        for item in SUITE if name == "suite" else (name,):
+            if item not in expanded:
+                expanded.append(item)
+    return expanded[0] if len(expanded) == 1 else tuple(expanded)
+
+
+def _reward_overrides(items: list[str]) -> dict[str, float]:
+    """``--reward-weight NAME=VALUE`` items as a dict (values checked by ``TrainConfig``)."""
+    overrides = {}
+    for item in items:
+        name, sep, value = item.partition("=")
+        try:
+            overrides[name.strip()] = float(value)
+        except ValueError:
+            sep = ""
+        if not sep:
+            raise ValueError(f"--reward-weight takes NAME=NUMBER (e.g. heading=1.0), got {item!r}.")
+    return overrides
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -42,7 +72,30 @@ def _parser() -> argparse.ArgumentParser:
         formatter_class=argparse.ArgumentDefaultsHelpFormatter,
     )
     parser.add_argument("--algo", default=defaults.algo, choices=["ppo", "sac"])
-    parser.add_argument("--scenario", default=defaults.scenario, choices=scenarios.list_scenarios())
+    parser.add_argument(
+        "--scenario",
+        nargs="+",
+        default=[defaults.scenario],
+        choices=[*training_scenarios(), "suite"],
+        metavar="SCENARIO",
+        help="training scenario; several (or 'suite', the benchmark suite) train one agent on "
+        "their mixture. Choices: " + ", ".join([*training_scenarios(), "suite"]),
+    )
+    parser.add_argument(
+        "--neighbour-slots",
+        type=positive_int,
+        default=None,
+        help="neighbour slots of the agent's input (default: the training scenarios' largest "
+        "degree); the agent then runs on every graph of degree <= this",
+    )
+    parser.add_argument(
+        "--reward-weight",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="change a reward field for training only (repeatable), e.g. heading=1.0; "
+        "the benchmark's cost is unchanged",
+    )
     parser.add_argument(
         "--base",
         default=defaults.base,
@@ -102,7 +155,7 @@ def train_main(argv: Sequence[str] | None = None) -> int:
     try:
         config = TrainConfig(
             algo=args.algo,
-            scenario=args.scenario,
+            scenario=_scenarios(args.scenario),
             base=args.base,
             fleets=args.fleets,
             timesteps=args.timesteps,
@@ -116,8 +169,11 @@ def train_main(argv: Sequence[str] | None = None) -> int:
             n_steps=args.n_steps,
             batch_size=args.batch_size,
             n_epochs=args.epochs,
+            neighbour_slots=args.neighbour_slots,
+            reward_overrides=_reward_overrides(args.reward_weight),
         )
-        check_training(config.scenario, range(config.seed, config.seed + config.fleets))
+        for name in config.scenarios:
+            check_training(name, range(config.seed, config.seed + config.fleets))
     except ValueError as error:
         parser.error(str(error))
     try:
@@ -128,10 +184,10 @@ def train_main(argv: Sequence[str] | None = None) -> int:
         parser.error(f"could not write the agent to {args.out}: {error}")
     record = json.loads((folder / "config.json").read_text())
     print(
-        f"trained {config.algo} on {config.scenario} (base {config.base}) for "
+        f"trained {config.algo} on {' + '.join(config.scenarios)} (base {config.base}) for "
         f"{record['timesteps_done']:,} vessel-steps in {record['train_seconds']} s "
         f"({record['vessel_steps_per_second']:,} vessel-steps/s); saved to {folder}/\n"
         f"evaluate: cpf-bench --policies {config.base if config.base != 'none' else 'nn_dsc'} "
-        f"{folder} --scenarios {config.scenario}"
+        f"{folder} --scenarios {' '.join(config.scenarios)} --split test"
     )
     return 0

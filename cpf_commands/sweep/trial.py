@@ -77,7 +77,7 @@ def evaluate_agent(
     """
     reference = "nn_dsc" if config.base == "none" else config.base
     cells = run_bench(
-        {"agent": folder, reference: reference}, [config.scenario], seeds=seeds, steps=steps
+        {"agent": folder, reference: reference}, list(config.scenarios), seeds=seeds, steps=steps
     )
     rows = summarize(cells, reference)
     by_metric = {row["metric"]: row for row in rows if row["policy"] == "agent"}

@@ -107,6 +107,12 @@ class ResidualConfig:
         extras: Names from ``EXTRAS`` appended to the learner's input, in this order.
         hide_residual_from_base: Show the base the applied force minus the
             residual (its auxiliary system then reacts to saturation only).
+        neighbour_slots: Neighbour slots of the learner's input, or None for the
+            scenario's own K. A learner trained with K' slots runs on every
+            scenario with K <= K': the vessel's K slots are followed by K' - K
+            empty ones (all zero, ``a_ij = 0``), as a vessel with fewer
+            neighbours sees them. The base policy always sees the scenario's
+            own observation.
     """
 
     mode: str = "force"
@@ -114,6 +120,7 @@ class ResidualConfig:
     kinematic_scale: tuple[float, float, float] = (0.05, 0.05, 0.05)
     extras: tuple[str, ...] = ()
     hide_residual_from_base: bool = True
+    neighbour_slots: int | None = None
 
     def __post_init__(self) -> None:
         if self.mode not in RESIDUAL_MODES:
@@ -144,15 +151,41 @@ class ResidualConfig:
                 "after the correction is known. Drop it, or use mode='force'."
             )
         object.__setattr__(self, "extras", extras)
+        slots = self.neighbour_slots
+        if slots is not None and (
+            isinstance(slots, bool) or not isinstance(slots, int | np.integer) or slots < 1
+        ):
+            raise ValueError(
+                f"neighbour_slots must be an integer >= 1 or None (the scenario's own), "
+                f"got {slots!r}."
+            )
 
     @property
     def action_size(self) -> int:
         """k, the learner's action length per vessel."""
         return RESIDUAL_MODES[self.mode]
 
+    def learner_layout(self, layout: ObsLayout) -> ObsLayout:
+        """The layout of the observation part of the learner's input.
+
+        Raises:
+            ValueError: The scenario's vessels have more neighbour slots than
+                ``neighbour_slots`` (the limit is named).
+        """
+        if self.neighbour_slots is None:
+            return layout
+        if layout.n_slots > self.neighbour_slots:
+            raise ValueError(
+                f"this learner takes at most {self.neighbour_slots} neighbours per vessel, and "
+                f"the scenario gives a vessel {layout.n_slots}: use a graph of degree <= "
+                f"{self.neighbour_slots}, or train with more neighbour slots "
+                "(cpf-train --neighbour-slots)."
+            )
+        return ObsLayout(n_slots=self.neighbour_slots, msg_size=layout.msg_size)
+
     def input_size(self, layout: ObsLayout) -> int:
-        """The learner's input length per vessel: observation plus extras."""
-        return layout.size + sum(EXTRAS[name] for name in self.extras)
+        """The learner's input length per vessel: observation (padded) plus extras."""
+        return self.learner_layout(layout).size + sum(EXTRAS[name] for name in self.extras)
 
 
 class ZeroPolicy:
@@ -227,6 +260,7 @@ class ResidualController:
         self._theta_dot_max = float(scenario.theta_dot_max)
         self.action_size = config.action_size
         self.input_size = config.input_size(self.layout)
+        self._padding = config.learner_layout(self.layout).size - self.layout.size
         shape = (self.num_fleets, self.n)
         self.base_actions = np.zeros((*shape, self.act_dim))
         self.residual = np.zeros((*shape, self.action_size))
@@ -334,8 +368,10 @@ class ResidualController:
         return shown
 
     def _inputs(self, obs: Array, index: slice | NDArray[np.int64]) -> Array:
-        """Observation followed by the configured extras, (rows, n, input_size)."""
+        """Observation (with empty slots up to ``neighbour_slots``) and extras, (rows, n, input_size)."""
         parts = [obs]
+        if self._padding:
+            parts.append(np.zeros((*obs.shape[:-1], self._padding)))
         for name in self.config.extras:
             if name == "base_action":
                 base = self.base_actions[index]
