@@ -2,6 +2,8 @@
 
 - ``FleetVecEnv``: a native SB3 ``VecEnv`` over one batched ``FleetSim``, one slot
   per vessel (parameter sharing), the base policy run batched underneath.
+- ``MixtureVecEnv``: fleets of several scenarios in one vector env (training over a
+  distribution of conditions), every slot with the same padded input.
 - ``train`` / ``TrainConfig``: PPO or SAC, residual or from scratch (``cpf-train``).
 - ``load_policy``: a ``cpf-train`` output folder as a policy with the analytic
   policies' interface (``reset``, ``act``, ``act_batch``, ``predict``), so trained
@@ -12,8 +14,13 @@ See ``docs/residual_rl.md``.
 
 from __future__ import annotations
 
+# cpf_env first: it sets OMP_WAIT_POLICY=PASSIVE (unless set) before Stable-Baselines3 loads
+# torch, whose OpenMP runtime reads the variable once, when it loads. With torch's idle
+# threads spinning, the simulator's threads waited for a core (docs/scaling.md, "Threads").
+import cpf_env  # noqa: F401
 from agents.loading import TrainedPolicy, load_policy
+from agents.mixture_env import MixtureVecEnv
 from agents.training import TrainConfig, train
 from agents.vec_env import FleetVecEnv
 
-__all__ = ["FleetVecEnv", "TrainConfig", "TrainedPolicy", "load_policy", "train"]
+__all__ = ["FleetVecEnv", "MixtureVecEnv", "TrainConfig", "TrainedPolicy", "load_policy", "train"]

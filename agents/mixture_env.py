@@ -92,7 +92,7 @@ class MixtureVecEnv(VecEnv):
         self,
         scenarios: Sequence[str | Scenario],
         num_fleets: int = 64,
-        base_policy: str | None | Sequence[FleetPolicy] = "nn_dsc",
+        base_policy: str | Sequence[FleetPolicy] | None = "nn_dsc",
         residual: ResidualConfig | None = None,
         stagger: bool = True,
         policy_options: dict[str, Any] | None = None,
@@ -117,8 +117,7 @@ class MixtureVecEnv(VecEnv):
         messages = sorted({layout.msg_size for layout in layouts})
         if len(messages) > 1:
             raise ValueError(
-                f"the scenarios of a mixture must share a message size, got {messages} "
-                f"for {names}."
+                f"the scenarios of a mixture must share a message size, got {messages} for {names}."
             )
         base_residual = residual
         if base_policy is None:
@@ -168,7 +167,7 @@ class MixtureVecEnv(VecEnv):
 
     def reset(self) -> NDArray[np.float32]:
         """Reset every group; (num_envs, input_size) float32."""
-        observations = [group.reset() for group in self.groups]
+        observations = [np.asarray(group.reset()) for group in self.groups]
         self.reset_infos = [info for group in self.groups for info in group.reset_infos]
         return np.concatenate(observations)
 
@@ -178,7 +177,7 @@ class MixtureVecEnv(VecEnv):
         if raw.ndim != 2 or raw.shape[0] != self.num_envs:
             raise ValueError(
                 f"actions must have shape (num_envs, k) = ({self.num_envs}, "
-                f"{self.action_space.shape[0]}), got {raw.shape}."
+                f"{self.groups[0].controller.action_size}), got {raw.shape}."
             )
         for group, (start, stop) in zip(self.groups, self._group_bounds(), strict=True):
             group.step_async(raw[start:stop])
@@ -191,7 +190,7 @@ class MixtureVecEnv(VecEnv):
             for info in group_infos:
                 if info:
                     info["scenario"] = name
-            obs.append(group_obs)
+            obs.append(np.asarray(group_obs))
             rewards.append(group_rewards)
             dones.append(group_dones)
             infos.extend(group_infos)
@@ -243,12 +242,12 @@ class MixtureVecEnv(VecEnv):
 
 
 def _per_scenario(
-    base_policy: str | None | Sequence[FleetPolicy], count: int
+    base_policy: str | Sequence[FleetPolicy] | None, count: int
 ) -> list[str | FleetPolicy | None]:
     """One base per scenario: a name or None repeated, or the given sequence (checked)."""
     if base_policy is None or isinstance(base_policy, str):
         return [base_policy] * count
-    bases = list(base_policy)
+    bases: list[str | FleetPolicy | None] = list(base_policy)
     if len(bases) != count:
         raise ValueError(
             f"give one base policy object per scenario: {count} scenarios, {len(bases)} policies "

@@ -246,7 +246,7 @@ class TrainConfig:
                 f"reward_overrides names unknown reward field(s) {unknown}; valid: "
                 f"{sorted(fields)}."
             )
-        return {"reward": dataclasses.replace(reward, **self.reward_overrides)}
+        return {"reward": dataclasses.replace(reward, **self.reward_overrides)}  # type: ignore[arg-type]
 
     def to_json(self) -> dict[str, Any]:
         """A JSON-ready dict of the fields."""

@@ -368,7 +368,7 @@ class ResidualController:
         return shown
 
     def _inputs(self, obs: Array, index: slice | NDArray[np.int64]) -> Array:
-        """Observation (with empty slots up to ``neighbour_slots``) and extras, (rows, n, input_size)."""
+        """Observation, empty slots up to ``neighbour_slots``, extras: (rows, n, input_size)."""
         parts = [obs]
         if self._padding:
             parts.append(np.zeros((*obs.shape[:-1], self._padding)))

@@ -58,7 +58,7 @@ def test_padded_slots_are_empty_and_the_base_sees_its_own_observation() -> None:
 
 def test_a_graph_of_higher_degree_than_the_slots_is_refused_with_the_limit_named() -> None:
     star = fleet_of(10, Graph.star(10, center=4, leaders=(4,)))
-    with pytest.raises(ValueError, match="at most 6 neighbours.*gives a vessel 9"):
+    with pytest.raises(ValueError, match=r"at most 6 neighbours.*gives a vessel 9"):
         ResidualConfig(neighbour_slots=6).input_size(observation_layout(star))
     with pytest.raises(ValueError, match="neighbour_slots must be an integer >= 1"):
         ResidualConfig(neighbour_slots=0)
