@@ -38,7 +38,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 from numpy.typing import NDArray
-from stable_baselines3.common.vec_env import VecEnv
+from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper
 from stable_baselines3.common.vec_env.base_vec_env import VecEnvIndices, VecEnvStepReturn
 
 from agents.vec_env import FleetVecEnv
@@ -48,7 +48,7 @@ from cpf_env.envs.residual import ResidualConfig
 from cpf_env.scenarios import Scenario
 from cpf_env.sim.fleet import observation_layout
 
-__all__ = ["MixtureVecEnv", "split_fleets"]
+__all__ = ["BalancedRewards", "MixtureVecEnv", "split_fleets"]
 
 
 def split_fleets(num_fleets: int, groups: int) -> list[int]:
@@ -254,3 +254,48 @@ def _per_scenario(
             "(or a policy name, rebuilt for each scenario)."
         )
     return bases
+
+
+class BalancedRewards(VecEnvWrapper):
+    """Each scenario's rewards divided by its running mean per-step cost (for learning only).
+
+    In a mixture the scenarios' costs differ several-fold (``bench_lossy_links``
+    costs ``nn_dsc`` about five times what ``bench_mild`` does), and so do their
+    advantages: the scenario with the largest cost steers every update, and a
+    correction good for it is learned at the others' expense (measured: see
+    ``docs/residual_rl.md``). Dividing each group's rewards by the mean cost per
+    step it has seen so far (all slots, all steps since the start) gives every
+    scenario rewards of order one. The scale changes slowly (a running mean over
+    millions of steps); put the wrapper after ``VecMonitor`` so episode returns
+    stay in the benchmark's units.
+
+    Args:
+        venv: A vector env over a ``MixtureVecEnv`` (maybe monitored).
+        mixture: That ``MixtureVecEnv`` (its ``group_of_slot``).
+
+    Attributes:
+        scales: (groups,) the running mean cost per step of every group.
+    """
+
+    def __init__(self, venv: VecEnv, mixture: MixtureVecEnv) -> None:
+        super().__init__(venv)
+        self._group = mixture.group_of_slot
+        groups = len(mixture.groups)
+        self._sums = np.zeros(groups)
+        self._counts = np.zeros(groups)
+        self._slots = np.bincount(self._group, minlength=groups).astype(np.float64)
+        self.scales = np.ones(groups)
+
+    def reset(self) -> NDArray[np.float32]:
+        """Reset the wrapped env (the running scales are kept)."""
+        return np.asarray(self.venv.reset())
+
+    def step_wait(self) -> VecEnvStepReturn:
+        """Step, update each group's mean cost per step, and divide its rewards by it."""
+        obs, rewards, dones, infos = self.venv.step_wait()
+        cost = -np.asarray(rewards, dtype=np.float64)
+        self._sums += np.bincount(self._group, weights=cost, minlength=len(self._sums))
+        self._counts += self._slots
+        self.scales = np.maximum(self._sums / self._counts, np.finfo(np.float32).tiny)
+        balanced = (rewards / self.scales[self._group]).astype(np.float32)
+        return obs, balanced, dones, infos

@@ -46,11 +46,11 @@ from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.logger import configure
 from stable_baselines3.common.running_mean_std import RunningMeanStd
-from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
+from stable_baselines3.common.vec_env import VecEnv, VecMonitor, VecNormalize
 from tqdm.auto import tqdm
 
 from agents.agent_folder import Normalization, actor_tensors, network_from_tensors, write_agent
-from agents.mixture_env import MixtureVecEnv
+from agents.mixture_env import BalancedRewards, MixtureVecEnv
 from agents.vec_env import FleetVecEnv
 from baselines import POLICIES
 from cpf_env import atomic, scenarios
@@ -115,6 +115,9 @@ class TrainConfig:
         reward_overrides: ``RewardWeights`` fields changed for training only (e.g.
             ``{"heading": 1.0}``), applied after ``reward_form``; the benchmark's
             cost stays the scenario's own reward.
+        balance_rewards: In a mixture, divide each scenario's rewards by its running
+            mean cost per step (``agents.mixture_env.BalancedRewards``), so no scenario
+            steers the updates by the size of its cost alone. Ignored for one scenario.
     """
 
     algo: str = "ppo"
@@ -141,6 +144,7 @@ class TrainConfig:
     torch_threads: int | None = None
     neighbour_slots: int | None = None
     reward_overrides: dict[str, float] = dataclasses.field(default_factory=dict)
+    balance_rewards: bool = True
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "extras", tuple(self.extras))
@@ -198,7 +202,7 @@ class TrainConfig:
                 f"(a standard deviation of exp(log_std_init) actions of range 1), got "
                 f"{self.log_std_init!r}."
             )
-        for name in ("hide_residual_from_base", "normalize_observations"):
+        for name in ("hide_residual_from_base", "normalize_observations", "balance_rewards"):
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"{name} must be true or false, got {getattr(self, name)!r}.")
         if self.base != "none":
@@ -342,7 +346,7 @@ class _ScenarioEpisodes(BaseCallback):
         self._costs = {}
 
 
-def build_model(config: TrainConfig, env: VecNormalize | VecMonitor) -> BaseAlgorithm:
+def build_model(config: TrainConfig, env: VecEnv) -> BaseAlgorithm:
     """The untrained PPO or SAC model ``train`` uses, on ``env``; the mean action starts at zero.
 
     Args:
@@ -448,7 +452,9 @@ def _train_into(
         torch.set_num_threads(config.torch_threads)
     venv = make_env(config)
     venv.seed(config.seed)
-    env: VecNormalize | VecMonitor = VecMonitor(venv)
+    env: VecEnv = VecMonitor(venv)
+    if config.balance_rewards and isinstance(venv, MixtureVecEnv):
+        env = BalancedRewards(env, venv)
     if config.normalize_observations:
         env = VecNormalize(env, norm_obs=True, norm_reward=False, gamma=config.gamma)
     model = build_model(config, env)

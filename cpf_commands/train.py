@@ -89,6 +89,12 @@ def _parser() -> argparse.ArgumentParser:
         "degree); the agent then runs on every graph of degree <= this",
     )
     parser.add_argument(
+        "--balance-rewards",
+        action=argparse.BooleanOptionalAction,
+        default=defaults.balance_rewards,
+        help="in a mixture, divide each scenario's rewards by its running mean cost per step",
+    )
+    parser.add_argument(
         "--reward-weight",
         action="append",
         default=[],
@@ -171,6 +177,7 @@ def train_main(argv: Sequence[str] | None = None) -> int:
             n_epochs=args.epochs,
             neighbour_slots=args.neighbour_slots,
             reward_overrides=_reward_overrides(args.reward_weight),
+            balance_rewards=args.balance_rewards,
         )
         for name in config.scenarios:
             check_training(name, range(config.seed, config.seed + config.fleets))
