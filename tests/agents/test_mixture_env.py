@@ -168,3 +168,27 @@ def test_cpf_train_expands_suite_and_refuses_shift_scenarios(tmp_path: Path) -> 
         train_main(["--scenario", "bench_mild_shift", "--out", str(tmp_path / "x")])
     with pytest.raises(SystemExit):
         train_main(["--reward-weight", "heading", "--out", str(tmp_path / "y")])
+
+
+def test_balanced_rewards_divide_each_scenario_by_its_running_mean_cost() -> None:
+    """Group g's rewards divided by the mean cost per step of everything g has seen."""
+    from stable_baselines3.common.vec_env import VecMonitor
+
+    from agents.mixture_env import BalancedRewards
+
+    mixture = MixtureVecEnv(["bench_mild", "bench_lossy_links"], num_fleets=2)
+    env = BalancedRewards(VecMonitor(mixture), mixture)
+    env.seed(0)
+    env.reset()
+    raw_sums, balanced, raw_steps = np.zeros(2), [], []
+    for _ in range(50):
+        _, rewards, _, _ = env.step(np.zeros((env.num_envs, 3)))
+        raw = np.concatenate([g.sim.arrays.reward.reshape(-1) for g in mixture.groups])
+        raw_sums += np.bincount(mixture.group_of_slot, weights=-raw)
+        raw_steps.append(raw)
+        balanced.append(rewards)
+    counts = 50 * np.bincount(mixture.group_of_slot)
+    np.testing.assert_allclose(env.scales, raw_sums / counts, rtol=1e-6)
+    last_scale = env.scales[mixture.group_of_slot]
+    np.testing.assert_allclose(balanced[-1], raw_steps[-1] / last_scale, rtol=1e-6)
+    assert env.scales[0] != env.scales[1]
