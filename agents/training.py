@@ -2,18 +2,20 @@
 
 ``train(config, out)`` builds ``FleetVecEnv`` -> ``VecMonitor`` -> ``VecNormalize``
 (observations only; rewards stay in their units so episode costs read as the
-benchmark's), creates PPO or SAC with residual-learning defaults, learns, and
-writes to ``out`` (built in a temporary sibling and renamed into place, so a
-killed run leaves the old folder or the new one; a lock refuses a second run
-on the same folder):
+benchmark's), creates PPO or SAC with residual-learning defaults and learns
+in the run folder ``out`` (a lock refuses a second run on the same folder;
+``agents.run_folder`` lists its files): held-out evaluations and the best
+agent (``best/``), checkpoints every K vessel-steps (``checkpoint/``, from
+which ``resume=True`` continues bit for bit), and at the end (or after
+Ctrl-C) the agent itself:
 
 - ``policy.safetensors``, ``normalization.json``, ``config.json`` (the exact
   ``TrainConfig``, the package versions and the training time) and
   ``manifest.json``: the data-only agent (``agents.agent_folder``) that
   ``agents.load_policy(out)`` reads;
-- ``model.zip``: SB3's own save, to resume training with SB3 (a pickle, never
-  read by evaluation);
-- ``progress.csv`` (and TensorBoard event files when tensorboard is installed).
+- ``model.zip``: SB3's own save, to continue training with plain SB3 (a pickle,
+  never read by evaluation nor by ``resume``);
+- ``progress.csv`` (and TensorBoard event files with ``tensorboard_log``).
 
 Residual-learning defaults (Johannink et al. 2019, Silver et al. 2018, and
 our measurements in ``docs/residual_rl.md``): the policy's mean action starts
@@ -32,25 +34,20 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import platform
-import time
-from collections.abc import Sequence
+import shutil
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, cast
 
-import numpy as np
 import torch
 from stable_baselines3 import PPO, SAC
 from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.callbacks import BaseCallback
-from stable_baselines3.common.logger import configure
-from stable_baselines3.common.running_mean_std import RunningMeanStd
-from stable_baselines3.common.vec_env import VecEnv, VecMonitor, VecNormalize
-from tqdm.auto import tqdm
+from stable_baselines3.common.vec_env import VecEnv
 
-from agents.agent_folder import Normalization, actor_tensors, network_from_tensors, write_agent
-from agents.mixture_env import BalancedRewards, MixtureVecEnv
+from agents.mixture_env import MixtureVecEnv
+from agents.schedule import Evaluator, RunSchedule
 from agents.vec_env import FleetVecEnv
 from baselines import POLICIES
 from cpf_env import atomic, scenarios
@@ -304,48 +301,6 @@ def make_env(config: TrainConfig, num_fleets: int | None = None) -> FleetVecEnv 
     )
 
 
-class _ProgressBar(BaseCallback):
-    """tqdm bar over vessel-steps with the mean episodic cost of the last episodes."""
-
-    def __init__(self, total: int, enabled: bool) -> None:
-        super().__init__()
-        self._bar = tqdm(total=total, unit="step", unit_scale=True, disable=not enabled)
-
-    def _on_step(self) -> bool:
-        self._bar.update(self.training_env.num_envs)
-        episodes = self.model.ep_info_buffer
-        if episodes:
-            cost = -float(np.mean([info["r"] for info in episodes]))
-            self._bar.set_postfix(episodic_cost=f"{cost:.4g}", refresh=False)
-        return True
-
-    def _on_training_end(self) -> None:
-        self._bar.close()
-
-
-class _ScenarioEpisodes(BaseCallback):
-    """Logs each mixture scenario's mean episodic cost per rollout (``rollout/ep_cost/<name>``).
-
-    Reads the infos of ending slots: ``MixtureVecEnv`` names their scenario and
-    ``VecMonitor`` adds the episode's return (``"episode"["r"]``).
-    """
-
-    def __init__(self) -> None:
-        super().__init__()
-        self._costs: dict[str, list[float]] = {}
-
-    def _on_step(self) -> bool:
-        for info in self.locals.get("infos", ()):
-            if "episode" in info and "scenario" in info:
-                self._costs.setdefault(info["scenario"], []).append(-float(info["episode"]["r"]))
-        return True
-
-    def _on_rollout_end(self) -> None:
-        for name, costs in self._costs.items():
-            self.logger.record(f"rollout/ep_cost/{name}", float(np.mean(costs)))
-        self._costs = {}
-
-
 def build_model(config: TrainConfig, env: VecEnv) -> BaseAlgorithm:
     """The untrained PPO or SAC model ``train`` uses, on ``env``; the mean action starts at zero.
 
@@ -393,43 +348,92 @@ def build_model(config: TrainConfig, env: VecEnv) -> BaseAlgorithm:
     return model
 
 
+def planned_timesteps(config: TrainConfig, num_envs: int) -> int:
+    """Vessel-steps a run of ``config.timesteps`` really trains: SB3 completes whole rollouts.
+
+    PPO collects ``n_steps x num_envs`` vessel-steps per rollout, SAC ``num_envs``
+    per vector-env step, so the budget is rounded up to a multiple of that.
+    """
+    per_call = config.n_steps * num_envs if config.algo == "ppo" else num_envs
+    return -(-config.timesteps // per_call) * per_call
+
+
 def train(
     config: TrainConfig,
     out: str | Path,
     progress: bool = True,
     overwrite: bool = False,
     callbacks: Sequence[BaseCallback] = (),
+    evaluate: Evaluator | None = None,
+    schedule: RunSchedule | None = None,
+    resume: bool = False,
+    tensorboard_log: str | Path | None = None,
+    run_files: Mapping[str, str] | None = None,
 ) -> Path:
-    """Train an agent and save it to ``out`` (see the module docstring).
+    """Train an agent into the run folder ``out`` (see the module docstring).
 
     Args:
         config: The run.
         out: Output folder (created).
-        progress: Show a progress bar with the episodic cost.
-        overwrite: Replace a trained model already in ``out``.
+        progress: Show a progress bar (with the latest evaluation cost) and say how the
+            budget was rounded.
+        overwrite: Delete a run already in ``out`` first.
         callbacks: More SB3 callbacks (a sweep's reporting to Ray Tune, say).
+        evaluate: Agent folder -> mean cost per scenario on held-out seeds (``cpf-train``
+            passes the benchmark's ``test`` split); None: no evaluation.
+        schedule: Evaluation and checkpoint periods (default: neither).
+        resume: Continue the run in ``out`` from its last checkpoint; ``config`` must be
+            the run's own (``run.json``) but for a larger ``timesteps``.
+        tensorboard_log: Also write TensorBoard event files to ``tensorboard_log/<out name>``.
+        run_files: File name -> text, written into ``out`` when the run (or its resumed
+            part) starts (``cpf-train`` saves its resolved ``hyperparameters.toml`` so).
 
     Returns:
         The output folder.
 
     Raises:
-        FileExistsError: ``out`` holds files and ``overwrite`` is False.
-        ValueError: ``out`` is empty or a file, or a held-out evaluation scenario or seed
-            (``splits.check_training``).
+        FileExistsError: ``out`` holds files and neither ``overwrite`` nor ``resume``.
+        ValueError: ``out`` is empty or a file, a held-out evaluation scenario or seed
+            (``splits.check_training``), nothing to resume, or a configuration that
+            differs from the run's own.
+        TrainingInterrupted: Ctrl-C; the checkpoint and the agent so far are written.
         cpf_env.atomic.FolderLockedError: Another run is writing ``out``.
     """
+    from agents.run_folder import TrainingRun, prepare_resume, write_run_record
+
     for name in config.scenarios:
         check_training(name, range(config.seed, config.seed + config.fleets))
     folder = _output_folder(out)
+    schedule = schedule or RunSchedule()
+    if tensorboard_log is not None:
+        try:
+            import tensorboard  # noqa: F401
+        except ImportError as error:
+            raise ValueError(
+                "--tensorboard-log needs tensorboard: pip install 'cpf_env[rl]'."
+            ) from error
     with atomic.FolderLock(folder, "another training run"):
-        if folder.exists() and any(folder.iterdir()) and not overwrite:
-            held = "a trained model" if (folder / "config.json").exists() else "files"
-            raise FileExistsError(
-                f"{folder} already holds {held}; choose another output folder or "
-                "overwrite it (cpf-train --force, train(..., overwrite=True))."
-            )
-        with atomic.staged_folder(folder) as staging:
-            _train_into(config, staging, progress, callbacks)
+        if resume:
+            resume_state = prepare_resume(folder, config)
+            write_run_record(folder, config, schedule, getattr(evaluate, "settings", None))
+        else:
+            if folder.exists() and any(folder.iterdir()):
+                if not overwrite:
+                    held = "a trained model" if (folder / "config.json").exists() else "files"
+                    raise FileExistsError(
+                        f"{folder} already holds {held}; choose another output folder, "
+                        "overwrite it (cpf-train --force, train(..., overwrite=True)) or "
+                        "continue it (cpf-train --resume)."
+                    )
+                shutil.rmtree(folder)
+            folder.mkdir(parents=True, exist_ok=True)
+            write_run_record(folder, config, schedule, getattr(evaluate, "settings", None))
+            resume_state = None
+        for name, text in (run_files or {}).items():
+            atomic.write_text(folder / name, text)
+        TrainingRun(config, folder, schedule, evaluate, resume_state, tensorboard_log).learn(
+            progress, callbacks
+        )
     return folder
 
 
@@ -441,71 +445,3 @@ def _output_folder(out: str | Path) -> Path:
     if folder.exists() and not folder.is_dir():
         raise ValueError(f"{folder} is a file; give a folder for the trained agent.")
     return folder
-
-
-def _train_into(
-    config: TrainConfig, folder: Path, progress: bool, callbacks: Sequence[BaseCallback]
-) -> None:
-    """Train and write every file of the agent into ``folder`` (the staging folder)."""
-    torch.manual_seed(config.seed)
-    if config.torch_threads is not None:
-        torch.set_num_threads(config.torch_threads)
-    venv = make_env(config)
-    venv.seed(config.seed)
-    env: VecEnv = VecMonitor(venv)
-    if config.balance_rewards and isinstance(venv, MixtureVecEnv):
-        env = BalancedRewards(env, venv)
-    if config.normalize_observations:
-        env = VecNormalize(env, norm_obs=True, norm_reward=False, gamma=config.gamma)
-    model = build_model(config, env)
-    formats = ["csv"]
-    try:
-        import tensorboard  # noqa: F401
-
-        formats.append("tensorboard")
-    except ImportError:
-        pass
-    model.set_logger(configure(str(folder), formats))
-    start = time.perf_counter()
-    per_call = config.n_steps * env.num_envs if config.algo == "ppo" else env.num_envs
-    total = -(-config.timesteps // per_call) * per_call  # SB3 completes whole rollouts
-    own: list[BaseCallback] = [_ProgressBar(total, progress)]
-    if len(config.scenarios) > 1:
-        own.append(_ScenarioEpisodes())
-    model.learn(config.timesteps, callback=[*own, *callbacks])
-    elapsed = time.perf_counter() - start
-    model.logger.close()  # progress.csv complete on disk before the folder is swapped in
-    model.save(folder / "model.zip")  # SB3's format, to resume training; evaluation ignores it
-    network = network_from_tensors(
-        actor_tensors(model, config.algo), config.algo, config.net_arch, folder / "model.zip"
-    )
-    normalization = None
-    if isinstance(env, VecNormalize):
-        rms = cast(RunningMeanStd, env.obs_rms)
-        normalization = Normalization(rms.mean.copy(), rms.var.copy(), env.epsilon, env.clip_obs)
-    record = {
-        "config": config.to_json(),
-        "num_envs": venv.num_envs,
-        "timesteps_done": int(model.num_timesteps),
-        "train_seconds": round(elapsed, 1),
-        "vessel_steps_per_second": round(model.num_timesteps / elapsed),
-        "versions": _versions(),
-    }
-    write_agent(folder, record, network, normalization)
-
-
-def _versions() -> dict[str, str]:
-    """Versions of the packages a trained model depends on."""
-    import gymnasium
-    import stable_baselines3
-
-    import cpf_env
-
-    return {
-        "python": platform.python_version(),
-        "cpf_env": cpf_env.__version__,
-        "stable_baselines3": stable_baselines3.__version__,
-        "torch": torch.__version__,
-        "gymnasium": gymnasium.__version__,
-        "numpy": np.__version__,
-    }

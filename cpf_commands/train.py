@@ -7,23 +7,54 @@ configuration (JSON), tied by a manifest of hashes (``agents.agent_folder``). Th
 with ``agents.load_policy(DIR)`` and is accepted wherever a policy name is
 (``cpf-bench --policies nn_dsc DIR``, ``cpf-run --policy DIR``).
 
+RL Zoo conventions too (``docs/residual_rl.md``, "A training run"): held-out
+evaluation on the benchmark's ``test`` split with the best agent kept
+(``--eval-every``, ``--eval-seeds``; ``cpf_commands.train_eval``),
+checkpoints and ``--resume`` (``--checkpoint-every``), a checkpoint and agent
+on Ctrl-C, ``--tensorboard-log DIR``, and ``--config FILE.toml``
+(``cpf_commands.hyperparameters``; flags given override it).
+
 Example::
 
     cpf-train --scenario bench_lossy_links --seed 0 --out runs/ppo_lossy_s0
+    cpf-train --resume --out runs/ppo_lossy_s0 -n 4000000   # continue, or extend
 """
 
 from __future__ import annotations
 
 import argparse
+import copy
+import dataclasses
 import json
+import sys
 from collections.abc import Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING
 
-from cpf_commands.common.arguments import positive_int
+from cpf_commands.common.arguments import non_negative_int, positive_int
+from cpf_commands.hyperparameters import (
+    FLAG_FIELDS,
+    SCHEDULE_KEYS,
+    hyperparameters_toml,
+    read_hyperparameters,
+)
+from cpf_commands.train_eval import DEFAULT_EVAL_SEEDS, TestSplitEvaluator
 from cpf_env import scenarios
 from cpf_env.scenarios.splits import SHIFT_SUFFIX, check_training
 from cpf_env.scenarios.suite import SUITE
 
-__all__ = ["train_main"]
+if TYPE_CHECKING:
+    from agents.schedule import RunSchedule
+    from agents.training import TrainConfig
+
+__all__ = ["DEFAULT_CHECKPOINT_EVERY", "DEFAULT_EVAL_EVERY", "train_main"]
+
+#: The resolved hyperparameters, saved in the run folder.
+HYPERPARAMETERS = "hyperparameters.toml"
+#: Vessel-steps between held-out evaluations (one takes a few seconds per scenario).
+DEFAULT_EVAL_EVERY = 500_000
+#: Vessel-steps between checkpoints.
+DEFAULT_CHECKPOINT_EVERY = 500_000
 
 
 def training_scenarios() -> list[str]:
@@ -96,10 +127,10 @@ def _parser() -> argparse.ArgumentParser:
     )
     parser.add_argument(
         "--reward-weight",
-        action="append",
+        nargs="+",
         default=[],
         metavar="NAME=VALUE",
-        help="change a reward field for training only (repeatable), e.g. heading=1.0; "
+        help="change reward fields for training only, e.g. heading=1.0 heading_scale=0.01; "
         "the benchmark's cost is unchanged",
     )
     parser.add_argument(
@@ -144,56 +175,190 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument(
         "--epochs", type=positive_int, default=defaults.n_epochs, help="PPO epochs per rollout"
     )
+    parser.add_argument(
+        "--eval-every", type=non_negative_int, default=DEFAULT_EVAL_EVERY,
+        help="vessel-steps between evaluations of the deterministic agent on the benchmark's "
+        "test split (evaluations.csv, best/); 0: none",
+    )  # fmt: skip
+    parser.add_argument(
+        "--eval-seeds", type=positive_int, default=DEFAULT_EVAL_SEEDS,
+        help="evaluation episodes per scenario (cpf-bench --seeds)",
+    )  # fmt: skip
+    parser.add_argument(
+        "--checkpoint-every", type=non_negative_int, default=DEFAULT_CHECKPOINT_EVERY,
+        help="vessel-steps between checkpoints (checkpoint/, for --resume); 0: none",
+    )  # fmt: skip
+    parser.add_argument(
+        "--resume", action="store_true",
+        help="continue the run in --out from its last checkpoint, with its own settings "
+        "(only -n may change: a larger budget extends the run)",
+    )  # fmt: skip
+    parser.add_argument(
+        "--tensorboard-log", metavar="DIR", default=None,
+        help="also write TensorBoard event files to DIR/<name of --out> "
+        "(tensorboard --logdir DIR)",
+    )  # fmt: skip
+    parser.add_argument(
+        "--config", metavar="FILE.toml", default=None,
+        help="hyperparameter file (TOML, TrainConfig field names and eval_every, eval_seeds, "
+        "checkpoint_every); flags given override it; the resolved values are saved as "
+        "--out/hyperparameters.toml",
+    )  # fmt: skip
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     parser.add_argument(
-        "--force", action="store_true", help="overwrite a trained model already in --out"
+        "--force", action="store_true", help="delete a run already in --out and start afresh"
     )
     return parser
+
+
+def _given(parser: argparse.ArgumentParser, argv: Sequence[str] | None) -> set[str]:
+    """The destinations of the options given on the command line (not left at their default)."""
+    unset = object()
+    probe = copy.deepcopy(parser)
+    probe.set_defaults(**{action.dest: unset for action in probe._actions if action.dest != "help"})
+    return {name for name, value in vars(probe.parse_args(argv)).items() if value is not unset}
+
+
+#: Options that may be given with --resume (the rest come from the run's run.json).
+RESUME_OPTIONS = {"out", "resume", "timesteps", "quiet", "tensorboard_log"}
+
+
+#: Option destinations that are not hyperparameters (what to do, not how to learn).
+NOT_HYPERPARAMETERS = {"out", "resume", "quiet", "force", "config", "tensorboard_log"}
+
+
+def _resolve(args: argparse.Namespace, given: set[str]) -> tuple[TrainConfig, RunSchedule, int]:
+    """The run's configuration, schedule and evaluation seeds: defaults < ``--config`` < flags.
+
+    Raises:
+        ValueError: A bad hyperparameter file or value.
+    """
+    from agents.schedule import RunSchedule
+    from agents.training import TrainConfig
+
+    values = {} if args.config is None else read_hyperparameters(args.config)
+    for dest in sorted(given - NOT_HYPERPARAMETERS):
+        values[FLAG_FIELDS.get(dest, dest)] = getattr(args, dest)
+    fields = {k: v for k, v in values.items() if k not in SCHEDULE_KEYS}
+    if "scenario" in fields:
+        named = fields["scenario"]
+        fields["scenario"] = _scenarios([named] if isinstance(named, str) else list(named))
+    if "reward_weight" in fields:
+        fields["reward_overrides"] = _reward_overrides(fields.pop("reward_weight"))
+    config = TrainConfig(**fields)
+    schedule = RunSchedule(
+        values.get("eval_every", args.eval_every),
+        values.get("checkpoint_every", args.checkpoint_every),
+    )
+    seeds = values.get("eval_seeds", args.eval_seeds)
+    if isinstance(seeds, bool) or not isinstance(seeds, int) or seeds < 1:
+        raise ValueError(f"eval_seeds must be an integer >= 1, got {seeds!r}.")
+    return config, schedule, seeds
+
+
+def _resumed(
+    args: argparse.Namespace, given: set[str]
+) -> tuple[TrainConfig, RunSchedule, int, int | None]:
+    """Configuration, schedule and evaluation settings of the run in ``--out``.
+
+    Raises:
+        ValueError: Options other than ``RESUME_OPTIONS``, or no run to resume.
+    """
+    from agents.run_folder import read_run_record
+
+    extra = sorted(given - RESUME_OPTIONS)
+    if extra:
+        flags = ", ".join("--" + name.replace("_", "-") for name in extra)
+        raise ValueError(
+            f"--resume continues the run with its own settings (run.json); drop {flags} "
+            "(only -n may change)."
+        )
+    config, schedule, evaluation = read_run_record(Path(args.out))
+    if "timesteps" in given:
+        config = dataclasses.replace(config, timesteps=args.timesteps)
+    seeds = int((evaluation or {}).get("seeds", DEFAULT_EVAL_SEEDS))
+    steps = (evaluation or {}).get("steps")
+    return config, schedule, seeds, steps
+
+
+def _hyperparameters(config: TrainConfig, schedule: RunSchedule, seeds: int) -> str:
+    """The resolved ``hyperparameters.toml`` of a run."""
+    return hyperparameters_toml(
+        config.to_json(),
+        {
+            "eval_every": schedule.eval_every,
+            "eval_seeds": seeds,
+            "checkpoint_every": schedule.checkpoint_every,
+        },
+    )
 
 
 def train_main(argv: Sequence[str] | None = None) -> int:
     """``cpf-train``: see ``cpf-train --help``."""
     parser = _parser()
     args = parser.parse_args(argv)
-    from agents.training import TrainConfig, train
+    from agents.schedule import TrainingInterrupted
+    from agents.training import train
     from cpf_env.atomic import FolderLockedError
 
+    given = _given(parser, argv)
     try:
-        config = TrainConfig(
-            algo=args.algo,
-            scenario=_scenarios(args.scenario),
-            base=args.base,
-            fleets=args.fleets,
-            timesteps=args.timesteps,
-            seed=args.seed,
-            mode=args.mode,
-            scale=args.scale,
-            extras=tuple(args.extras),
-            reward_form=args.reward,
-            log_std_init=args.log_std_init,
-            learning_rate=args.learning_rate,
-            n_steps=args.n_steps,
-            batch_size=args.batch_size,
-            n_epochs=args.epochs,
-            neighbour_slots=args.neighbour_slots,
-            reward_overrides=_reward_overrides(args.reward_weight),
-            balance_rewards=args.balance_rewards,
-        )
+        if args.resume:
+            config, schedule, seeds, steps = _resumed(args, given)
+        else:
+            config, schedule, seeds = _resolve(args, given)
+            steps = None
         for name in config.scenarios:
             check_training(name, range(config.seed, config.seed + config.fleets))
     except ValueError as error:
         parser.error(str(error))
+    evaluate = TestSplitEvaluator(config.scenarios, seeds, steps)
     try:
-        folder = train(config, args.out, progress=not args.quiet, overwrite=args.force)
+        folder = train(
+            config,
+            args.out,
+            progress=not args.quiet,
+            overwrite=args.force,
+            evaluate=evaluate if schedule.eval_every > 0 else None,
+            schedule=schedule,
+            resume=args.resume,
+            tensorboard_log=args.tensorboard_log,
+            run_files={HYPERPARAMETERS: _hyperparameters(config, schedule, seeds)},
+        )
+    except TrainingInterrupted as stop:
+        print(
+            f"cpf-train: stopped by Ctrl-C at {stop.timesteps:,} vessel-steps; the agent so far "
+            f"is in {args.out}/ and its checkpoint in {args.out}/checkpoint/. Continue with: "
+            f"cpf-train --resume --out {args.out}",
+            file=sys.stderr,
+        )
+        return 130
+    except KeyboardInterrupt:
+        print(
+            f"cpf-train: aborted; the last periodic checkpoint (if any) is in "
+            f"{args.out}/checkpoint/: cpf-train --resume --out {args.out}",
+            file=sys.stderr,
+        )
+        return 130
     except (FileExistsError, ValueError, FolderLockedError) as error:
         parser.error(str(error))
-    except OSError as error:  # disk full: the staging folder is removed, --out is unchanged
-        parser.error(f"could not write the agent to {args.out}: {error}")
+    except OSError as error:  # disk full: the last checkpoint stays
+        parser.error(f"could not write the run to {args.out}: {error}")
     record = json.loads((folder / "config.json").read_text())
+    rounded = (
+        ""
+        if record["timesteps_done"] == config.timesteps
+        else f" (-n {config.timesteps:,} rounded up to whole rollouts)"
+    )
+    best = (
+        f"; best held-out evaluation in {folder}/best/ (evaluations.csv)"
+        if (folder / "best").is_dir()
+        else ""
+    )
     print(
         f"trained {config.algo} on {' + '.join(config.scenarios)} (base {config.base}) for "
-        f"{record['timesteps_done']:,} vessel-steps in {record['train_seconds']} s "
-        f"({record['vessel_steps_per_second']:,} vessel-steps/s); saved to {folder}/\n"
+        f"{record['timesteps_done']:,} vessel-steps{rounded} in {record['train_seconds']} s "
+        f"({record['vessel_steps_per_second']:,} vessel-steps/s); saved to {folder}/{best}\n"
         f"evaluate: cpf-bench --policies {config.base if config.base != 'none' else 'nn_dsc'} "
         f"{folder} --scenarios {' '.join(config.scenarios)} --split test"
     )

@@ -1,0 +1,289 @@
+"""One training run in its folder: learn, evaluate, checkpoint, resume, write the agent.
+
+``agents.training.train`` claims the folder and hands over to ``TrainingRun``.
+The folder during and after a run (``docs/residual_rl.md`` has the user's view):
+
+- ``run.json``: the configuration and schedule, written first (``--resume`` reads it);
+- ``progress.csv``: SB3's log (continued, not restarted, by a resumed run);
+- ``evaluations.csv`` and ``best/`` (an agent folder): held-out evaluations and
+  the best agent so far (``agents.schedule``);
+- ``checkpoint/``: the latest checkpoint (``agents.checkpoint``), replaced whole;
+- at the end, or after Ctrl-C: the agent (``policy.safetensors``,
+  ``normalization.json``, ``config.json``, ``manifest.json``; ``agents.agent_folder``)
+  and SB3's ``model.zip``.
+
+A killed run leaves its last checkpoint; ``--resume`` continues from it. A
+resumed run ends with the same weights, normalization statistics, evaluation
+costs and ``progress.csv`` values as an uninterrupted run at the same seed;
+only wall-clock columns and fields (``time/*``, ``wall_clock_seconds``,
+``train_seconds``) differ (``tests/agents/test_resume.py``).
+"""
+
+from __future__ import annotations
+
+import json
+import platform
+import shutil
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any, cast
+
+import numpy as np
+import torch
+from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.logger import CSVOutputFormat, KVWriter, Logger, make_output_format
+from stable_baselines3.common.running_mean_std import RunningMeanStd
+from stable_baselines3.common.vec_env import VecEnv, VecMonitor, VecNormalize
+
+from agents.agent_folder import Normalization, actor_tensors, network_from_tensors, write_agent
+from agents.checkpoint import load_checkpoint
+from agents.mixture_env import BalancedRewards, MixtureVecEnv
+from agents.schedule import (
+    BEST,
+    CHECKPOINT,
+    EVALUATIONS,
+    PROGRESS,
+    Evaluator,
+    GracefulInterrupt,
+    ProgressBar,
+    RunSchedule,
+    ScenarioEpisodes,
+    ScheduleCallback,
+    TrainingInterrupted,
+    evaluations_csv,
+)
+from agents.training import TrainConfig, build_model, make_env, planned_timesteps
+from cpf_env import atomic
+
+__all__ = ["RUN_RECORD", "TrainingRun", "prepare_resume", "read_run_record", "write_run_record"]
+
+RUN_RECORD = "run.json"
+
+
+def write_run_record(
+    folder: Path, config: TrainConfig, schedule: RunSchedule, evaluation: Any = None
+) -> None:
+    """Write ``run.json``: the configuration, schedule and evaluation settings of a run.
+
+    Args:
+        folder: The run folder.
+        config: The run's configuration.
+        schedule: Its periods.
+        evaluation: The evaluator's JSON-ready ``settings`` (if it has any), or None.
+    """
+    record = {
+        "config": config.to_json(),
+        "evaluation": evaluation,
+        "schedule": {
+            "eval_every": schedule.eval_every,
+            "checkpoint_every": schedule.checkpoint_every,
+        },
+    }
+    atomic.write_text(folder / RUN_RECORD, json.dumps(record, indent=2) + "\n")
+
+
+def read_run_record(folder: Path) -> tuple[TrainConfig, RunSchedule, Any]:
+    """The configuration, schedule and evaluation settings in ``folder/run.json``.
+
+    Raises:
+        ValueError: No run record (not a run folder), or an unreadable one.
+    """
+    path = folder / RUN_RECORD
+    if not path.is_file():
+        raise ValueError(
+            f"{folder} holds no {RUN_RECORD}: nothing to resume (train with cpf-train --out "
+            f"{folder} first)."
+        )
+    try:
+        record = json.loads(path.read_text())
+        config = TrainConfig.from_json(record["config"])
+        return config, RunSchedule(**record["schedule"]), record.get("evaluation")
+    except (OSError, json.JSONDecodeError, KeyError, TypeError) as error:
+        raise ValueError(f"{path} is not a readable run record: {error}") from None
+
+
+def prepare_resume(folder: Path, config: TrainConfig) -> Path:
+    """Check that ``config`` continues the run in ``folder``; return its checkpoint folder.
+
+    Raises:
+        ValueError: No checkpoint, or ``config`` differs from the run's in anything
+            but ``timesteps``.
+    """
+    saved, _, _ = read_run_record(folder)
+    differ = [
+        name
+        for name, value in config.to_json().items()
+        if name != "timesteps" and saved.to_json()[name] != value
+    ]
+    if differ:
+        raise ValueError(
+            f"--resume continues the run in {folder} with its own configuration; these "
+            f"settings differ from it: {differ}. Only the budget (-n) may change."
+        )
+    checkpoint = folder / CHECKPOINT
+    if not (checkpoint / "state.json").is_file():
+        raise ValueError(
+            f"{folder} has no checkpoint to resume from (the run was killed before its "
+            "first one, or ran with --checkpoint-every 0); start it again with --force."
+        )
+    return checkpoint
+
+
+class _AppendingCSV(CSVOutputFormat):
+    """SB3's ``progress.csv`` writer, continuing the rows a checkpoint kept."""
+
+    def __init__(self, filename: str, previous: str) -> None:
+        super().__init__(filename)
+        if previous:
+            self.file.write(previous)
+            self.file.flush()
+            self.keys = previous.splitlines()[0].split(",")
+
+
+def _versions() -> dict[str, str]:
+    """Versions of the packages a trained model depends on."""
+    import gymnasium
+    import stable_baselines3
+
+    import cpf_env
+
+    return {
+        "python": platform.python_version(),
+        "cpf_env": cpf_env.__version__,
+        "stable_baselines3": stable_baselines3.__version__,
+        "torch": torch.__version__,
+        "gymnasium": gymnasium.__version__,
+        "numpy": np.__version__,
+    }
+
+
+class TrainingRun:
+    """The env, model, logger and callbacks of one run (fresh, or from a checkpoint).
+
+    Args:
+        config: The run's configuration.
+        folder: The run folder (exists; claimed by the caller's lock).
+        schedule: Evaluation and checkpoint periods.
+        evaluate: Agent folder -> mean cost per scenario, or None.
+        checkpoint: The checkpoint folder to resume from, or None (a fresh run).
+        tensorboard_log: Parent folder of the TensorBoard event files, or None.
+    """
+
+    def __init__(
+        self,
+        config: TrainConfig,
+        folder: Path,
+        schedule: RunSchedule,
+        evaluate: Evaluator | None,
+        checkpoint: Path | None,
+        tensorboard_log: str | Path | None,
+    ) -> None:
+        self.config, self.folder = config, folder
+        torch.manual_seed(config.seed)
+        if config.torch_threads is not None:
+            torch.set_num_threads(config.torch_threads)
+        self.venv = make_env(config)
+        self.venv.seed(config.seed)
+        self.env: VecEnv = VecMonitor(self.venv)
+        if config.balance_rewards and isinstance(self.venv, MixtureVecEnv):
+            self.env = BalancedRewards(self.env, self.venv)
+        if config.normalize_observations:
+            self.env = VecNormalize(self.env, norm_obs=True, norm_reward=False, gamma=config.gamma)
+        self.model = build_model(config, self.env)
+        previous = ""
+        if checkpoint is not None and (checkpoint / PROGRESS).is_file():
+            previous = (checkpoint / PROGRESS).read_text()
+        outputs: list[KVWriter] = [_AppendingCSV(str(folder / PROGRESS), previous)]
+        if tensorboard_log is not None:
+            events = Path(tensorboard_log) / folder.name
+            outputs.append(make_output_format("tensorboard", str(events)))
+        self.model.set_logger(Logger(str(folder), outputs))
+        state: dict[str, Any] = {}
+        if checkpoint is not None:
+            self.model._last_obs = self.env.reset()  # type: ignore[assignment]  # as learn would
+            state = load_checkpoint(checkpoint, self.model)
+            if (checkpoint / BEST).is_dir():
+                with atomic.staged_folder(folder / BEST) as staging:
+                    shutil.copytree(checkpoint / BEST, staging, dirs_exist_ok=True)
+            else:
+                shutil.rmtree(folder / BEST, ignore_errors=True)
+            atomic.write_text(folder / EVALUATIONS, evaluations_csv(state.get("rows", [])))
+        self.interrupt = GracefulInterrupt()
+        self.schedule = ScheduleCallback(
+            folder, schedule, self.write_agent, evaluate, self.interrupt, state or None
+        )
+        self.total = planned_timesteps(config, self.env.num_envs)
+
+    def learn(self, progress: bool, callbacks: Sequence[BaseCallback]) -> None:
+        """Train to the budget (or Ctrl-C), then write the agent and ``model.zip``.
+
+        Raises:
+            TrainingInterrupted: After Ctrl-C, once the checkpoint and agent are written.
+        """
+        done = int(self.model.num_timesteps)
+        if progress and self.total != self.config.timesteps:
+            print(
+                f"cpf-train: the budget of {self.config.timesteps:,} vessel-steps is rounded "
+                f"up to {self.total:,}: {self._rounding()}.",
+                flush=True,
+            )
+        bar = ProgressBar(self.total, done, progress, self.schedule)
+        try:
+            with self.interrupt:
+                self.model.learn(
+                    self.total - done,
+                    callback=[self.schedule, bar, *self._mixture_logs(), *callbacks],
+                    reset_num_timesteps=done == 0,
+                )
+        except TrainingInterrupted:
+            self._finish(interrupted=True)
+            raise
+        finally:
+            bar._on_training_end()
+            self.model.logger.close()
+        self._finish(interrupted=False)
+
+    def _mixture_logs(self) -> list[BaseCallback]:
+        """Per-scenario episode costs in the logs, for a mixture."""
+        return [ScenarioEpisodes()] if len(self.config.scenarios) > 1 else []
+
+    def _rounding(self) -> str:
+        if self.config.algo == "ppo":
+            return (
+                f"PPO trains whole rollouts of n_steps x num_envs = {self.config.n_steps} x "
+                f"{self.env.num_envs} = {self.config.n_steps * self.env.num_envs:,} vessel-steps"
+            )
+        return f"SAC steps all {self.env.num_envs:,} slots at once"
+
+    def write_agent(self, folder: Path, interrupted: bool = False) -> None:
+        """Write the current agent (actor, frozen normalization, record) into ``folder``."""
+        network = network_from_tensors(
+            actor_tensors(self.model, self.config.algo),
+            self.config.algo,
+            self.config.net_arch,
+            folder / "policy.safetensors",
+        )
+        normalization = None
+        if isinstance(self.env, VecNormalize):
+            rms = cast(RunningMeanStd, self.env.obs_rms)
+            normalization = Normalization(
+                rms.mean.copy(), rms.var.copy(), self.env.epsilon, self.env.clip_obs
+            )
+        seconds = self.schedule.seconds()
+        steps = int(self.model.num_timesteps)
+        record: dict[str, Any] = {
+            "config": self.config.to_json(),
+            "num_envs": self.venv.num_envs,
+            "timesteps_done": steps,
+            "train_seconds": round(seconds, 1),
+            "vessel_steps_per_second": round(steps / seconds) if seconds > 0 else 0,
+            "versions": _versions(),
+        }
+        if interrupted:
+            record["interrupted"] = True
+        write_agent(folder, record, network, normalization)
+
+    def _finish(self, interrupted: bool) -> None:
+        """Write the agent and SB3's ``model.zip`` into the run folder."""
+        self.model.save(self.folder / "model.zip")  # SB3's format; evaluation never reads it
+        self.write_agent(self.folder, interrupted=interrupted)

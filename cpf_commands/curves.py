@@ -1,0 +1,288 @@
+"""``cpf-curves``: learning curves of several training runs, IQM over training seeds.
+
+Reads the ``evaluations.csv`` of each ``cpf-train`` run folder (one per
+training seed; the cost on the benchmark's held-out ``test`` seeds) and
+writes to ``--out``:
+
+- ``curves.csv``: one row per point of either axis: ``axis`` (``vessel_steps``
+  or ``wall_clock_seconds``), ``x``, ``iqm`` (interquartile mean over the runs
+  of the mean evaluation cost), ``ci_low``, ``ci_high`` (95 % percentile
+  bootstrap over the runs, ``cpf_commands.bench.stats``), ``runs`` and
+  ``base_cost``;
+- ``curves.png``: both curves with their intervals, each run faint, the base
+  policy's cost as a dashed line;
+
+and prints the time to beat the base: the first vessel-step count (and
+wall-clock second) at which the IQM is below the base's cost, and at which
+the whole interval is.
+
+Vessel-steps axis: the evaluation points every run has (runs with one
+schedule evaluate at the same counts). Wall-clock axis: every time at which
+some run evaluated, between the latest first evaluation and the earliest last
+one; each run's cost at time t is its latest evaluation at or before t.
+
+The base's cost: with ``--base NAME``, that analytic policy run by the
+benchmark on the runs' evaluation settings (``run.json``); without it, the
+runs' evaluation at 0 vessel-steps, which for a residual agent is exactly its
+base policy (the correction starts at zero).
+
+Example::
+
+    cpf-curves runs/lossy_s0 runs/lossy_s1 runs/lossy_s2 --out results/curves_lossy
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import io
+import json
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from matplotlib.figure import Figure
+from numpy.typing import NDArray
+
+from cpf_commands.bench.run import run_bench
+from cpf_commands.bench.stats import bootstrap_interval, iqm
+from cpf_env import atomic
+
+__all__ = [
+    "Curve",
+    "RunCurve",
+    "curves_csv",
+    "curves_main",
+    "read_run",
+    "steps_curve",
+    "time_curve",
+]
+
+AXES = ("vessel_steps", "wall_clock_seconds")
+
+
+@dataclass(frozen=True)
+class RunCurve:
+    """One run's evaluations.
+
+    Attributes:
+        name: The run folder's name.
+        steps: (E,) vessel-steps of the evaluations.
+        seconds: (E,) wall-clock seconds of the run at each evaluation.
+        cost: (E,) mean evaluation cost.
+    """
+
+    name: str
+    steps: NDArray[np.float64]
+    seconds: NDArray[np.float64]
+    cost: NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class Curve:
+    """IQM over runs along one axis, with its interval.
+
+    Attributes:
+        axis: ``vessel_steps`` or ``wall_clock_seconds``.
+        x: (P,) points of the axis.
+        values: (P, R) each run's cost at each point.
+        iqm: (P,) interquartile mean over the runs.
+        low: (P,) lower end of the 95 % bootstrap interval.
+        high: (P,) upper end.
+    """
+
+    axis: str
+    x: NDArray[np.float64]
+    values: NDArray[np.float64]
+    iqm: NDArray[np.float64]
+    low: NDArray[np.float64]
+    high: NDArray[np.float64]
+
+
+def read_run(folder: Path) -> RunCurve:
+    """A run folder's ``evaluations.csv``.
+
+    Raises:
+        ValueError: No or an empty ``evaluations.csv`` (the run did not evaluate).
+    """
+    path = folder / "evaluations.csv"
+    if not path.is_file():
+        raise ValueError(
+            f"{folder} has no evaluations.csv; train with cpf-train --eval-every N (> 0)."
+        )
+    rows = list(csv.DictReader(io.StringIO(path.read_text())))
+    if not rows:
+        raise ValueError(f"{path} holds no evaluation.")
+    try:
+        columns = [
+            np.array([float(row[key]) for row in rows])
+            for key in ("vessel_steps", "wall_clock_seconds", "mean_cost")
+        ]
+    except (KeyError, ValueError) as error:
+        raise ValueError(f"{path} is not a cpf-train evaluations.csv: {error}") from None
+    return RunCurve(folder.name, *columns)
+
+
+def _summarize(axis: str, x: NDArray[np.float64], values: NDArray[np.float64]) -> Curve:
+    """IQM and bootstrap interval over the runs (columns) at every point (row)."""
+    intervals = np.array([bootstrap_interval([row], iqm) for row in values]).reshape(-1, 2)
+    return Curve(axis, x, values, iqm(values, axis=1), intervals[:, 0], intervals[:, 1])
+
+
+def steps_curve(runs: Sequence[RunCurve]) -> Curve:
+    """The IQM vs vessel-steps, at the evaluation counts every run has.
+
+    Raises:
+        ValueError: The runs share no evaluation count.
+    """
+    common = sorted(set.intersection(*(set(run.steps.tolist()) for run in runs)))
+    if not common:
+        raise ValueError("the runs share no evaluation vessel-step count; use one --eval-every.")
+    values = np.array(
+        [[run.cost[np.flatnonzero(run.steps == x)[-1]] for run in runs] for x in common]
+    )
+    return _summarize("vessel_steps", np.array(common), values)
+
+
+def time_curve(runs: Sequence[RunCurve]) -> Curve:
+    """The IQM vs wall-clock seconds (each run's latest evaluation at or before each time)."""
+    start = max(float(run.seconds[0]) for run in runs)
+    end = min(float(run.seconds[-1]) for run in runs)
+    times = np.unique(np.concatenate([run.seconds for run in runs]))
+    grid = times[(times >= start) & (times <= end)]
+    if grid.size == 0:
+        grid = np.array([end])
+    values = np.array(
+        [
+            [run.cost[max(np.searchsorted(run.seconds, t, side="right") - 1, 0)] for run in runs]
+            for t in grid
+        ]
+    )
+    return _summarize("wall_clock_seconds", grid, values)
+
+
+def first_below(curve: Curve, level: float) -> tuple[float | None, float | None]:
+    """First x where the IQM is below ``level``, and first x where the whole interval is."""
+    below = np.flatnonzero(curve.iqm < level)
+    surely = np.flatnonzero(curve.high < level)
+    return (
+        float(curve.x[below[0]]) if below.size else None,
+        float(curve.x[surely[0]]) if surely.size else None,
+    )
+
+
+def curves_csv(curves: Sequence[Curve], base_cost: float, runs: int) -> str:
+    """``curves.csv`` text."""
+    buffer = io.StringIO()
+    writer = csv.writer(buffer, lineterminator="\n")
+    writer.writerow(["axis", "x", "iqm", "ci_low", "ci_high", "runs", "base_cost"])
+    for curve in curves:
+        for i, x in enumerate(curve.x):
+            writer.writerow(
+                [curve.axis, repr(float(x)), repr(float(curve.iqm[i])), repr(float(curve.low[i])),
+                 repr(float(curve.high[i])), runs, repr(base_cost)]
+            )  # fmt: skip
+    return buffer.getvalue()
+
+
+def figure(curves: Sequence[Curve], base_cost: float, names: Sequence[str]) -> Figure:
+    """Both learning curves side by side (Agg figure, no time stamp)."""
+    drawing = Figure(figsize=(11, 4.2))
+    labels = {"vessel_steps": "vessel-steps", "wall_clock_seconds": "wall-clock seconds"}
+    for index, curve in enumerate(curves):
+        axes = drawing.add_subplot(1, len(curves), index + 1)
+        style = "steps-post" if curve.axis == "wall_clock_seconds" else "default"
+        for r in range(curve.values.shape[1]):
+            axes.plot(curve.x, curve.values[:, r], color="tab:blue", alpha=0.25, lw=0.8,
+                      drawstyle=style)  # fmt: skip
+        axes.plot(curve.x, curve.iqm, color="tab:blue", lw=2, drawstyle=style,
+                  label=f"IQM over {len(names)} training seeds")  # fmt: skip
+        axes.fill_between(curve.x, curve.low, curve.high, color="tab:blue", alpha=0.2,
+                          step="post" if style == "steps-post" else None,
+                          label="95 % bootstrap interval")  # fmt: skip
+        axes.axhline(base_cost, color="k", ls="--", lw=1.2, label="base policy")
+        axes.set_xlabel(labels[curve.axis])
+        axes.set_ylabel("evaluation cost (test split, lower is better)")
+        axes.grid(alpha=0.3)
+        if index == 0:
+            axes.legend(fontsize=8)
+    drawing.suptitle("Held-out evaluation cost during training")
+    drawing.tight_layout()
+    return drawing
+
+
+def _base_cost(folders: Sequence[Path], runs: Sequence[RunCurve], base: str | None) -> float:
+    """The base policy's evaluation cost (see the module docstring)."""
+    records = [json.loads((folder / "run.json").read_text()) for folder in folders]
+    if base is not None:
+        evaluation = records[0].get("evaluation") or {}
+        cells = run_bench(
+            [base],
+            evaluation.get("scenarios") or [records[0]["config"]["scenario"]],
+            seeds=int(evaluation.get("seeds", 10)),
+            steps=evaluation.get("steps"),
+            split="test",
+        )
+        return float(np.mean([np.mean(cell.metrics["cost"]) for cell in cells]))
+    if any(record["config"]["base"] == "none" for record in records):
+        raise ValueError(
+            "runs trained from scratch have no base to compare with; give --base NAME."
+        )
+    starts = [run.cost[run.steps == 0] for run in runs]
+    if any(start.size == 0 for start in starts):
+        raise ValueError("a run has no evaluation at 0 vessel-steps (its base); give --base NAME.")
+    return float(iqm(np.array([start[0] for start in starts])))
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        allow_abbrev=False,
+        prog="cpf-curves",
+        description="Learning curves of cpf-train runs (one per training seed): IQM of the "
+        "held-out evaluation cost with 95 %% bootstrap intervals vs vessel-steps and vs "
+        "wall-clock seconds; writes curves.csv and curves.png and prints when the IQM first "
+        "beats the base policy.",
+    )
+    parser.add_argument("runs", nargs="+", metavar="RUN_DIR", help="cpf-train --out folders")
+    parser.add_argument("--out", required=True, help="output folder (curves.csv, curves.png)")
+    parser.add_argument(
+        "--base", default=None,
+        help="analytic policy whose test-split cost is the line to beat (default: the runs' "
+        "evaluation at 0 vessel-steps, their base policy)",
+    )  # fmt: skip
+    return parser
+
+
+def _when(x: float | None, unit: str) -> str:
+    if x is None:
+        return "never"
+    return f"{x:,.0f} {unit}" if unit == "vessel-steps" else f"{x:,.1f} {unit}"
+
+
+def curves_main(argv: Sequence[str] | None = None) -> int:
+    """``cpf-curves``: see ``cpf-curves --help``."""
+    parser = _parser()
+    args = parser.parse_args(argv)
+    folders = [Path(run) for run in args.runs]
+    try:
+        runs = [read_run(folder) for folder in folders]
+        base_cost = _base_cost(folders, runs, args.base)
+        curves = [steps_curve(runs), time_curve(runs)]
+    except (ValueError, OSError, KeyError, json.JSONDecodeError) as error:
+        parser.error(str(error))
+    with atomic.staged_folder(args.out) as staging:
+        atomic.write_text(staging / "curves.csv", curves_csv(curves, base_cost, len(runs)))
+        drawing = figure(curves, base_cost, [run.name for run in runs])
+        drawing.savefig(staging / "curves.png", dpi=100, metadata={"Software": None})
+    steps, seconds = curves
+    print(f"cpf-curves: {len(runs)} runs; base policy cost {base_cost:.6g}")
+    for curve, unit in ((steps, "vessel-steps"), (seconds, "s")):
+        below, surely = first_below(curve, base_cost)
+        print(
+            f"  IQM below the base from {_when(below, unit)}; whole 95 % interval below from "
+            f"{_when(surely, unit)}"
+        )
+    print(f"  final IQM {steps.iqm[-1]:.6g} [{steps.low[-1]:.6g}, {steps.high[-1]:.6g}] at "
+          f"{steps.x[-1]:,.0f} vessel-steps; wrote {args.out}/curves.csv, curves.png")  # fmt: skip
+    return 0

@@ -1,0 +1,145 @@
+"""Checkpoints, --resume and Ctrl-C: a resumed run ends with the files of an uninterrupted one."""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import os
+import signal
+from pathlib import Path
+
+import numpy as np
+import pytest
+from stable_baselines3.common.callbacks import BaseCallback
+
+from agents import TrainConfig, load_policy, train
+from agents.schedule import RunSchedule, TrainingInterrupted
+from cpf_commands.train_eval import TestSplitEvaluator
+
+#: 2 fleets x 5 vessels x 16 steps = 160 vessel-steps per PPO rollout.
+TINY = {"fleets": 2, "n_steps": 16, "batch_size": 80, "n_epochs": 1, "net_arch": (16, 16)}
+SCHEDULE = RunSchedule(eval_every=160, checkpoint_every=320)
+#: Columns that hold wall-clock times (they cannot repeat).
+CLOCK = ("time/", "wall_clock_seconds", "evaluation_seconds")
+
+
+def _config(algo: str) -> TrainConfig:
+    extra = {"buffer_size": 2_000, "batch_size": 32} if algo == "sac" else {}
+    return TrainConfig(
+        algo=algo,
+        scenario="bench_mild",
+        timesteps=640,
+        seed=3,
+        **{**TINY, **extra},  # type: ignore[arg-type]
+    )
+
+
+def _evaluator() -> TestSplitEvaluator:
+    return TestSplitEvaluator(["bench_mild"], seeds=2, steps=20)
+
+
+class _KillAt(BaseCallback):
+    """Raises (a killed process) once training passes ``steps`` vessel-steps."""
+
+    def __init__(self, steps: int) -> None:
+        super().__init__()
+        self.steps = steps
+
+    def _on_step(self) -> bool:
+        if self.model.num_timesteps >= self.steps:
+            raise RuntimeError("killed")
+        return True
+
+
+class _CtrlCAt(_KillAt):
+    """Sends this process SIGINT (Ctrl-C) once, after ``steps`` vessel-steps."""
+
+    def _on_step(self) -> bool:
+        if self.model.num_timesteps >= self.steps and self.steps >= 0:
+            self.steps = -1
+            os.kill(os.getpid(), signal.SIGINT)
+        return True
+
+
+def _rows(text: str) -> list[dict[str, str]]:
+    """CSV rows without the wall-clock columns."""
+    rows = list(csv.DictReader(io.StringIO(text)))
+    return [{k: v for k, v in row.items() if not k.startswith(CLOCK)} for row in rows]
+
+
+def _assert_same_run(a: Path, b: Path) -> None:
+    for name in ("policy.safetensors", "normalization.json", "manifest.json"):
+        if name == "manifest.json":
+            continue  # it hashes config.json, whose training time differs
+        assert (a / name).read_bytes() == (b / name).read_bytes(), name
+    for name in ("policy.safetensors", "normalization.json"):
+        assert (a / "best" / name).read_bytes() == (b / "best" / name).read_bytes(), name
+    assert _rows((a / "evaluations.csv").read_text()) == _rows((b / "evaluations.csv").read_text())
+    assert _rows((a / "progress.csv").read_text()) == _rows((b / "progress.csv").read_text())
+    record_a, record_b = (json.loads((f / "config.json").read_text()) for f in (a, b))
+    for record in (record_a, record_b):
+        del record["train_seconds"], record["vessel_steps_per_second"]
+    assert record_a == record_b
+
+
+@pytest.mark.parametrize("algo", ["ppo", "sac"])
+def test_a_killed_run_resumes_to_the_same_files(tmp_path: Path, algo: str) -> None:
+    config = _config(algo)
+    whole = train(config, tmp_path / "whole", False, evaluate=_evaluator(), schedule=SCHEDULE)
+    parts = tmp_path / "parts"
+    with pytest.raises(RuntimeError, match="killed"):  # after the checkpoint at 320
+        train(config, parts, False, callbacks=[_KillAt(490)], evaluate=_evaluator(),
+              schedule=SCHEDULE)  # fmt: skip
+    assert (parts / "checkpoint" / "state.json").is_file()
+    assert not (parts / "manifest.json").exists()  # no agent yet: it was killed
+    assert len(_rows((parts / "evaluations.csv").read_text())) > 3  # evaluated past 320
+    train(config, parts, False, evaluate=_evaluator(), schedule=SCHEDULE, resume=True)
+    _assert_same_run(whole, parts)
+    evaluated = [int(r["vessel_steps"]) for r in _rows((parts / "evaluations.csv").read_text())]
+    assert evaluated == [0, 160, 320, 480, 640]
+
+
+def test_ctrl_c_saves_a_complete_agent_and_resumes_exactly(tmp_path: Path) -> None:
+    config = _config("ppo")
+    whole = train(config, tmp_path / "whole", False, evaluate=_evaluator(), schedule=SCHEDULE)
+    parts = tmp_path / "parts"
+    with pytest.raises(TrainingInterrupted) as stop:
+        train(config, parts, False, callbacks=[_CtrlCAt(170)], evaluate=_evaluator(),
+              schedule=SCHEDULE)  # fmt: skip
+    assert stop.value.timesteps == 320  # the update in progress finished first
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # handler restored
+    record = json.loads((parts / "config.json").read_text())
+    assert record["interrupted"] is True and record["timesteps_done"] == 320
+    policy = load_policy(parts)  # a complete, verified agent folder
+    assert np.all(np.isfinite(policy.act_batch(np.zeros((1, 5, policy.obs_dim)))))
+    train(config, parts, False, evaluate=_evaluator(), schedule=SCHEDULE, resume=True)
+    assert "interrupted" not in json.loads((parts / "config.json").read_text())
+    _assert_same_run(whole, parts)
+
+
+def test_resume_refuses_what_it_cannot_continue(tmp_path: Path) -> None:
+    config = _config("ppo")
+    with pytest.raises(ValueError, match="nothing to resume"):
+        train(config, tmp_path / "none", False, resume=True)
+    folder = train(config, tmp_path / "run", False, schedule=RunSchedule(checkpoint_every=0))
+    with pytest.raises(ValueError, match="no checkpoint"):
+        train(config, folder, False, resume=True)
+    with pytest.raises(ValueError, match=r"differ from it: \['seed'\]"):
+        train(TrainConfig(**{**config.to_json(), "seed": 4}), folder, False, resume=True)
+
+
+def test_resume_extends_a_finished_run(tmp_path: Path) -> None:
+    """A checkpoint is written at the end: a larger budget continues where it stopped."""
+    config = _config("ppo")
+    longer = TrainConfig(**{**config.to_json(), "timesteps": 960})
+    whole = train(longer, tmp_path / "whole", False, schedule=SCHEDULE)
+    folder = train(config, tmp_path / "run", False, schedule=SCHEDULE)
+    assert (
+        json.loads((folder / "checkpoint" / "state.json").read_text())["extra"]["last_checkpoint"]
+        == 640
+    )
+    train(longer, folder, False, schedule=SCHEDULE, resume=True)
+    assert (whole / "policy.safetensors").read_bytes() == (
+        folder / "policy.safetensors"
+    ).read_bytes()

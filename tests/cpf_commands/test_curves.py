@@ -1,0 +1,90 @@
+"""``cpf-curves``: IQM over training seeds against a hand calculation, and the files it writes."""
+
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cpf_commands.bench.run import run_bench
+from cpf_commands.curves import curves_main
+
+#: Four runs (training seeds): (vessel_steps, wall_clock_seconds, mean_cost) per evaluation.
+RUNS = {
+    "s0": [(0, 1.0, 10.0), (100, 2.0, 8.0), (200, 3.0, 5.0)],
+    "s1": [(0, 1.5, 10.0), (100, 2.5, 9.0), (200, 3.5, 7.0)],
+    "s2": [(0, 1.0, 10.0), (100, 2.0, 12.0), (200, 4.0, 6.0)],
+    "s3": [(0, 2.0, 10.0), (100, 3.0, 30.0), (200, 4.0, 1.0)],
+}
+
+
+def _write_runs(root: Path, base: str = "nn_dsc", evaluation: dict | None = None) -> list[str]:
+    folders = []
+    for name, rows in RUNS.items():
+        folder = root / name
+        folder.mkdir(parents=True)
+        lines = ["vessel_steps,wall_clock_seconds,evaluation_seconds,mean_cost,cost_bench_mild"]
+        lines += [f"{s},{t},0.1,{c},{c}" for s, t, c in rows]
+        (folder / "evaluations.csv").write_text("\n".join(lines) + "\n")
+        record = {"config": {"scenario": "bench_mild", "base": base}, "evaluation": evaluation}
+        (folder / "run.json").write_text(json.dumps(record))
+        folders.append(str(folder))
+    return folders
+
+
+def _curves(out: Path) -> dict[str, list[dict[str, float]]]:
+    rows = list(csv.DictReader((out / "curves.csv").open()))
+    by_axis: dict[str, list[dict[str, float]]] = {}
+    for row in rows:
+        by_axis.setdefault(row.pop("axis"), []).append({k: float(v) for k, v in row.items()})
+    return by_axis
+
+
+def test_iqm_over_seeds_matches_the_hand_calculation(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "curves"
+    assert curves_main([*_write_runs(tmp_path / "runs"), "--out", str(out)]) == 0
+    curves = _curves(out)
+    steps = curves["vessel_steps"]
+    assert [r["x"] for r in steps] == [0, 100, 200]
+    # IQM of 4 values: drop the lowest and the highest, average the middle two.
+    assert [r["iqm"] for r in steps] == [10.0, (9 + 12) / 2, (5 + 6) / 2]
+    assert all(r["base_cost"] == 10.0 and r["runs"] == 4 for r in steps)  # the 0-step rows
+    assert steps[0]["ci_low"] == steps[0]["ci_high"] == 10.0  # no spread, no width
+    assert steps[2]["ci_low"] <= 5.5 <= steps[2]["ci_high"] < 10.0
+    # Wall clock: from the latest first evaluation (2 s) to the earliest last one (3 s); each
+    # run's cost is its latest evaluation by then: t=2: 8,10,12,10; t=2.5: 8,9,12,10;
+    # t=3: 5,9,12,30.
+    seconds = curves["wall_clock_seconds"]
+    assert [r["x"] for r in seconds] == [2.0, 2.5, 3.0]
+    assert [r["iqm"] for r in seconds] == [10.0, 9.5, 10.5]
+    printed = capsys.readouterr().out
+    assert "IQM below the base from 200 vessel-steps" in printed
+    assert "whole 95 % interval below from 200 vessel-steps" in printed
+    assert "IQM below the base from 2.5 s" in printed
+    assert (out / "curves.png").read_bytes()[:4] == b"\x89PNG"
+
+
+def test_the_base_line_of_an_analytic_policy_is_the_benchmark_number(tmp_path: Path) -> None:
+    evaluation = {"split": "test", "scenarios": ["bench_mild"], "seeds": 2, "steps": 20}
+    folders = _write_runs(tmp_path / "runs", base="none", evaluation=evaluation)
+    with pytest.raises(SystemExit):  # from scratch: no base at 0 steps to compare with
+        curves_main([*folders, "--out", str(tmp_path / "c")])
+    assert curves_main([*folders, "--out", str(tmp_path / "c"), "--base", "dsc"]) == 0
+    cells = run_bench(["dsc"], ["bench_mild"], seeds=2, steps=20, split="test")
+    expected = float(np.mean(cells[0].metrics["cost"]))
+    assert _curves(tmp_path / "c")["vessel_steps"][0]["base_cost"] == expected
+
+
+def test_a_run_without_evaluations_is_refused(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(SystemExit):
+        curves_main([str(tmp_path / "empty"), "--out", str(tmp_path / "c")])
+    assert "--eval-every" in capsys.readouterr().err
+    assert not (tmp_path / "c").exists()

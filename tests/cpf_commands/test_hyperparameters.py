@@ -1,0 +1,105 @@
+"""``cpf-train --config``: TOML hyperparameters, flags override them, the resolved file is saved."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+from conftest import ROOT
+
+from agents import TrainConfig
+from cpf_commands.hyperparameters import hyperparameters_toml, read_hyperparameters
+from cpf_commands.train import DEFAULT_CHECKPOINT_EVERY, DEFAULT_EVAL_EVERY, train_main
+from cpf_commands.train_eval import DEFAULT_EVAL_SEEDS
+
+EXAMPLES = ROOT / "examples" / "hyperparameters"
+TINY = """
+scenario = "bench_mild"
+fleets = 2
+timesteps = 160
+n_steps = 16
+batch_size = 80
+n_epochs = 1
+net_arch = [8]
+gamma = 0.95
+eval_every = 0
+"""
+
+
+def test_the_example_files_are_the_defaults() -> None:
+    defaults = TrainConfig()
+    schedule = {"eval_every": DEFAULT_EVAL_EVERY, "eval_seeds": DEFAULT_EVAL_SEEDS,
+                "checkpoint_every": DEFAULT_CHECKPOINT_EVERY}  # fmt: skip
+    ppo = read_hyperparameters(EXAMPLES / "ppo_residual.toml")
+    assert TrainConfig(**{k: v for k, v in ppo.items() if k not in schedule}) == defaults
+    assert {k: ppo[k] for k in schedule} == schedule
+    sac = read_hyperparameters(EXAMPLES / "sac_residual.toml")
+    config = TrainConfig(**{k: v for k, v in sac.items() if k not in schedule})
+    assert config == TrainConfig(algo="sac")
+
+
+def test_written_hyperparameters_read_back_exactly(tmp_path: Path) -> None:
+    config = TrainConfig(learning_rate=1e-20, extras=("base_action",), reward_form="log",
+                         net_arch=(3, 5), torch_threads=None)  # fmt: skip
+    text = hyperparameters_toml(config.to_json(), {"eval_every": 7})
+    (tmp_path / "h.toml").write_text(text)
+    values = read_hyperparameters(tmp_path / "h.toml")
+    assert values.pop("eval_every") == 7
+    assert TrainConfig(**values) == config
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("learning_rate = ", "not valid TOML"),
+        ("[ppo]\nn_steps = 3", "tables ['ppo']"),
+        ("n_step = 3", "unknown keys ['n_step']; valid keys"),
+    ],
+)
+def test_a_bad_file_is_refused_with_what_is_wrong(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], text: str, message: str
+) -> None:
+    path = tmp_path / "bad.toml"
+    path.write_text(text)
+    with pytest.raises(SystemExit):
+        train_main(["--config", str(path), "--out", str(tmp_path / "run")])
+    assert message in capsys.readouterr().err
+    assert not (tmp_path / "run").exists()  # nothing created
+
+
+def test_flags_override_the_file_and_the_resolved_file_is_saved(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    path = tmp_path / "h.toml"
+    path.write_text(TINY)
+    out = tmp_path / "run"
+    assert train_main(["--config", str(path), "--seed", "4", "--epochs", "2", "--out", str(out),
+                       "--quiet"]) == 0  # fmt: skip
+    config = TrainConfig.from_json(json.loads((out / "run.json").read_text())["config"])
+    assert (config.seed, config.n_epochs, config.gamma, config.net_arch) == (4, 2, 0.95, (8,))
+    assert config.scenario == "bench_mild" and config.learning_rate == 3e-4  # file, default
+    saved = out / "hyperparameters.toml"
+    again = tmp_path / "again"
+    assert train_main(["--config", str(saved), "--out", str(again), "--quiet"]) == 0
+    run = json.loads((out / "run.json").read_text())
+    assert json.loads((again / "run.json").read_text()) == run
+    assert (again / "policy.safetensors").read_bytes() == (out / "policy.safetensors").read_bytes()
+    with pytest.raises(SystemExit):
+        train_main(["--config", str(path), "--out", str(tmp_path / "x"), "--quiet",
+                    "--learning-rate", "-1"])  # fmt: skip
+    assert "learning_rate must be a number > 0" in capsys.readouterr().err
+
+
+def test_a_mixture_and_reward_overrides_round_trip_through_the_file(tmp_path: Path) -> None:
+    """The scenario list and the reward-overrides table read back as written."""
+    config = TrainConfig(
+        scenario=("bench_mild", "bench_switching"), reward_overrides={"heading": 1.0}
+    )
+    file = tmp_path / "h.toml"
+    file.write_text(hyperparameters_toml(config.to_json(), {}))
+    values = read_hyperparameters(file)
+    assert TrainConfig(**values) == config
+    file.write_text("[policy]\nnet_arch = [8]\n")
+    with pytest.raises(ValueError, match="only \\['reward_overrides'\\] may be a table"):
+        read_hyperparameters(file)
