@@ -16,7 +16,8 @@ A killed run leaves its last checkpoint; ``--resume`` continues from it. A
 resumed run ends with the same weights, normalization statistics, evaluation
 costs and ``progress.csv`` values as an uninterrupted run at the same seed;
 only wall-clock columns and fields (``time/*``, ``wall_clock_seconds``,
-``train_seconds``) differ (``tests/agents/test_resume.py``).
+``evaluation_seconds``, ``train_seconds``, ``vessel_steps_per_second``)
+differ (``tests/agents/test_resume.py``).
 """
 
 from __future__ import annotations
@@ -262,13 +263,16 @@ class TrainingRun:
                 rms.mean.copy(), rms.var.copy(), self.env.epsilon, self.env.clip_obs
             )
         seconds = self.schedule.seconds()
+        training = seconds - self.schedule.eval_seconds
         steps = int(self.model.num_timesteps)
         record: dict[str, Any] = {
             "config": self.config.to_json(),
             "num_envs": self.venv.num_envs,
             "timesteps_done": steps,
-            "train_seconds": round(seconds, 1),
-            "vessel_steps_per_second": round(steps / seconds) if seconds > 0 else 0,
+            "train_seconds": round(training, 1),  # held-out evaluations excluded
+            "vessel_steps_per_second": round(steps / training) if training > 0 else 0,
+            "evaluation_seconds": round(self.schedule.eval_seconds, 1),
+            "wall_clock_seconds": round(seconds, 1),
             "versions": _versions(),
         }
         if interrupted:

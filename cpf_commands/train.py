@@ -293,7 +293,8 @@ def train_main(argv: Sequence[str] | None = None) -> int:
     print(
         f"trained {config.algo} on {config.scenario} (base {config.base}) for "
         f"{record['timesteps_done']:,} vessel-steps{rounded} in {record['train_seconds']} s "
-        f"({record['vessel_steps_per_second']:,} vessel-steps/s); saved to {folder}/{best}\n"
+        f"({record['vessel_steps_per_second']:,} vessel-steps/s; held-out evaluations took "
+        f"{record['evaluation_seconds']} s more); saved to {folder}/{best}\n"
         f"evaluate: cpf-bench --policies {config.base if config.base != 'none' else 'nn_dsc'} "
         f"{folder} --scenarios {config.scenario}"
     )
