@@ -37,7 +37,7 @@ from stable_baselines3.common.running_mean_std import RunningMeanStd
 from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 
 from agents.agent_folder import Normalization, actor_tensors, network_from_tensors, write_agent
-from agents.checkpoint import load_checkpoint
+from agents.checkpoint import checkpoint_timesteps, load_checkpoint
 from agents.schedule import (
     BEST,
     CHECKPOINT,
@@ -105,8 +105,8 @@ def prepare_resume(folder: Path, config: TrainConfig) -> Path:
     """Check that ``config`` continues the run in ``folder``; return its checkpoint folder.
 
     Raises:
-        ValueError: No checkpoint, or ``config`` differs from the run's in anything
-            but ``timesteps``.
+        ValueError: No checkpoint, ``config`` differs from the run's in anything
+            but ``timesteps``, or a budget the checkpoint has reached already.
     """
     saved, _, _ = read_run_record(folder)
     differ = [
@@ -124,6 +124,12 @@ def prepare_resume(folder: Path, config: TrainConfig) -> Path:
         raise ValueError(
             f"{folder} has no checkpoint to resume from (the run was killed before its "
             "first one, or ran with --checkpoint-every 0); start it again with --force."
+        )
+    done = checkpoint_timesteps(checkpoint)
+    if config.timesteps <= done:
+        raise ValueError(
+            f"the checkpoint in {checkpoint} has trained {done:,} vessel-steps already, as many "
+            f"as the budget of {config.timesteps:,}; give a larger -n to extend the run."
         )
     return checkpoint
 

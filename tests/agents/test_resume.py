@@ -6,6 +6,7 @@ import csv
 import io
 import json
 import os
+import shutil
 import signal
 from pathlib import Path
 
@@ -129,6 +130,14 @@ def test_resume_refuses_what_it_cannot_continue(tmp_path: Path) -> None:
         train(config, folder, False, resume=True)
     with pytest.raises(ValueError, match=r"differ from it: \['seed'\]"):
         train(TrainConfig(**{**config.to_json(), "seed": 4}), folder, False, resume=True)
+    shutil.rmtree(folder)
+    folder = train(config, folder, False, schedule=SCHEDULE)
+    before = {path.name: path.read_bytes() for path in folder.iterdir() if path.is_file()}
+    for budget in (640, 100):  # reached already: refused, the folder untouched
+        shorter = TrainConfig(**{**config.to_json(), "timesteps": budget})
+        with pytest.raises(ValueError, match="has trained 640 vessel-steps already"):
+            train(shorter, folder, False, schedule=SCHEDULE, resume=True)
+    assert {path.name: path.read_bytes() for path in folder.iterdir() if path.is_file()} == before
 
 
 def test_resume_extends_a_finished_run(tmp_path: Path) -> None:
