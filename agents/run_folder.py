@@ -184,6 +184,7 @@ class TrainingRun:
         tensorboard_log: str | Path | None,
     ) -> None:
         self.config, self.folder = config, folder
+        self.resumed = checkpoint is not None
         torch.manual_seed(config.seed)
         if config.torch_threads is not None:
             torch.set_num_threads(config.torch_threads)
@@ -236,7 +237,7 @@ class TrainingRun:
                 self.model.learn(
                     self.total - done,
                     callback=[self.schedule, bar, *callbacks],
-                    reset_num_timesteps=done == 0,
+                    reset_num_timesteps=not self.resumed,
                 )
         except TrainingInterrupted:
             self._finish(interrupted=True)

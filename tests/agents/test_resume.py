@@ -177,3 +177,25 @@ def test_resume_is_exact_across_fleet_restarts(tmp_path: Path) -> None:
     rows = _rows((whole / "progress.csv").read_text())
     assert _rows((parts / "progress.csv").read_text()) == rows
     assert float(rows[-1]["rollout/ep_len_mean"]) > 0  # episodes did end during the run
+
+
+class _CtrlCBeforeTraining(BaseCallback):
+    """Sends SIGINT before the first rollout: the checkpoint is taken at 0 vessel-steps."""
+
+    def _on_training_start(self) -> None:
+        os.kill(os.getpid(), signal.SIGINT)
+
+    def _on_step(self) -> bool:
+        return True
+
+
+def test_a_run_stopped_before_its_first_update_resumes_exactly(tmp_path: Path) -> None:
+    config = _config("ppo")
+    whole = train(config, tmp_path / "whole", False, evaluate=_evaluator(), schedule=SCHEDULE)
+    parts = tmp_path / "parts"
+    with pytest.raises(TrainingInterrupted) as stop:
+        train(config, parts, False, callbacks=[_CtrlCBeforeTraining()], evaluate=_evaluator(),
+              schedule=SCHEDULE)  # fmt: skip
+    assert stop.value.timesteps == 0
+    train(config, parts, False, evaluate=_evaluator(), schedule=SCHEDULE, resume=True)
+    _assert_same_run(whole, parts)
