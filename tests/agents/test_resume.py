@@ -199,3 +199,37 @@ def test_a_run_stopped_before_its_first_update_resumes_exactly(tmp_path: Path) -
     assert stop.value.timesteps == 0
     train(config, parts, False, evaluate=_evaluator(), schedule=SCHEDULE, resume=True)
     _assert_same_run(whole, parts)
+
+
+@pytest.mark.slow
+def test_cpf_train_stops_on_a_real_ctrl_c_with_status_130_and_resumes(tmp_path: Path) -> None:
+    """The command in its own process, interrupted by SIGINT as a terminal would."""
+    import subprocess
+    import sys
+    import time
+
+    out = tmp_path / "run"
+    argv = ["--scenario", "bench_mild", "--fleets", "4", "-n", "400000", "--n-steps", "16",
+            "--batch-size", "320", "--epochs", "1", "--eval-every", "0", "--out", str(out),
+            "--quiet"]  # fmt: skip
+    code = f"from cpf_commands.train import train_main; raise SystemExit(train_main({argv!r}))"
+    process = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE,
+                               stderr=subprocess.PIPE, text=True)  # fmt: skip
+    deadline = time.monotonic() + 120
+    while (
+        not (out / "progress.csv").is_file()
+        or not (out / "progress.csv").read_text().count("\n") > 2
+    ):
+        assert process.poll() is None and time.monotonic() < deadline, process.communicate()
+        time.sleep(0.2)
+    process.send_signal(signal.SIGINT)
+    stdout, stderr = process.communicate(timeout=120)
+    assert process.returncode == 130, stderr
+    assert "Ctrl-C: finishing this update" in stdout
+    assert f"Continue with: cpf-train --resume --out {out}" in stderr
+    done = json.loads((out / "config.json").read_text())["timesteps_done"]
+    assert 0 < done < 400_000 and load_policy(out).n == 5
+    from cpf_commands.train import train_main
+
+    assert train_main(["--resume", "--out", str(out), "-n", str(done + 320), "--quiet"]) == 0
+    assert json.loads((out / "config.json").read_text())["timesteps_done"] == done + 320
