@@ -104,11 +104,19 @@ def read_run_record(folder: Path) -> tuple[TrainConfig, RunSchedule, Any]:
 def prepare_resume(folder: Path, config: TrainConfig) -> Path:
     """Check that ``config`` continues the run in ``folder``; return its checkpoint folder.
 
+    Also tidies what a killed run left (the caller holds the folder's lock): a
+    ``checkpoint/`` or ``best/`` killed between the two renames of its swap is put
+    back, and staging and scratch folders are removed.
+
     Raises:
         ValueError: No checkpoint, ``config`` differs from the run's in anything
             but ``timesteps``, or a budget the checkpoint has reached already.
     """
     saved, _, _ = read_run_record(folder)
+    for child in (CHECKPOINT, BEST):  # a run killed while swapping one in: put it back
+        atomic.recover_folder(folder / child, remove_leftovers=True)
+    for scratch in folder.glob(".evaluating-*"):  # a run killed while evaluating
+        shutil.rmtree(scratch, ignore_errors=True)
     differ = [
         name
         for name, value in config.to_json().items()

@@ -97,7 +97,12 @@ def test_a_killed_run_resumes_to_the_same_files(tmp_path: Path, algo: str) -> No
     assert (parts / "checkpoint" / "state.json").is_file()
     assert not (parts / "manifest.json").exists()  # no agent yet: it was killed
     assert len(_rows((parts / "evaluations.csv").read_text())) > 3  # evaluated past 320
+    # killed between the two renames of a checkpoint swap, and while evaluating
+    (parts / "checkpoint").rename(parts / ".checkpoint.old-x1")
+    (parts / ".checkpoint.new-x2").mkdir()
+    (parts / ".evaluating-x3").mkdir()
     train(config, parts, False, evaluate=_evaluator(), schedule=SCHEDULE, resume=True)
+    assert not list(parts.glob(".*"))  # put back and tidied
     _assert_same_run(whole, parts)
     evaluated = [int(r["vessel_steps"]) for r in _rows((parts / "evaluations.csv").read_text())]
     assert evaluated == [0, 160, 320, 480, 640]
