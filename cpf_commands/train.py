@@ -27,17 +27,12 @@ import copy
 import dataclasses
 import json
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from cpf_commands.common.arguments import non_negative_int, positive_int
-from cpf_commands.hyperparameters import (
-    FLAG_FIELDS,
-    SCHEDULE_KEYS,
-    hyperparameters_toml,
-    read_hyperparameters,
-)
+from cpf_commands.hyperparameters import SCHEDULE_KEYS, hyperparameters_toml, read_hyperparameters
 from cpf_commands.train_eval import DEFAULT_EVAL_SEEDS, TestSplitEvaluator, evaluation_scenarios
 from cpf_env import scenarios
 from cpf_env.scenarios.splits import check_training
@@ -166,6 +161,14 @@ RESUME_OPTIONS = {"out", "resume", "timesteps", "quiet", "tensorboard_log"}
 
 #: Option destinations that are not hyperparameters (what to do, not how to learn).
 NOT_HYPERPARAMETERS = {"out", "resume", "quiet", "force", "config", "tensorboard_log"}
+#: Options whose ``TrainConfig`` field has another name or form: destination -> (field,
+#: conversion of the parsed value or None). Every other hyperparameter option's destination
+#: is its field's name and its value the field's value (``hyperparameters.toml`` keys).
+FLAG_FIELDS: dict[str, tuple[str, Callable[[Any], Any] | None]] = {
+    "epochs": ("n_epochs", None),
+    "reward": ("reward_form", None),
+    "extras": ("extras", tuple),
+}
 
 
 def _resolve(args: argparse.Namespace, given: set[str]) -> tuple[TrainConfig, RunSchedule, int]:
@@ -179,7 +182,9 @@ def _resolve(args: argparse.Namespace, given: set[str]) -> tuple[TrainConfig, Ru
 
     values = {} if args.config is None else read_hyperparameters(args.config)
     for dest in sorted(given - NOT_HYPERPARAMETERS):
-        values[FLAG_FIELDS.get(dest, dest)] = getattr(args, dest)
+        field, convert = FLAG_FIELDS.get(dest, (dest, None))
+        value = getattr(args, dest)
+        values[field] = value if convert is None else convert(value)
     fields = {k: v for k, v in values.items() if k not in SCHEDULE_KEYS}
     config = TrainConfig(**fields)
     schedule = RunSchedule(
