@@ -39,7 +39,7 @@ from stable_baselines3.common.base_class import BaseAlgorithm
 from agents.snapshot import SnapshotError, capture, decode_value, encode_value, restore
 from cpf_env import atomic
 
-__all__ = ["CHECKPOINT_FILES", "load_checkpoint", "save_checkpoint"]
+__all__ = ["CHECKPOINT_FILES", "checkpoint_timesteps", "load_checkpoint", "save_checkpoint"]
 
 TENSORS = "tensors.safetensors"
 ARRAYS = "arrays.npz"
@@ -118,6 +118,19 @@ def save_checkpoint(folder: Path, model: BaseAlgorithm, extra: dict[str, Any]) -
     atomic.write_bytes(folder / TENSORS, save_tensors(tensors))
     atomic.write_bytes(folder / ARRAYS, buffer.getvalue())
     atomic.write_text(folder / STATE, json.dumps(state) + "\n")
+
+
+def checkpoint_timesteps(folder: Path) -> int:
+    """Vessel-steps (SB3 timesteps) the checkpoint in ``folder`` had trained.
+
+    Raises:
+        agents.snapshot.SnapshotError: No readable checkpoint there.
+    """
+    try:
+        state = json.loads((folder / STATE).read_text())
+        return int(decode_value(state["model"]["num_timesteps"], {}))
+    except (OSError, ValueError, KeyError, TypeError) as error:
+        raise SnapshotError(f"{folder / STATE} is not a readable checkpoint: {error}") from None
 
 
 def load_checkpoint(folder: Path, model: BaseAlgorithm) -> dict[str, Any]:

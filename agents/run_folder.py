@@ -16,7 +16,8 @@ A killed run leaves its last checkpoint; ``--resume`` continues from it. A
 resumed run ends with the same weights, normalization statistics, evaluation
 costs and ``progress.csv`` values as an uninterrupted run at the same seed;
 only wall-clock columns and fields (``time/*``, ``wall_clock_seconds``,
-``train_seconds``) differ (``tests/agents/test_resume.py``).
+``evaluation_seconds``, ``train_seconds``, ``vessel_steps_per_second``)
+differ (``tests/agents/test_resume.py``).
 """
 
 from __future__ import annotations
@@ -36,7 +37,7 @@ from stable_baselines3.common.running_mean_std import RunningMeanStd
 from stable_baselines3.common.vec_env import VecEnv, VecMonitor, VecNormalize
 
 from agents.agent_folder import Normalization, actor_tensors, network_from_tensors, write_agent
-from agents.checkpoint import load_checkpoint
+from agents.checkpoint import checkpoint_timesteps, load_checkpoint
 from agents.mixture_env import BalancedRewards, MixtureVecEnv
 from agents.schedule import (
     BEST,
@@ -105,11 +106,19 @@ def read_run_record(folder: Path) -> tuple[TrainConfig, RunSchedule, Any]:
 def prepare_resume(folder: Path, config: TrainConfig) -> Path:
     """Check that ``config`` continues the run in ``folder``; return its checkpoint folder.
 
+    Also tidies what a killed run left (the caller holds the folder's lock): a
+    ``checkpoint/`` or ``best/`` killed between the two renames of its swap is put
+    back, and staging and scratch folders are removed.
+
     Raises:
-        ValueError: No checkpoint, or ``config`` differs from the run's in anything
-            but ``timesteps``.
+        ValueError: No checkpoint, ``config`` differs from the run's in anything
+            but ``timesteps``, or a budget the checkpoint has reached already.
     """
     saved, _, _ = read_run_record(folder)
+    for child in (CHECKPOINT, BEST):  # a run killed while swapping one in: put it back
+        atomic.recover_folder(folder / child, remove_leftovers=True)
+    for scratch in folder.glob(".evaluating-*"):  # a run killed while evaluating
+        shutil.rmtree(scratch, ignore_errors=True)
     differ = [
         name
         for name, value in config.to_json().items()
@@ -125,6 +134,12 @@ def prepare_resume(folder: Path, config: TrainConfig) -> Path:
         raise ValueError(
             f"{folder} has no checkpoint to resume from (the run was killed before its "
             "first one, or ran with --checkpoint-every 0); start it again with --force."
+        )
+    done = checkpoint_timesteps(checkpoint)
+    if config.timesteps <= done:
+        raise ValueError(
+            f"the checkpoint in {checkpoint} has trained {done:,} vessel-steps already, as many "
+            f"as the budget of {config.timesteps:,}; give a larger -n to extend the run."
         )
     return checkpoint
 
@@ -179,6 +194,7 @@ class TrainingRun:
         tensorboard_log: str | Path | None,
     ) -> None:
         self.config, self.folder = config, folder
+        self.resumed = checkpoint is not None
         torch.manual_seed(config.seed)
         if config.torch_threads is not None:
             torch.set_num_threads(config.torch_threads)
@@ -233,7 +249,7 @@ class TrainingRun:
                 self.model.learn(
                     self.total - done,
                     callback=[self.schedule, bar, *self._mixture_logs(), *callbacks],
-                    reset_num_timesteps=done == 0,
+                    reset_num_timesteps=not self.resumed,
                 )
         except TrainingInterrupted:
             self._finish(interrupted=True)
@@ -270,13 +286,16 @@ class TrainingRun:
                 rms.mean.copy(), rms.var.copy(), self.env.epsilon, self.env.clip_obs
             )
         seconds = self.schedule.seconds()
+        training = seconds - self.schedule.eval_seconds
         steps = int(self.model.num_timesteps)
         record: dict[str, Any] = {
             "config": self.config.to_json(),
             "num_envs": self.venv.num_envs,
             "timesteps_done": steps,
-            "train_seconds": round(seconds, 1),
-            "vessel_steps_per_second": round(steps / seconds) if seconds > 0 else 0,
+            "train_seconds": round(training, 1),  # held-out evaluations excluded
+            "vessel_steps_per_second": round(steps / training) if training > 0 else 0,
+            "evaluation_seconds": round(self.schedule.eval_seconds, 1),
+            "wall_clock_seconds": round(seconds, 1),
             "versions": _versions(),
         }
         if interrupted:

@@ -43,6 +43,7 @@ from pathlib import Path
 
 import numpy as np
 from matplotlib.figure import Figure
+from matplotlib.ticker import FuncFormatter
 from numpy.typing import NDArray
 
 from cpf_commands.bench.run import run_bench
@@ -203,6 +204,7 @@ def figure(curves: Sequence[Curve], base_cost: float, names: Sequence[str]) -> F
                           label="95 % bootstrap interval")  # fmt: skip
         axes.axhline(base_cost, color="k", ls="--", lw=1.2, label="base policy")
         axes.set_xlabel(labels[curve.axis])
+        axes.xaxis.set_major_formatter(FuncFormatter(lambda value, _: f"{value:,.0f}"))
         axes.set_ylabel("evaluation cost (test split, lower is better)")
         axes.grid(alpha=0.3)
         if index == 0:

@@ -28,14 +28,10 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-__all__ = ["FLAG_FIELDS", "SCHEDULE_KEYS", "hyperparameters_toml", "read_hyperparameters"]
+__all__ = ["SCHEDULE_KEYS", "hyperparameters_toml", "read_hyperparameters"]
 
 #: Keys of the run's schedule (not ``TrainConfig`` fields).
 SCHEDULE_KEYS = ("eval_every", "eval_seeds", "checkpoint_every")
-#: ``cpf-train`` option destinations whose ``TrainConfig`` field has another name.
-FLAG_FIELDS = {"epochs": "n_epochs", "reward": "reward_form"}
-#: Keys whose value is a table (a ``TrainConfig`` field holding a dict).
-TABLE_KEYS = frozenset({"reward_overrides"})
 
 
 def _valid_keys() -> list[str]:
@@ -48,8 +44,9 @@ def read_hyperparameters(path: str | Path) -> dict[str, Any]:
     """The keys and values of a hyperparameter file (checked by name, not yet by value).
 
     Raises:
-        ValueError: A missing or unreadable file, invalid TOML, a table, or an unknown key
-            (the message lists the valid ones). Values are checked by ``TrainConfig``.
+        ValueError: A missing or unreadable file, invalid TOML, or an unknown key (also a
+            ``[section]``; the message lists the valid ones). Values are checked by
+            ``TrainConfig`` (a field whose value is a mapping is an inline table).
     """
     try:
         import tomllib
@@ -65,15 +62,7 @@ def read_hyperparameters(path: str | Path) -> dict[str, Any]:
         raise ValueError(f"cannot read the hyperparameter file {file}: {error}") from None
     except tomllib.TOMLDecodeError as error:
         raise ValueError(f"{file} is not valid TOML: {error}") from None
-    tables = sorted(
-        key for key, value in values.items() if isinstance(value, dict) and key not in TABLE_KEYS
-    )
-    if tables:
-        raise ValueError(
-            f"{file} has tables {tables}; write every key at the top level (only "
-            f"{sorted(TABLE_KEYS)} may be a table)."
-        )
-    valid = _valid_keys()
+    valid = _valid_keys()  # a [section] is an unknown key too: the file is flat
     unknown = sorted(set(values) - set(valid))
     if unknown:
         raise ValueError(f"{file} has unknown keys {unknown}; valid keys: {valid}.")
@@ -81,7 +70,7 @@ def read_hyperparameters(path: str | Path) -> dict[str, Any]:
 
 
 def _toml_value(value: Any) -> str:
-    """One TOML value: strings, booleans, integers, floats and lists of them."""
+    """One TOML value: strings, booleans, integers, floats, and lists and mappings of them."""
     if isinstance(value, bool):
         return "true" if value else "false"
     if isinstance(value, int):
@@ -96,8 +85,9 @@ def _toml_value(value: Any) -> str:
         return json.dumps(value)  # a TOML basic string
     if isinstance(value, list | tuple):
         return "[" + ", ".join(_toml_value(item) for item in value) + "]"
-    if isinstance(value, dict):  # an inline table; the keys are field names (bare keys)
-        return "{" + ", ".join(f"{k} = {_toml_value(v)}" for k, v in value.items()) + "}"
+    if isinstance(value, dict):  # an inline table, keys quoted
+        items = ", ".join(f"{json.dumps(str(k))} = {_toml_value(v)}" for k, v in value.items())
+        return "{" + items + "}"
     raise ValueError(f"cannot write {value!r} as a TOML value.")
 
 

@@ -27,17 +27,12 @@ import copy
 import dataclasses
 import json
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from cpf_commands.common.arguments import non_negative_int, positive_int
-from cpf_commands.hyperparameters import (
-    FLAG_FIELDS,
-    SCHEDULE_KEYS,
-    hyperparameters_toml,
-    read_hyperparameters,
-)
+from cpf_commands.hyperparameters import SCHEDULE_KEYS, hyperparameters_toml, read_hyperparameters
 from cpf_commands.train_eval import DEFAULT_EVAL_SEEDS, TestSplitEvaluator
 from cpf_env import scenarios
 from cpf_env.scenarios.splits import SHIFT_SUFFIX, check_training
@@ -225,6 +220,15 @@ RESUME_OPTIONS = {"out", "resume", "timesteps", "quiet", "tensorboard_log"}
 
 #: Option destinations that are not hyperparameters (what to do, not how to learn).
 NOT_HYPERPARAMETERS = {"out", "resume", "quiet", "force", "config", "tensorboard_log"}
+#: Options whose ``TrainConfig`` field has another name or form: destination -> (field,
+#: conversion of the parsed value or None). Every other hyperparameter option's destination
+#: is its field's name and its value the field's value (``hyperparameters.toml`` keys).
+FLAG_FIELDS: dict[str, tuple[str, Callable[[Any], Any] | None]] = {
+    "epochs": ("n_epochs", None),
+    "reward": ("reward_form", None),
+    "extras": ("extras", tuple),
+    "reward_weight": ("reward_overrides", _reward_overrides),
+}
 
 
 def _resolve(args: argparse.Namespace, given: set[str]) -> tuple[TrainConfig, RunSchedule, int]:
@@ -238,13 +242,13 @@ def _resolve(args: argparse.Namespace, given: set[str]) -> tuple[TrainConfig, Ru
 
     values = {} if args.config is None else read_hyperparameters(args.config)
     for dest in sorted(given - NOT_HYPERPARAMETERS):
-        values[FLAG_FIELDS.get(dest, dest)] = getattr(args, dest)
+        field, convert = FLAG_FIELDS.get(dest, (dest, None))
+        value = getattr(args, dest)
+        values[field] = value if convert is None else convert(value)
     fields = {k: v for k, v in values.items() if k not in SCHEDULE_KEYS}
-    if "scenario" in fields:
+    if "scenario" in fields:  # from the file or the flag: a name, names, or "suite"
         named = fields["scenario"]
         fields["scenario"] = _scenarios([named] if isinstance(named, str) else list(named))
-    if "reward_weight" in fields:
-        fields["reward_overrides"] = _reward_overrides(fields.pop("reward_weight"))
     config = TrainConfig(**fields)
     schedule = RunSchedule(
         values.get("eval_every", args.eval_every),
@@ -358,7 +362,8 @@ def train_main(argv: Sequence[str] | None = None) -> int:
     print(
         f"trained {config.algo} on {' + '.join(config.scenarios)} (base {config.base}) for "
         f"{record['timesteps_done']:,} vessel-steps{rounded} in {record['train_seconds']} s "
-        f"({record['vessel_steps_per_second']:,} vessel-steps/s); saved to {folder}/{best}\n"
+        f"({record['vessel_steps_per_second']:,} vessel-steps/s; held-out evaluations took "
+        f"{record['evaluation_seconds']} s more); saved to {folder}/{best}\n"
         f"evaluate: cpf-bench --policies {config.base if config.base != 'none' else 'nn_dsc'} "
         f"{folder} --scenarios {' '.join(config.scenarios)} --split test"
     )

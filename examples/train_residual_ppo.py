@@ -81,7 +81,7 @@ def train_runs(
                     **settings,  # type: ignore[arg-type]
                 )
                 print(f"training {folder.name} ...", flush=True)
-                train(config, folder, progress=False)
+                train(config, folder, progress=False, overwrite=True)  # redo a killed run
     return folders
 
 

@@ -9,17 +9,24 @@ run's own metrics), and write figures and metrics.
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 import time
 from collections.abc import Sequence
-from typing import Any
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 from cpf_commands.common.arguments import positive_int
 from cpf_commands.common.policies import policy_argument, trusting_pickles
 from cpf_env import scenarios
 
+if TYPE_CHECKING:
+    from cpf_commands.run.video import VideoRecorder
+
 __all__ = ["run_main"]
 
+#: The scenario without --scenario and without an agent folder: the paper's reproduction.
+DEFAULT_SCENARIO = "wang2014_fine"
 #: Claims that need a part of the policy, and what it is.
 _CLAIM_NEEDS = {2: "NN", 5: "speed estimator"}
 
@@ -27,6 +34,7 @@ _CLAIM_NEEDS = {2: "NN", 5: "speed estimator"}
 def _run_parser(prog: str = "cpf-run") -> argparse.ArgumentParser:
     from baselines import POLICIES
     from baselines.gains import LEAKAGE_LAWS
+    from cpf_commands.run.video import FPS, FRAMES
 
     parser = argparse.ArgumentParser(
         prog=prog,
@@ -36,7 +44,12 @@ def _run_parser(prog: str = "cpf-run") -> argparse.ArgumentParser:
         "scenarios wang2014 and wang2014_fine), else the run's own metrics. Without "
         "arguments: the paper's reproduction, wang2014_fine with nn_dsc, leakage=plain.",
     )
-    parser.add_argument("--scenario", default="wang2014_fine", choices=scenarios.list_scenarios())
+    parser.add_argument(
+        "--scenario",
+        default=None,
+        choices=scenarios.list_scenarios(),
+        help=f"default: {DEFAULT_SCENARIO}, or a cpf-train --out folder's training scenario",
+    )
     parser.add_argument(
         "--policy",
         default="nn_dsc",
@@ -66,6 +79,19 @@ def _run_parser(prog: str = "cpf-run") -> argparse.ArgumentParser:
     )
     parser.add_argument("--out", default="outputs", help="output directory (default: outputs)")
     parser.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
+    parser.add_argument(
+        "--video",
+        metavar="FILE",
+        default=None,
+        help="also render the episode (fleet 0) to FILE: .mp4 (needs ffmpeg on PATH) or .gif",
+    )
+    parser.add_argument(
+        "--video-every",
+        type=positive_int,
+        default=None,
+        help=f"control steps between video frames (default: at most {FRAMES} frames, "
+        f"played at {FPS} frames/s)",
+    )
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     return parser
 
@@ -90,12 +116,44 @@ def _print_metrics(metrics: dict[str, Any]) -> None:
     )
 
 
+def _default_scenario(policy: str) -> str:
+    """The paper's scenario, or the training scenario of an agent folder (its first, if several).
+
+    Raises:
+        ValueError: An agent folder whose config.json is unreadable.
+    """
+    record = Path(policy) / "config.json"
+    if not record.is_file():
+        return DEFAULT_SCENARIO
+    try:
+        scenario = json.loads(record.read_text())["config"]["scenario"]
+    except (OSError, json.JSONDecodeError, KeyError, TypeError) as error:
+        raise ValueError(f"{record} is not a readable training record: {error}") from None
+    return scenario if isinstance(scenario, str) else str(scenario[0])
+
+
+def _video_recorder(args: argparse.Namespace) -> VideoRecorder:
+    """The recorder of ``--video``, its file checked before the episode runs."""
+    from cpf_commands.run.video import VideoRecorder, check_video_path, frame_period
+    from cpf_env.envs.parallel import make_scenario
+
+    check_video_path(args.video)
+    scenario = make_scenario(args.scenario)
+    horizon = scenario.max_steps if args.steps is None else args.steps
+    return VideoRecorder(scenario, args.video_every or frame_period(horizon))
+
+
 def run_main(argv: Sequence[str] | None = None, prog: str = "cpf-run") -> int:
     """``cpf-run``: see ``cpf-run --help``; ``prog`` names the command in its help."""
     from cpf_commands.run.reproduce import PAPER_SCENARIOS, reproduce
 
     parser = _run_parser(prog)
     args = parser.parse_args(argv)
+    try:
+        args.scenario = args.scenario or _default_scenario(args.policy)
+        video = None if args.video is None else _video_recorder(args)
+    except ValueError as error:
+        parser.error(str(error))
     if not args.quiet:
         print("Loading the simulator kernels (numba compiles them on the first run: 10-30 s)...")
         sys.stdout.flush()
@@ -110,7 +168,10 @@ def run_main(argv: Sequence[str] | None = None, prog: str = "cpf-run") -> int:
             figures=not args.no_figures,
             progress=not args.quiet,
             leakage=args.leakage,
+            observer=video,
         )
+        if video is not None:
+            video.write(args.video)
     except ValueError as error:
         parser.error(str(error))
     elapsed = time.perf_counter() - start
@@ -140,6 +201,12 @@ def run_main(argv: Sequence[str] | None = None, prog: str = "cpf-run") -> int:
             f"{args.scenario} is not one of them."
         )
         _print_metrics(metrics)
+    if video is not None:
+        print(
+            f"Video of fleet 0: {args.video} ({len(video.frames)} frames, one every "
+            f"{video.every} steps = {video.seconds_per_frame:.2f} s simulated, at {video.fps} "
+            "frames/s)"
+        )
     if "output_directory" in metrics:
         written = "metrics.json and trajectory.npz"
         if not args.no_figures:

@@ -28,7 +28,7 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from cpf_commands.common.policies import BenchPolicy, resolve_policy
-from cpf_commands.common.rollout import rollout
+from cpf_commands.common.rollout import StepObserver, rollout
 from cpf_env.envs.parallel import make_scenario
 from cpf_env.model.paths import encode_paths, evaluate_paths
 from cpf_env.scenarios import Scenario
@@ -45,6 +45,7 @@ def run_episode(
     steps: int | None = None,
     policy_options: dict[str, Any] | None = None,
     progress: bool = False,
+    observer: StepObserver | None = None,
 ) -> Trajectory:
     """Run one episode of ``policy`` on ``scenario`` and record it.
 
@@ -56,6 +57,8 @@ def run_episode(
             the run stops early if the episode terminates.
         policy_options: Gains of a baseline (e.g. ``K2=(30, 30, 5)``).
         progress: Show a progress bar.
+        observer: Also sees every step, after the trajectory's recorder (e.g. a
+            ``cpf_commands.run.video.VideoRecorder``).
 
     Returns:
         The recorded trajectory (T = number of steps taken); its
@@ -64,7 +67,7 @@ def run_episode(
     """
     resolved = make_scenario(scenario)
     controller = resolve_policy(policy, resolved, **(policy_options or {}))
-    recorder = _TrajectoryRecorder()
+    recorder = _TrajectoryRecorder(observer)
     horizon = resolved.max_steps if steps is None else int(steps)
     if horizon < 1:
         raise ValueError(f"steps must be >= 1, got {steps}.")
@@ -102,7 +105,8 @@ class _TrajectoryRecorder:
     _BEFORE = ("eta", "nu", "theta", "errors")
     _AFTER = ("theta_dot", "tau_command", "tau_applied", "reward")
 
-    def __init__(self) -> None:
+    def __init__(self, observer: StepObserver | None = None) -> None:
+        self._observer = observer
         names = ("time", "v0", *self._BEFORE, *self._AFTER)
         self.series: dict[str, list[np.ndarray]] = {name: [] for name in names}
         self.extras: dict[str, list[np.ndarray]] = {"lumped_true": []}
@@ -124,8 +128,12 @@ class _TrajectoryRecorder:
             if self._mass is None:
                 self._mass = sim.mass_matrices()[0]
             self.extras["lumped_true"].append(np.einsum("ijk,ik->ij", self._mass, nubar_dot - free))
+        if self._observer is not None:
+            self._observer.before(sim, actions, policy)
 
     def after(self, sim: FleetSim) -> None:
         """Record what the step's action did."""
         for name in self._AFTER:
             self.series[name].append(getattr(sim.arrays, name)[0].copy())
+        if self._observer is not None:
+            self._observer.after(sim)

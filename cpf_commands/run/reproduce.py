@@ -26,6 +26,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from baselines import POLICIES, NNDSCGains
+from cpf_commands.common.rollout import StepObserver
 from cpf_commands.run.experiment import run_episode
 from cpf_commands.run.figures import write_figures
 from cpf_env.envs.parallel import make_scenario
@@ -340,6 +341,7 @@ def reproduce(
     figures: bool = True,
     progress: bool = False,
     leakage: str | None = None,
+    observer: StepObserver | None = None,
 ) -> tuple[dict[str, Any], list[Claim]]:
     """Run the reproduction and write ``metrics.json``, ``trajectory.npz`` and figures.
 
@@ -355,6 +357,7 @@ def reproduce(
             time estimate is that of the run).
         leakage: Weight-law reading of nn_dsc and its ablations (default:
             ``default_leakage(scenario)``); must be None for other policies.
+        observer: Also sees every step of the episode (``cpf-run --video``).
 
     Returns:
         (metrics, claims); the claims are empty off the paper's scenarios.
@@ -367,7 +370,13 @@ def reproduce(
     if progress:
         warm_up(resolved)
     trajectory = run_episode(
-        resolved, policy, seed=seed, steps=steps, policy_options=options, progress=progress
+        resolved,
+        policy,
+        seed=seed,
+        steps=steps,
+        policy_options=options,
+        progress=progress,
+        observer=observer,
     )
     metrics = episode_metrics(trajectory)
     policy_type = POLICIES.get(policy)

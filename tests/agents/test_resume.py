@@ -6,6 +6,7 @@ import csv
 import io
 import json
 import os
+import shutil
 import signal
 from pathlib import Path
 
@@ -79,7 +80,9 @@ def _assert_same_run(a: Path, b: Path) -> None:
     assert _rows((a / "progress.csv").read_text()) == _rows((b / "progress.csv").read_text())
     record_a, record_b = (json.loads((f / "config.json").read_text()) for f in (a, b))
     for record in (record_a, record_b):
-        del record["train_seconds"], record["vessel_steps_per_second"]
+        for field in ("train_seconds", "vessel_steps_per_second", "evaluation_seconds",
+                      "wall_clock_seconds"):  # fmt: skip
+            del record[field]
     assert record_a == record_b
 
 
@@ -94,7 +97,12 @@ def test_a_killed_run_resumes_to_the_same_files(tmp_path: Path, algo: str) -> No
     assert (parts / "checkpoint" / "state.json").is_file()
     assert not (parts / "manifest.json").exists()  # no agent yet: it was killed
     assert len(_rows((parts / "evaluations.csv").read_text())) > 3  # evaluated past 320
+    # killed between the two renames of a checkpoint swap, and while evaluating
+    (parts / "checkpoint").rename(parts / ".checkpoint.old-x1")
+    (parts / ".checkpoint.new-x2").mkdir()
+    (parts / ".evaluating-x3").mkdir()
     train(config, parts, False, evaluate=_evaluator(), schedule=SCHEDULE, resume=True)
+    assert not list(parts.glob(".*"))  # put back and tidied
     _assert_same_run(whole, parts)
     evaluated = [int(r["vessel_steps"]) for r in _rows((parts / "evaluations.csv").read_text())]
     assert evaluated == [0, 160, 320, 480, 640]
@@ -127,6 +135,14 @@ def test_resume_refuses_what_it_cannot_continue(tmp_path: Path) -> None:
         train(config, folder, False, resume=True)
     with pytest.raises(ValueError, match=r"differ from it: \['seed'\]"):
         train(TrainConfig(**{**config.to_json(), "seed": 4}), folder, False, resume=True)
+    shutil.rmtree(folder)
+    folder = train(config, folder, False, schedule=SCHEDULE)
+    before = {path.name: path.read_bytes() for path in folder.iterdir() if path.is_file()}
+    for budget in (640, 100):  # reached already: refused, the folder untouched
+        shorter = TrainConfig(**{**config.to_json(), "timesteps": budget})
+        with pytest.raises(ValueError, match="has trained 640 vessel-steps already"):
+            train(shorter, folder, False, schedule=SCHEDULE, resume=True)
+    assert {path.name: path.read_bytes() for path in folder.iterdir() if path.is_file()} == before
 
 
 def test_resume_extends_a_finished_run(tmp_path: Path) -> None:
@@ -143,3 +159,82 @@ def test_resume_extends_a_finished_run(tmp_path: Path) -> None:
     assert (whole / "policy.safetensors").read_bytes() == (
         folder / "policy.safetensors"
     ).read_bytes()
+
+
+def test_resume_is_exact_across_fleet_restarts(tmp_path: Path) -> None:
+    """Fleet 1 of 2 restarts at step 600 (staggered) and 1800 of bench_saturation (1,200-step
+    episodes); the checkpoint at step 1,024 lies between, so the resumed part restarts a fleet
+    from its restored generator and continues the other fleet's episode."""
+    config = TrainConfig(scenario="bench_saturation", timesteps=19_200, seed=5,
+                         **{**TINY, "n_steps": 64, "batch_size": 640})  # type: ignore[arg-type]  # fmt: skip
+    schedule = RunSchedule(checkpoint_every=10_240)
+    whole = train(config, tmp_path / "whole", False, schedule=schedule)
+    parts = tmp_path / "parts"
+    with pytest.raises(RuntimeError, match="killed"):
+        train(config, parts, False, callbacks=[_KillAt(12_000)], schedule=schedule)
+    train(config, parts, False, schedule=schedule, resume=True)
+    assert (whole / "policy.safetensors").read_bytes() == (
+        parts / "policy.safetensors"
+    ).read_bytes()
+    assert (whole / "normalization.json").read_bytes() == (
+        parts / "normalization.json"
+    ).read_bytes()
+    rows = _rows((whole / "progress.csv").read_text())
+    assert _rows((parts / "progress.csv").read_text()) == rows
+    assert float(rows[-1]["rollout/ep_len_mean"]) > 0  # episodes did end during the run
+
+
+class _CtrlCBeforeTraining(BaseCallback):
+    """Sends SIGINT before the first rollout: the checkpoint is taken at 0 vessel-steps."""
+
+    def _on_training_start(self) -> None:
+        os.kill(os.getpid(), signal.SIGINT)
+
+    def _on_step(self) -> bool:
+        return True
+
+
+def test_a_run_stopped_before_its_first_update_resumes_exactly(tmp_path: Path) -> None:
+    config = _config("ppo")
+    whole = train(config, tmp_path / "whole", False, evaluate=_evaluator(), schedule=SCHEDULE)
+    parts = tmp_path / "parts"
+    with pytest.raises(TrainingInterrupted) as stop:
+        train(config, parts, False, callbacks=[_CtrlCBeforeTraining()], evaluate=_evaluator(),
+              schedule=SCHEDULE)  # fmt: skip
+    assert stop.value.timesteps == 0
+    train(config, parts, False, evaluate=_evaluator(), schedule=SCHEDULE, resume=True)
+    _assert_same_run(whole, parts)
+
+
+@pytest.mark.slow
+def test_cpf_train_stops_on_a_real_ctrl_c_with_status_130_and_resumes(tmp_path: Path) -> None:
+    """The command in its own process, interrupted by SIGINT as a terminal would."""
+    import subprocess
+    import sys
+    import time
+
+    out = tmp_path / "run"
+    argv = ["--scenario", "bench_mild", "--fleets", "4", "-n", "400000", "--n-steps", "16",
+            "--batch-size", "320", "--epochs", "1", "--eval-every", "0", "--out", str(out),
+            "--quiet"]  # fmt: skip
+    code = f"from cpf_commands.train import train_main; raise SystemExit(train_main({argv!r}))"
+    process = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE,
+                               stderr=subprocess.PIPE, text=True)  # fmt: skip
+    deadline = time.monotonic() + 120
+    while (
+        not (out / "progress.csv").is_file()
+        or not (out / "progress.csv").read_text().count("\n") > 2
+    ):
+        assert process.poll() is None and time.monotonic() < deadline, process.communicate()
+        time.sleep(0.2)
+    process.send_signal(signal.SIGINT)
+    stdout, stderr = process.communicate(timeout=120)
+    assert process.returncode == 130, stderr
+    assert "Ctrl-C: finishing this update" in stdout
+    assert f"Continue with: cpf-train --resume --out {out}" in stderr
+    done = json.loads((out / "config.json").read_text())["timesteps_done"]
+    assert 0 < done < 400_000 and load_policy(out).n == 5
+    from cpf_commands.train import train_main
+
+    assert train_main(["--resume", "--out", str(out), "-n", str(done + 320), "--quiet"]) == 0
+    assert json.loads((out / "config.json").read_text())["timesteps_done"] == done + 320

@@ -11,6 +11,7 @@ import torch
 
 from agents.snapshot import SnapshotError, capture, decode_value, encode_value, restore
 from agents.training import TrainConfig, make_env
+from agents.vec_env import FleetVecEnv
 
 
 def test_values_round_trip_exactly() -> None:
@@ -35,8 +36,7 @@ def test_values_round_trip_exactly() -> None:
 
 
 def test_an_env_restores_in_place_and_steps_as_the_original() -> None:
-    config = TrainConfig(scenario="bench_lossy_links", fleets=2)
-    env = make_env(config)
+    env = FleetVecEnv("bench_lossy_links", num_fleets=2, max_steps=20)
     env.seed(5)
     env.reset()
     rng = np.random.default_rng(0)
@@ -44,13 +44,16 @@ def test_an_env_restores_in_place_and_steps_as_the_original() -> None:
         env.step(rng.uniform(-1, 1, (env.num_envs, 3)))
     arrays: dict[str, object] = {}
     tree = capture(env, "env", arrays)
-    fresh = make_env(config)
+    fresh = FleetVecEnv("bench_lossy_links", num_fleets=2, max_steps=20)
     fresh.reset()
     restore(fresh, tree, "env", arrays)
     actions = rng.uniform(-1, 1, (env.num_envs, 3))
-    for _ in range(30):  # lossy links, delays, random disturbances: all in the state
+    resets = 0
+    for _ in range(30):  # lossy links, delays, disturbances, and random restarts of the fleets
         a, b = env.step(actions), fresh.step(actions)
         assert all(np.array_equal(x, y) for x, y in zip(a[:3], b[:3], strict=True))
+        resets += int(a[2].any())
+    assert resets >= 2  # fleets restarted from their generators after the restore
     with pytest.raises(SnapshotError, match="resume with the code and configuration"):
         restore(make_env(TrainConfig(scenario="bench_lossy_links", fleets=2, base="dsc")), tree,
                 "env", arrays)  # fmt: skip

@@ -47,13 +47,17 @@ def test_written_hyperparameters_read_back_exactly(tmp_path: Path) -> None:
     values = read_hyperparameters(tmp_path / "h.toml")
     assert values.pop("eval_every") == 7
     assert TrainConfig(**values) == config
+    # a mapping-valued setting is an inline table, its keys quoted
+    mapping = hyperparameters_toml({"n_steps": 3}, {"eval_seeds": {"a b": 1.5, "c": [1, 2]}})
+    (tmp_path / "m.toml").write_text(mapping)
+    assert read_hyperparameters(tmp_path / "m.toml")["eval_seeds"] == {"a b": 1.5, "c": [1, 2]}
 
 
 @pytest.mark.parametrize(
     ("text", "message"),
     [
         ("learning_rate = ", "not valid TOML"),
-        ("[ppo]\nn_steps = 3", "tables ['ppo']"),
+        ("[ppo]\nn_steps = 3", "unknown keys ['ppo']"),
         ("n_step = 3", "unknown keys ['n_step']; valid keys"),
     ],
 )
@@ -101,5 +105,5 @@ def test_a_mixture_and_reward_overrides_round_trip_through_the_file(tmp_path: Pa
     values = read_hyperparameters(file)
     assert TrainConfig(**values) == config
     file.write_text("[policy]\nnet_arch = [8]\n")
-    with pytest.raises(ValueError, match="only \\['reward_overrides'\\] may be a table"):
+    with pytest.raises(ValueError, match="unknown keys \\['policy'\\]"):
         read_hyperparameters(file)
