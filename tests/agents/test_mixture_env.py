@@ -192,3 +192,36 @@ def test_balanced_rewards_divide_each_scenario_by_its_running_mean_cost() -> Non
     last_scale = env.scales[mixture.group_of_slot]
     np.testing.assert_allclose(balanced[-1], raw_steps[-1] / last_scale, rtol=1e-6)
     assert env.scales[0] != env.scales[1]
+
+
+def test_each_scenarios_episode_cost_is_logged(tmp_path: Path) -> None:
+    """ScenarioEpisodes logs rollout/ep_cost/<name>: the mean of that scenario's episode costs."""
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.logger import configure
+    from stable_baselines3.common.vec_env import VecMonitor
+
+    from agents.schedule import ScenarioEpisodes
+
+    short = [{"max_steps": 8}, {"max_steps": 12}]
+    mixture = MixtureVecEnv(
+        ["bench_mild", "bench_large_fleet"], 2, stagger=False, scenario_overrides=short
+    )
+    monitor = VecMonitor(mixture)
+    model = PPO("MlpPolicy", monitor, n_steps=24, batch_size=60, n_epochs=1, seed=0)
+    model.set_logger(configure(str(tmp_path), ["csv"]))
+    costs: dict[str, list[float]] = {}
+
+    class Record(ScenarioEpisodes):
+        def _on_step(self) -> bool:
+            for info in self.locals["infos"]:
+                if "episode" in info:
+                    costs.setdefault(info["scenario"], []).append(-info["episode"]["r"])
+            return super()._on_step()
+
+    model.learn(24 * mixture.num_envs, callback=Record())
+    logged = (tmp_path / "progress.csv").read_text().splitlines()
+    header, row = logged[0].split(","), logged[-1].split(",")
+    for name in ("bench_mild", "bench_large_fleet"):
+        value = float(row[header.index(f"rollout/ep_cost/{name}")])
+        assert value == pytest.approx(np.mean(costs[name]), rel=1e-6)
+    assert len(costs["bench_mild"]) == 3 * 5 and len(costs["bench_large_fleet"]) == 2 * 10

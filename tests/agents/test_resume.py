@@ -238,3 +238,22 @@ def test_cpf_train_stops_on_a_real_ctrl_c_with_status_130_and_resumes(tmp_path: 
 
     assert train_main(["--resume", "--out", str(out), "-n", str(done + 320), "--quiet"]) == 0
     assert json.loads((out / "config.json").read_text())["timesteps_done"] == done + 320
+
+
+def test_a_killed_mixture_run_resumes_to_the_same_files(tmp_path: Path) -> None:
+    """Two scenarios, balanced rewards: the groups and the reward scales are in the checkpoint."""
+    config = TrainConfig(
+        scenario=("bench_mild", "bench_large_fleet"),
+        timesteps=960,
+        seed=3,
+        **{**TINY, "batch_size": 120},  # type: ignore[arg-type]
+    )  # 2 fleets: 5 + 10 slots, 240 vessel-steps per rollout
+    schedule = RunSchedule(eval_every=240, checkpoint_every=480)
+    evaluate = TestSplitEvaluator(config.scenarios, seeds=1, steps=20)
+    whole = train(config, tmp_path / "whole", False, evaluate=evaluate, schedule=schedule)
+    parts = tmp_path / "parts"
+    with pytest.raises(RuntimeError, match="killed"):
+        train(config, parts, False, callbacks=[_KillAt(700)], evaluate=evaluate,
+              schedule=schedule)  # fmt: skip
+    train(config, parts, False, evaluate=evaluate, schedule=schedule, resume=True)
+    _assert_same_run(whole, parts)
