@@ -89,12 +89,11 @@ def busy_competitor() -> Iterator[subprocess.Popen[bytes]]:
 
 def _bench_seconds(seeds: int) -> tuple[float, int]:
     """Wall time (s) of ``cpf-bench``'s default policies on the suite, and its episodes."""
-    from baselines import POLICIES
-    from cpf_commands.bench.run import run_bench
+    from cpf_commands.bench.run import default_policies, run_bench
     from cpf_env.scenarios.suite import list_suite
 
     start = time.perf_counter()
-    cells = run_bench(list(POLICIES), list_suite(), seeds=seeds, out=None, figures=False)
+    cells = run_bench(default_policies(), list_suite(), seeds=seeds, out=None, figures=False)
     return time.perf_counter() - start, sum(len(cell.seeds) for cell in cells)
 
 

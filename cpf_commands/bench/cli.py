@@ -17,6 +17,7 @@ from cpf_commands.bench.marl_eval import write_marl_eval
 from cpf_commands.bench.run import (
     BASE_SEED,
     OUTPUT_FILES,
+    default_policies,
     labelled_policies,
     reference_label,
     run_bench,
@@ -41,8 +42,6 @@ OUTPUT_BYTES_PER_EPISODE = 1024
 
 
 def _parser() -> argparse.ArgumentParser:
-    from baselines import POLICIES
-
     parser = argparse.ArgumentParser(
         prog="cpf-bench",
         allow_abbrev=False,
@@ -53,10 +52,12 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument(
         "--policies",
         nargs="+",
-        default=list(POLICIES),
+        default=default_policies(),
         type=policy_argument,
         metavar="POLICY",
-        help="baseline names or cpf-train --out folders (default: every baseline)",
+        help="baseline names or cpf-train --out folders (default: every deployable baseline "
+        "and the headroom reference nn_dsc_privileged, which is told the true model error "
+        "and disturbances and has ideal links: not deployable)",
     )
     add_scenarios_argument(
         parser,

@@ -3,8 +3,10 @@
 Every policy (a baseline name, a ``cpf-train --out`` folder, an ``.onnx`` file
 or a policy object, all through ``cpf_commands.common.policies.resolve_policy``)
 runs every scenario on the same evaluation seeds ``base_seed + k`` (paired
-episodes), all seeds of a (policy, scenario) in one batched simulator
-(``cpf_commands.bench.episodes``). A scenario in which nothing is random
+episodes). A local run puts every policy's seeds of a scenario in one
+batched simulator (``cpf_commands.common.rollout.rollout_group``: one large
+batch per scenario, the same numbers as a batch per cell); a Ray run sends
+one (policy, scenario) cell per task (``cpf_commands.bench.episodes``). A scenario in which nothing is random
 (``cpf_env.scenarios.suite.is_deterministic``) runs one episode: its seeds would all
 give the same one. ``write_outputs`` fills the output folder with
 ``episodes.csv``, ``summary.csv``, ``summary.md`` and one figure per headline
@@ -32,10 +34,12 @@ from cpf_commands.common.policies import (
     BenchPolicy,
     PolicySpec,
     TrustedAgentFolder,
+    baseline_names,
     policy_label,
     resolve_policy,
 )
 from cpf_commands.common.ray_runtime import start_ray
+from cpf_commands.common.rollout import rollout_group
 from cpf_env import atomic
 from cpf_env.envs.parallel import make_scenario
 from cpf_env.scenarios import Scenario
@@ -45,6 +49,7 @@ from cpf_env.scenarios.suite import is_deterministic
 __all__ = [
     "BASE_SEED",
     "DEFAULT_REFERENCE",
+    "default_policies",
     "OUTPUT_FILES",
     "labelled_policies",
     "reference_label",
@@ -61,6 +66,17 @@ OUTPUT_FILES = frozenset(
 BASE_SEED = EVALUATION_SEED
 #: The reference policy when none is given and it runs.
 DEFAULT_REFERENCE = "nn_dsc"
+
+
+def default_policies() -> list[str]:
+    """``cpf-bench``'s default policy set: every deployable baseline and the headroom reference.
+
+    The headroom reference (``baselines.HEADROOM_REFERENCE``, privileged, not
+    deployable) is what the share of the gap closed is measured against.
+    """
+    from baselines import HEADROOM_REFERENCE, POLICIES
+
+    return [*POLICIES, HEADROOM_REFERENCE]
 
 
 def labelled_policies(
@@ -158,19 +174,7 @@ def run_cell(
     label: str, spec: PolicySpec, task: Scenario, seeds: tuple[int, ...], steps: int | None
 ) -> CellResult:
     """One (policy, scenario) cell: build the policy, run its episodes, measure them."""
-    return _measure(label, resolve_policy(spec, task), task, seeds, steps)
-
-
-def _measure(
-    label: str,
-    policy: BenchPolicy,
-    task: Scenario,
-    seeds: tuple[int, ...],
-    steps: int | None,
-    progress: tqdm | None = None,
-) -> CellResult:
-    """Run a built policy's episodes on ``task`` and measure them."""
-    metrics = run_episodes(policy, task, seeds, steps=steps, progress=progress)
+    metrics = run_episodes(resolve_policy(spec, task), task, seeds, steps=steps)
     return CellResult(label, task.name, seeds, is_deterministic(task), metrics)
 
 
@@ -180,23 +184,35 @@ def _run_here(
     steps: int | None,
     progress: bool,
 ) -> list[CellResult]:
-    """The cells one after the other in this process, with a progress bar over steps."""
-    total = sum(task.max_steps if steps is None else int(steps) for *_, task, _ in jobs)
-    cells = []
+    """The cells in this process, one batch per scenario, with a progress bar over steps.
+
+    Returns the cells in the order of ``jobs``.
+    """
+    groups: dict[str, list[_Job]] = {}
+    for job in jobs:
+        groups.setdefault(job[2].name, []).append(job)
+    total = sum(
+        group[0][2].max_steps if steps is None else int(steps) for group in groups.values()
+    )
+    results: dict[tuple[str, str], CellResult] = {}
     with tqdm(total=total, disable=not progress, unit="step", desc="cpf-bench") as bar:
-        for label, _, task, seeds in jobs:
-            bar.set_postfix_str(f"{label} on {task.name}")
-            cells.append(_measure(label, built[(label, task.name)], task, seeds, steps, bar))
-    return cells
+        for name, group in groups.items():
+            bar.set_postfix_str(f"{len(group)} policies on {name}")
+            task, seeds = group[0][2], group[0][3]
+            policies = [built[(label, name)] for label, *_ in group]
+            measured = rollout_group(policies, task, seeds, steps=steps, progress=bar)
+            for (label, *_), metrics in zip(group, measured, strict=True):
+                results[(label, name)] = CellResult(
+                    label, name, seeds, is_deterministic(task), metrics
+                )
+    return [results[(label, task.name)] for label, _, task, _ in jobs]
 
 
 def _absolute(spec: PolicySpec) -> PolicySpec:
     """An agent folder given by a relative path made absolute (Ray workers run elsewhere)."""
-    from baselines import POLICIES
-
     if isinstance(spec, TrustedAgentFolder):
         return spec  # already absolute; keeps the user's trust
-    if isinstance(spec, Path) or (isinstance(spec, str) and spec not in POLICIES):
+    if isinstance(spec, Path) or (isinstance(spec, str) and spec not in baseline_names()):
         return Path(spec).resolve()
     return spec
 
