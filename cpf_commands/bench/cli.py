@@ -22,6 +22,7 @@ from cpf_commands.bench.run import (
     reference_label,
     run_bench,
 )
+from cpf_commands.bench.verdict import COST_MARGIN, check_margin
 from cpf_commands.common.arguments import add_scenarios_argument
 from cpf_commands.common.outputs import claim_output_folder
 from cpf_commands.common.policies import policy_argument, trusting_pickles
@@ -112,6 +113,15 @@ def _parser() -> argparse.ArgumentParser:
         "if it runs, else the first policy)",
     )
     parser.add_argument(
+        "--cost-margin",
+        type=float,
+        default=COST_MARGIN,
+        metavar="FRACTION",
+        help="practical-equivalence margin of the verdict: a cost difference whose 95 %% "
+        "interval lies within +-FRACTION x the reference's mean cost is 'equivalent' "
+        f"(default: {COST_MARGIN:g}, i.e. {100 * COST_MARGIN:g}%%; 0 turns it off)",
+    )
+    parser.add_argument(
         "--marl-eval",
         default=None,
         metavar="FILE",
@@ -131,6 +141,8 @@ def _command(args: argparse.Namespace) -> str:
         parts += ["--split", args.split]
     if args.reference is not None:
         parts += ["--reference", args.reference]
+    if args.cost_margin != COST_MARGIN:
+        parts += ["--cost-margin", repr(args.cost_margin)]
     if args.base_seed != BASE_SEED:
         parts += ["--base-seed", str(args.base_seed)]
     if args.steps is not None:
@@ -139,9 +151,10 @@ def _command(args: argparse.Namespace) -> str:
 
 
 def _claim_output(args: argparse.Namespace) -> atomic.FolderLock:
-    """Refuse a run whose memory or output folder would fail it, before it starts; lock --out."""
+    """Refuse a run whose flags, memory or output folder would fail it; lock --out."""
     if args.seeds < 1:
         raise ValueError(f"--seeds must be >= 1, got {args.seeds}.")
+    check_margin(args.cost_margin)
     horizons = [args.steps or make_scenario(name).max_steps for name in args.scenarios]
     fleets = max(make_scenario(name).n for name in args.scenarios)
     needed = args.seeds * (max(horizons) * SERIES_BYTES_PER_STEP + fleets * STATE_BYTES_PER_VESSEL)
@@ -200,6 +213,7 @@ def bench_main(argv: Sequence[str] | None = None) -> int:
             address=args.address,
             reference=args.reference,
             split=args.split,
+            cost_margin=args.cost_margin,
         )
         if args.marl_eval is not None:
             write_marl_eval(cells, args.marl_eval)
@@ -211,7 +225,7 @@ def bench_main(argv: Sequence[str] | None = None) -> int:
         lock.release()
     elapsed = time.perf_counter() - start
     table = views.terminal_table(
-        cells, reference_label(args.reference, labelled_policies(args.policies))
+        cells, reference_label(args.reference, labelled_policies(args.policies)), args.cost_margin
     )
     if table:
         print(table)

@@ -6,11 +6,11 @@ runs every scenario on the same evaluation seeds ``base_seed + k`` (paired
 episodes). A local run puts every policy's seeds of a scenario in one
 batched simulator (``cpf_commands.common.rollout.rollout_group``: one large
 batch per scenario, the same numbers as a batch per cell); a Ray run sends
-one (policy, scenario) cell per task (``cpf_commands.bench.episodes``). A scenario in which nothing is random
-(``cpf_env.scenarios.suite.is_deterministic``) runs one episode: its seeds would all
-give the same one. ``write_outputs`` fills the output folder with
-``episodes.csv``, ``summary.csv``, ``summary.md`` and one figure per headline
-metric; ``cpf_commands.bench.cli`` is the command around it.
+one (policy, scenario) cell per task (``cpf_commands.bench.episodes``). A
+scenario in which nothing is random (``cpf_env.scenarios.suite.is_deterministic``)
+runs one episode: its seeds would all give the same one. ``write_outputs``
+fills the output folder with ``episodes.csv``, ``summary.csv``, ``summary.md``
+and the figures; ``cpf_commands.bench.cli`` is the command around it.
 
 Example:
     >>> from cpf_commands.bench.run import run_bench
@@ -29,6 +29,7 @@ from tqdm.auto import tqdm
 from cpf_commands.bench import views
 from cpf_commands.bench.episodes import run_episodes
 from cpf_commands.bench.report import HEADLINE, CellResult, episodes_csv, summarize, summary_csv
+from cpf_commands.bench.verdict import COST_MARGIN, check_margin
 from cpf_commands.common.outputs import foreign_files
 from cpf_commands.common.policies import (
     BenchPolicy,
@@ -49,8 +50,8 @@ from cpf_env.scenarios.suite import is_deterministic
 __all__ = [
     "BASE_SEED",
     "DEFAULT_REFERENCE",
-    "default_policies",
     "OUTPUT_FILES",
+    "default_policies",
     "labelled_policies",
     "reference_label",
     "run_bench",
@@ -104,6 +105,7 @@ def write_outputs(
     reference: str = "nn_dsc",
     skipped: Mapping[tuple[str, str], str] | None = None,
     figures: bool = True,
+    cost_margin: float = COST_MARGIN,
 ) -> list[dict[str, object]]:
     """Write episodes.csv, summary.csv, summary.md and one PNG per headline metric to ``out``.
 
@@ -117,6 +119,8 @@ def write_outputs(
         reference: The policy scores are relative to.
         skipped: (policy, scenario) -> why it was not run, listed in summary.md.
         figures: Write the PNG figures.
+        cost_margin: The verdict's practical-equivalence margin of the cost, a
+            fraction of the reference's mean cost.
 
     Returns:
         The summary rows.
@@ -129,7 +133,7 @@ def write_outputs(
     with atomic.staged_folder(directory) as staging:  # all files or none, no stale figure
         atomic.write_text(staging / "episodes.csv", episodes_csv(cells))
         atomic.write_text(staging / "summary.csv", summary_csv(rows))
-        text = views.markdown(rows, cells, command, reference, skipped or {})
+        text = views.markdown(rows, cells, command, reference, skipped or {}, cost_margin)
         atomic.write_text(staging / "summary.md", text)
         if figures:
             for metric, title in HEADLINE:
@@ -191,9 +195,7 @@ def _run_here(
     groups: dict[str, list[_Job]] = {}
     for job in jobs:
         groups.setdefault(job[2].name, []).append(job)
-    total = sum(
-        group[0][2].max_steps if steps is None else int(steps) for group in groups.values()
-    )
+    total = sum(group[0][2].max_steps if steps is None else int(steps) for group in groups.values())
     results: dict[tuple[str, str], CellResult] = {}
     with tqdm(total=total, disable=not progress, unit="step", desc="cpf-bench") as bar:
         for name, group in groups.items():
@@ -263,6 +265,7 @@ def run_bench(
     address: str | None = None,
     reference: str | None = None,
     split: str = "test",
+    cost_margin: float = COST_MARGIN,
 ) -> list[CellResult]:
     """Run every policy on every scenario for ``seeds`` paired seeds, and write the outputs.
 
@@ -286,6 +289,8 @@ def run_bench(
         split: ``test`` (the scenarios as named, on the evaluation seeds) or
             ``shift`` (each suite scenario's ``_shift`` variant, outside its
             training ranges; ``cpf_env.scenarios.splits``).
+        cost_margin: The verdict's practical-equivalence margin of the cost, a
+            fraction >= 0 of the reference's mean cost (``verdict.COST_MARGIN``).
 
     Returns:
         One ``CellResult`` per (policy, scenario), policies outermost. A policy
@@ -304,6 +309,7 @@ def run_bench(
         raise ValueError(f"--out {out} is a file; give a folder (it is created if needed).")
     if split not in SPLITS:
         raise ValueError(f"unknown split {split!r}; choose one of {list(SPLITS)}.")
+    check_margin(cost_margin)
     if split == "shift":
         scenario_names = [_shifted(name) for name in scenario_names]
     tasks = [make_scenario(name) for name in scenario_names]
@@ -326,7 +332,15 @@ def run_bench(
     else:
         cells = _run_here(jobs, built, steps, progress)
     if out is not None:
-        write_outputs(cells, out, command, reference=reference, skipped=skipped, figures=figures)
+        write_outputs(
+            cells,
+            out,
+            command,
+            reference=reference,
+            skipped=skipped,
+            figures=figures,
+            cost_margin=cost_margin,
+        )
     return cells
 
 

@@ -27,6 +27,7 @@ Example:
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable, Sequence
 from statistics import NormalDist
 
@@ -102,15 +103,31 @@ def bootstrap_interval(
         raise ValueError("bootstrap_interval needs at least one stratum, none of them empty.")
     if not 0.0 < confidence < 1.0:
         raise ValueError(f"confidence must be in (0, 1), got {confidence}.")
-    rng = np.random.default_rng(seed)
+    draws = _resample_indices(tuple(array.size for array in arrays), replicates, seed)
     resampled = np.concatenate(
-        [array[rng.integers(0, array.size, size=(replicates, array.size))] for array in arrays],
-        axis=1,
+        [array[index] for array, index in zip(arrays, draws, strict=True)], axis=1
     )
     estimates = statistic(resampled)
     tail = 100.0 * (1.0 - confidence) / 2.0
     low, high = np.percentile(estimates, [tail, 100.0 - tail])
     return float(low), float(high)
+
+
+@functools.lru_cache(maxsize=64)
+def _resample_indices(
+    sizes: tuple[int, ...], replicates: int, seed: int
+) -> tuple[NDArray[np.int64], ...]:
+    """The bootstrap's draws: per stratum of N_s samples, (replicates, N_s) indices.
+
+    One seeded generator draws the strata in order; the draws depend only on
+    the sizes, so they are made once and shared by every metric and cell of a
+    run (read-only arrays), the same numbers as drawing them each time.
+    """
+    rng = np.random.default_rng(seed)
+    draws = tuple(rng.integers(0, size, size=(replicates, size)) for size in sizes)
+    for draw in draws:
+        draw.flags.writeable = False
+    return draws
 
 
 def wilson_interval(successes: float, trials: int, confidence: float = 0.95) -> tuple[float, float]:

@@ -14,7 +14,13 @@ from matplotlib.figure import Figure
 from matplotlib.ticker import FuncFormatter
 
 from cpf_commands.bench.report import HEADLINE, CellResult
-from cpf_commands.bench.verdict import GUARDED, RELATIVE_TOLERANCE, Verdict, verdicts
+from cpf_commands.bench.verdict import (
+    COST_MARGIN,
+    GUARDED,
+    RELATIVE_TOLERANCE,
+    Verdict,
+    verdicts,
+)
 
 __all__ = ["figure", "markdown", "markdown_table", "terminal_table", "verdict_rows"]
 
@@ -40,16 +46,17 @@ def verdict_rows(found: Sequence[Verdict]) -> list[list[str]]:
     return rows
 
 
-def terminal_table(cells: Sequence[CellResult], reference: str) -> str:
+def terminal_table(cells: Sequence[CellResult], reference: str, margin: float = COST_MARGIN) -> str:
     """The verdicts as a plain-text table for the terminal ('' without the reference)."""
-    body = verdict_rows(verdicts(cells, reference))
+    body = verdict_rows(verdicts(cells, reference, margin))
     if not body:
         return ""
     table = [list(VERDICT_HEADER), *body]
     widths = [max(len(row[k]) for row in table) for k in range(len(VERDICT_HEADER))]
     lines = ["  ".join(cell.ljust(w) for cell, w in zip(row, widths, strict=True)) for row in table]
-    return f"against {reference}:\n" + "\n".join(
-        [line.rstrip() for line in lines] + _regressions(cells, reference)
+    return (
+        f"against {reference}: (equivalent: cost interval within +-{margin:.1%} of its mean)\n"
+        + "\n".join([line.rstrip() for line in lines] + _regressions(cells, reference, margin))
     )
 
 
@@ -57,7 +64,7 @@ def terminal_table(cells: Sequence[CellResult], reference: str) -> str:
 _UNITS = {"cross-track": " m", "heading": " rad", "formation": " m"}
 
 
-def _regressions(cells: Sequence[CellResult], reference: str) -> list[str]:
+def _regressions(cells: Sequence[CellResult], reference: str, margin: float) -> list[str]:
     """One line per verdict with a regressed guarded metric: the means, policy vs reference.
 
     Final-window means in SI units (m, rad; progress as a fraction of v0 T,
@@ -66,7 +73,7 @@ def _regressions(cells: Sequence[CellResult], reference: str) -> list[str]:
     by_key = {(cell.policy, cell.scenario): cell for cell in cells}
     label_of = {label: name for name, (label, _, _) in GUARDED.items()}
     lines = []
-    for result in verdicts(cells, reference):
+    for result in verdicts(cells, reference, margin):
         if not result.regressed:
             continue
         cell, base = by_key[result.policy, result.scenario], by_key[reference, result.scenario]
@@ -104,6 +111,7 @@ def markdown(
     command: str,
     reference: str,
     skipped: Mapping[tuple[str, str], str],
+    margin: float = COST_MARGIN,
 ) -> str:
     """``summary.md``: the command, how to read it, and the headline metrics' tables."""
     index = {(r["policy"], r["scenario"], r["metric"]): r for r in rows}
@@ -122,7 +130,7 @@ def markdown(
         f"`P(beats)`: probability of a lower cost than {reference} on the same seed. "
         "All numbers: `summary.csv`.",
     ]
-    judged = verdicts(cells, reference)
+    judged = verdicts(cells, reference, margin)
     if judged:
         lines += [
             "",
@@ -134,7 +142,9 @@ def markdown(
             "cross-track, heading and formation error, progress, failures) worse by more "
             f"than {RELATIVE_TOLERANCE:.0%} of {reference}'s mean (and a physical floor) with "
             "its interval above zero; else `mixed` names the metric that regressed. "
-            "See docs/benchmark.md.",
+            f"`equivalent`: the whole cost interval lies within +-{margin:.1%} of {reference}'s "
+            "mean cost (the practical-equivalence margin, `--cost-margin`), too small a "
+            "difference to matter either way. See docs/benchmark.md.",
             "",
         ]
         lines += markdown_table(VERDICT_HEADER, verdict_rows(judged))

@@ -30,7 +30,7 @@ __all__ = ["ideal_link_observations", "lumped_uncertainty"]
 
 
 def lumped_uncertainty(sim: FleetSim) -> NDArray[np.float64]:
-    """f (B, n, 3) in N, N, N m with M nu' = tau - f at the current state (true model).
+    """The lumped f (B, n, 3) in N, N, N m: M nu' = tau - f at the current state, true model.
 
     f = -M nu'(tau = 0): the plant's acceleration without control force,
     times the true mass matrix, with the wave, wind and current of the

@@ -413,11 +413,13 @@ def test_commands_reject_an_unknown_policy(capsys):
         assert "neither a baseline" in capsys.readouterr().err
 
 
-def test_default_bench_is_every_baseline_on_the_suite():
+def test_default_bench_is_every_baseline_and_the_headroom_reference_on_the_suite():
+    from baselines import HEADROOM_REFERENCE, PRIVILEGED
     from cpf_commands.bench.cli import _parser
 
     args = _parser().parse_args([])
-    assert args.policies == list(POLICIES) and args.scenarios == suite.list_suite()
+    assert args.policies == [*POLICIES, HEADROOM_REFERENCE]
+    assert HEADROOM_REFERENCE in PRIVILEGED and args.scenarios == suite.list_suite()
     assert args.seeds == 10
 
 
