@@ -4,7 +4,9 @@
 metric (mean and IQM with 95 % bootstrap intervals, failures, the ratio to
 the reference policy's mean, the mean paired difference to it with its
 bootstrap interval, and the probability of beating it on a paired episode
-with Wilson's interval), plus, when the reference ran, rows over all scenarios together
+with Wilson's interval; for the cost, the share of the gap between the
+reference and the headroom reference that the policy closes), plus, when the
+reference ran, rows over all scenarios together
 (scenario ``"all"``, metric ``<metric>_normalized``): every episode divided
 by the reference's mean on its scenario, resampled by a bootstrap stratified
 by scenario. Numbers are written with ``repr`` (shortest round-trip form) and
@@ -22,10 +24,19 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from baselines import HEADROOM_REFERENCE
 from cpf_commands.bench import stats
 from cpf_commands.bench.episodes import METRICS
 
-__all__ = ["HEADLINE", "SUMMARY_COLUMNS", "CellResult", "episodes_csv", "summarize", "summary_csv"]
+__all__ = [
+    "GAP_METRICS",
+    "HEADLINE",
+    "SUMMARY_COLUMNS",
+    "CellResult",
+    "episodes_csv",
+    "summarize",
+    "summary_csv",
+]
 
 #: Metrics shown in summary.md and drawn as figures: (metric, heading), cost first.
 HEADLINE: tuple[tuple[str, str], ...] = (
@@ -66,7 +77,12 @@ SUMMARY_COLUMNS = (
     "p_beats_reference",
     "p_ci_low",
     "p_ci_high",
+    "gap_closed",
+    "gap_ci_low",
+    "gap_ci_high",
 )
+#: Metrics with a share of the gap closed (lower is better for both).
+GAP_METRICS = ("cost", "cost_window")
 
 
 @dataclass(frozen=True)
@@ -125,6 +141,9 @@ def _row(
         "p_beats_reference": None,
         "p_ci_low": None,
         "p_ci_high": None,
+        "gap_closed": None,
+        "gap_ci_low": None,
+        "gap_ci_high": None,
     }
 
 
@@ -183,12 +202,16 @@ def _suite_rows(
     return rows
 
 
-def summarize(cells: Sequence[CellResult], reference: str = "nn_dsc") -> list[dict[str, object]]:
+def summarize(
+    cells: Sequence[CellResult], reference: str = "nn_dsc", headroom: str = HEADROOM_REFERENCE
+) -> list[dict[str, object]]:
     """Summary rows (``SUMMARY_COLUMNS``) of every cell and metric, then the suite-wide rows.
 
     Metrics a policy does not have (NaN in every episode, e.g. a speed-estimate
     error without an estimator) get no row. The suite-wide rows need the
-    reference on every scenario.
+    reference on every scenario. The gap columns (``GAP_METRICS``) need the
+    reference and the ``headroom`` reference on the scenario, and stay empty
+    where the headroom reference is not better than the reference.
     """
     by_key = {(cell.policy, cell.scenario): cell for cell in cells}
     rows: list[dict[str, object]] = []
@@ -202,6 +225,12 @@ def summarize(cells: Sequence[CellResult], reference: str = "nn_dsc") -> list[di
             row = _row(cell.policy, cell.scenario, metric, [values], failures, cell.deterministic)
             if base is not None and not np.all(np.isnan(base.metrics[metric])):
                 _compare(row, values, base.metrics[metric], metric, cell.policy != reference)
+            top = by_key.get((headroom, cell.scenario))
+            if metric in GAP_METRICS and base is not None and top is not None:
+                if cell.policy not in (reference, headroom):
+                    found = stats.gap_closed(base.metrics[metric], values, top.metrics[metric])
+                    if found is not None:
+                        row.update(zip(("gap_closed", "gap_ci_low", "gap_ci_high"), found, strict=True))
             rows.append(row)
     return rows + _suite_rows(cells, reference, by_key)
 

@@ -18,6 +18,10 @@ lines (rliable 1.2 does not import with pandas 3) and tested against scipy:
   and N/N, where a percentile bootstrap collapses to a point.
 * ``paired_difference``: the mean over seeds of (policy - reference) with a
   percentile bootstrap interval that resamples the pairs together.
+* ``gap_closed``: the share of the gap between the reference and a
+  headroom reference that a policy closes, (ref - policy) / (ref - headroom)
+  of the means, with a paired bootstrap interval (the seeds resampled
+  together for all three).
 
 Example:
     >>> import numpy as np
@@ -37,6 +41,7 @@ from numpy.typing import ArrayLike, NDArray
 __all__ = [
     "BOOTSTRAP_SEED",
     "bootstrap_interval",
+    "gap_closed",
     "iqm",
     "paired_difference",
     "probability_of_beating",
@@ -221,3 +226,50 @@ def probability_of_beating(
     wins = (x < y) + 0.5 * (x == y)
     low, high = wilson_interval(float(wins.sum()), int(wins.size), confidence)
     return float(wins.mean()), low, high
+
+
+def gap_closed(
+    reference: ArrayLike,
+    values: ArrayLike,
+    headroom: ArrayLike,
+    confidence: float = 0.95,
+    replicates: int = REPLICATES,
+    seed: int = BOOTSTRAP_SEED,
+) -> tuple[float, float, float] | None:
+    """Share of the reference-to-headroom gap a policy closes, with a paired bootstrap interval.
+
+    share = (mean(reference) - mean(values)) / (mean(reference) - mean(headroom)),
+    lower is better: 0 = the reference's level, 1 = the headroom reference's,
+    below 0 worse than the reference, above 1 better than the headroom. Each
+    bootstrap replicate resamples the N seeds once and applies the draw to
+    all three arrays (they ran the same seeds).
+
+    Args:
+        reference: The reference policy's values per seed (N,).
+        values: The policy's values on the same seeds (N,).
+        headroom: The headroom reference's values on the same seeds (N,).
+        confidence: Coverage of the interval.
+        replicates: Bootstrap replicates.
+        seed: Seed of the resampling generator.
+
+    Returns:
+        (share, low, high), or None when the headroom reference is not better
+        than the reference with this confidence (the lower end of the paired
+        interval of reference - headroom is not above zero): then there is no
+        gap to close and the ratio would only measure noise.
+
+    Raises:
+        ValueError: Arrays of different shapes or empty.
+    """
+    x, y = _paired(values, reference)
+    h, _ = _paired(headroom, reference)
+    gap, gap_low, _ = paired_difference(y, h, confidence, replicates, seed)
+    if not gap_low > 0.0:
+        return None
+    (draw,) = _resample_indices((y.size,), replicates, seed)
+    shares = (y[draw].mean(axis=1) - x[draw].mean(axis=1)) / (
+        y[draw].mean(axis=1) - h[draw].mean(axis=1)
+    )
+    tail = 100.0 * (1.0 - confidence) / 2.0
+    low, high = np.percentile(shares, [tail, 100.0 - tail])
+    return float((y.mean() - x.mean()) / gap), float(low), float(high)

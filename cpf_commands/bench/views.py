@@ -13,7 +13,8 @@ import numpy as np
 from matplotlib.figure import Figure
 from matplotlib.ticker import FuncFormatter
 
-from cpf_commands.bench.report import HEADLINE, CellResult
+from baselines import HEADROOM_REFERENCE, PRIVILEGED
+from cpf_commands.bench.report import GAP_METRICS, HEADLINE, CellResult
 from cpf_commands.bench.verdict import (
     COST_MARGIN,
     GUARDED,
@@ -22,9 +23,22 @@ from cpf_commands.bench.verdict import (
     verdicts,
 )
 
-__all__ = ["figure", "markdown", "markdown_table", "terminal_table", "verdict_rows"]
+__all__ = [
+    "display_name",
+    "figure",
+    "gap_table",
+    "markdown",
+    "markdown_table",
+    "terminal_table",
+    "verdict_rows",
+]
 
 VERDICT_HEADER = ("policy", "scenario", "N", "cost difference [95 %]", "P(beats) [95 %]", "verdict")
+
+
+def display_name(policy: str) -> str:
+    """A policy's name in tables: a privileged reference says that it is one."""
+    return f"{policy} (privileged, not deployable)" if policy in PRIVILEGED else policy
 
 
 def verdict_rows(found: Sequence[Verdict]) -> list[list[str]]:
@@ -35,7 +49,7 @@ def verdict_rows(found: Sequence[Verdict]) -> list[list[str]]:
         p, p_low, p_high = v.p_beats
         rows.append(
             [
-                v.policy,
+                display_name(v.policy),
                 v.scenario,
                 str(v.episodes),
                 f"{diff:+.3g} [{low:+.3g}, {high:+.3g}]",
@@ -105,6 +119,39 @@ def markdown_table(header: Sequence[str], body: Sequence[Sequence[str]]) -> list
     return lines + ["| " + " | ".join(row) + " |" for row in body]
 
 
+def gap_table(
+    rows: list[dict[str, object]], cells: Sequence[CellResult], metric: str, reference: str
+) -> list[str]:
+    """Markdown lines: each policy's share of the gap closed on ``metric``, per scenario.
+
+    "n/a" where the headroom reference is not better than the reference (no
+    gap to close); empty where the policy did not run.
+    """
+    index = {(r["policy"], r["scenario"]): r for r in rows if r["metric"] == metric}
+    names = list(dict.fromkeys(cell.scenario for cell in cells))
+    policies = [
+        p
+        for p in dict.fromkeys(cell.policy for cell in cells)
+        if p not in (reference, HEADROOM_REFERENCE)
+    ]
+    body = []
+    for policy in policies:
+        texts = []
+        for name in names:
+            row = index.get((policy, name))
+            if row is None or (reference, name) not in index:
+                texts.append("")
+            elif row["gap_closed"] is None:
+                texts.append("n/a")
+            else:
+                share, low, high = (
+                    float(row[k]) for k in ("gap_closed", "gap_ci_low", "gap_ci_high")
+                )  # type: ignore[arg-type]
+                texts.append(f"{share:.2f} [{low:.2f}, {high:.2f}]")
+        body.append([display_name(policy), *texts])
+    return markdown_table(["policy", *names], body)
+
+
 def markdown(
     rows: list[dict[str, object]],
     cells: Sequence[CellResult],
@@ -148,6 +195,27 @@ def markdown(
             "",
         ]
         lines += markdown_table(VERDICT_HEADER, verdict_rows(judged))
+    privileged = [p for p in policies if p in PRIVILEGED]
+    if privileged:
+        lines += [
+            "",
+            f"Privileged references ({', '.join(privileged)}): told the true lumped model error "
+            "and disturbances and given lossless, undelayed neighbour values; not deployable, "
+            "they show the headroom.",
+        ]
+    if HEADROOM_REFERENCE in policies and len(policies) > 2:
+        for metric in GAP_METRICS:
+            lines += [
+                "",
+                f"## Share of the gap to {HEADROOM_REFERENCE} closed, {metric}",
+                "",
+                f"({reference} - policy) / ({reference} - {HEADROOM_REFERENCE}) of the mean "
+                f"{metric}, with its paired 95 % bootstrap interval: 0 = {reference}'s level, 1 = "
+                f"the headroom reference's, < 0 worse than {reference}. n/a: "
+                f"{HEADROOM_REFERENCE} is not better than {reference} there (no gap to close).",
+                "",
+            ]
+            lines += gap_table(rows, cells, metric, reference)
     if skipped:
         lines += ["", "Not run (the policy does not fit the scenario):", ""]
         lines += [f"- {policy} on {name}: {why}" for (policy, name), why in skipped.items()]
@@ -156,14 +224,14 @@ def markdown(
         for policy in policies:
             found = [index.get((policy, "all", f"{m}_normalized")) for m, _ in HEADLINE]
             failures = next((str(r["failures"]) for r in found if r), "")
-            body.append([policy, *(_interval(r) for r in found), failures])
+            body.append([display_name(policy), *(_interval(r) for r in found), failures])
         lines += ["", f"## All scenarios, each episode divided by {reference}'s mean", ""]
         lines += markdown_table(["policy", *headings, "failures"], body)
     for metric, heading in HEADLINE[:2]:
         body = []
         for policy in policies:
             found = [index.get((policy, name, metric)) for name in names]
-            body.append([policy] + [_mean_and_failures(r) for r in found])
+            body.append([display_name(policy)] + [_mean_and_failures(r) for r in found])
         lines += ["", f"## {heading.capitalize()} by scenario (mean; failed episodes)", ""]
         lines += markdown_table(["policy", *names], body)
     for name in names:
@@ -183,7 +251,17 @@ def markdown(
             failures = f"{cost['failures']}/{cost['n_episodes']}"
             found = [index.get((policy, name, m)) for m, _ in HEADLINE]
             text = [_interval(r) for r in found]
-            body.append([policy, text[0], _interval(cost, "iqm"), *text[1:], failures, ratio, p])
+            body.append(
+                [
+                    display_name(policy),
+                    text[0],
+                    _interval(cost, "iqm"),
+                    *text[1:],
+                    failures,
+                    ratio,
+                    p,
+                ]
+            )
         lines += ["", f"## {name} ({count})", ""]
         header = ["policy", headings[0], "cost IQM", *headings[1:]]
         lines += markdown_table([*header, "failures", f"/ {reference}", "P(beats)"], body)
