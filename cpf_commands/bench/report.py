@@ -230,7 +230,9 @@ def summarize(
                 if cell.policy not in (reference, headroom):
                     found = stats.gap_closed(base.metrics[metric], values, top.metrics[metric])
                     if found is not None:
-                        row.update(zip(("gap_closed", "gap_ci_low", "gap_ci_high"), found, strict=True))
+                        row.update(
+                            zip(("gap_closed", "gap_ci_low", "gap_ci_high"), found, strict=True)
+                        )
             rows.append(row)
     return rows + _suite_rows(cells, reference, by_key)
 

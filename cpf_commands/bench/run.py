@@ -26,7 +26,7 @@ from pathlib import Path
 
 from tqdm.auto import tqdm
 
-from cpf_commands.bench import views
+from cpf_commands.bench import profiles, views
 from cpf_commands.bench.episodes import run_episodes
 from cpf_commands.bench.report import HEADLINE, CellResult, episodes_csv, summarize, summary_csv
 from cpf_commands.bench.verdict import COST_MARGIN, check_margin
@@ -59,9 +59,17 @@ __all__ = [
     "write_outputs",
 ]
 
+#: The rliable-style figures (``cpf_commands.bench.profiles``).
+PROFILE_FIGURES = ("performance_profile.png", "probability_of_improvement.png")
 #: The files cpf-bench writes to --out (nothing else may be there: it is replaced whole).
 OUTPUT_FILES = frozenset(
-    ("episodes.csv", "summary.csv", "summary.md", *(f"{metric}.png" for metric, _ in HEADLINE))
+    (
+        "episodes.csv",
+        "summary.csv",
+        "summary.md",
+        *(f"{metric}.png" for metric, _ in HEADLINE),
+        *PROFILE_FIGURES,
+    )
 )
 #: First evaluation seed (training refuses seeds from here on: ``cpf_env.scenarios.splits``).
 BASE_SEED = EVALUATION_SEED
@@ -136,9 +144,18 @@ def write_outputs(
         text = views.markdown(rows, cells, command, reference, skipped or {}, cost_margin)
         atomic.write_text(staging / "summary.md", text)
         if figures:
-            for metric, title in HEADLINE:
-                drawing = views.figure(rows, cells, metric, title)
-                drawing.savefig(staging / f"{metric}.png", dpi=100, metadata={"Software": None})
+            drawings = {
+                f"{metric}.png": views.figure(rows, cells, metric, title)
+                for metric, title in HEADLINE
+            }
+            scores = profiles.normalized_scores(cells, reference)
+            if len(scores) > 1:  # the reference and at least one other policy on every scenario
+                drawings["performance_profile.png"] = profiles.profile_figure(scores, reference)
+                drawings["probability_of_improvement.png"] = profiles.improvement_figure(
+                    scores, reference
+                )
+            for name, drawing in drawings.items():
+                drawing.savefig(staging / name, dpi=100, metadata={"Software": None})
     return rows
 
 
