@@ -189,7 +189,9 @@ def test_identical_arguments_give_identical_files(tmp_path):
         assert bench_main([*argv, "--out", str(tmp_path / run)]) == 0
     names = sorted(path.name for path in (tmp_path / "one").iterdir())
     assert {"episodes.csv", "summary.csv", "summary.md", "cost.png"} <= set(names)
-    assert len([n for n in names if n.endswith(".png")]) == len(bench_report.HEADLINE)
+    pictures = [n for n in names if n.endswith(".png")]
+    assert len(pictures) == len(bench_report.HEADLINE) + 2  # + the two rliable-style figures
+    assert {"performance_profile.png", "probability_of_improvement.png"} <= set(pictures)
     for name in names:
         assert (tmp_path / "one" / name).read_bytes() == (tmp_path / "two" / name).read_bytes()
     summary = (tmp_path / "one" / "summary.md").read_text()
