@@ -144,9 +144,8 @@ def gap_table(
             elif row["gap_closed"] is None:
                 texts.append("n/a")
             else:
-                share, low, high = (
-                    float(row[k]) for k in ("gap_closed", "gap_ci_low", "gap_ci_high")
-                )  # type: ignore[arg-type]
+                keys = ("gap_closed", "gap_ci_low", "gap_ci_high")
+                share, low, high = (float(row[k]) for k in keys)  # type: ignore[arg-type]
                 texts.append(f"{share:.2f} [{low:.2f}, {high:.2f}]")
         body.append([display_name(policy), *texts])
     return markdown_table(["policy", *names], body)
