@@ -12,7 +12,7 @@ Measures, after a warm-up that triggers numba compilation:
 * one whole episode of the scenario with the policy (B = 1), in seconds: for
   ``wang2014``, the paper's 150 s simulation;
 * with ``--bench-seeds N``: the wall time of ``cpf-bench``'s default evaluation
-  (every baseline on the benchmark suite, N paired seeds, no files written);
+  (its default policies on the benchmark suite, N paired seeds, no files written);
 * with ``--contention B``: ``FleetSim.step`` and ``FleetVecEnv.step`` at batch B
   alone and then next to one busy competitor process (a Python loop spinning on
   one core, as a neighbour on a shared machine would), in the same run, so
@@ -306,7 +306,7 @@ def speed_main(argv: Sequence[str] | None = None) -> int:
         type=int,
         default=0,
         metavar="N",
-        help="also time cpf-bench's default evaluation (every baseline, the suite) with N "
+        help="also time cpf-bench's default evaluation (its default policies, the suite) with N "
         "seeds, e.g. 10 (default: 0, not timed)",
     )
     parser.add_argument("--json", action="store_true", help="print JSON instead of a table")
