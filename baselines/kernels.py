@@ -282,10 +282,10 @@ def _nn_dsc(
                 )
     if c.privileged:  # [26] told, not learned: f + M nubar'
         for q in range(3):
-            total = known.lumped[r, i, q]
+            told = known.lumped[r, i, q]
             for p in range(3):
-                total = total + known.mass[r, i, q, p] * nubar_dot[p]
-            out.nn_output[r, i, q] = total
+                told = told + known.mass[r, i, q, p] * nubar_dot[p]
+            out.nn_output[r, i, q] = told
     for q in range(3):
         tau0 = -c.k2[q] * e2[q] - obs[Z1 + q] + out.nn_output[r, i, q]  # [29]
         out.tau_command[r, i, q] = tau0
