@@ -34,9 +34,9 @@ from matplotlib.figure import Figure
 from matplotlib.ticker import FuncFormatter
 from numpy.typing import ArrayLike, NDArray
 
-from baselines import PRIVILEGED
 from cpf_commands.bench.report import CellResult
 from cpf_commands.bench.stats import BOOTSTRAP_SEED, REPLICATES
+from cpf_commands.bench.views import figure_label
 
 __all__ = [
     "improvement_figure",
@@ -162,12 +162,6 @@ def probability_of_improvement(
 _MINOR = (0.5, 2.0, 3.0, 5.0)
 
 
-def _legend(policy: str) -> str:
-    """A policy's short label: a folder's last part; a privileged reference says so."""
-    short = policy.rstrip("/").split("/")[-1]
-    return f"{short} (privileged)" if policy in PRIVILEGED else short
-
-
 def profile_figure(scores: dict[str, list[Array]], reference: str) -> Figure:
     """Performance profiles of the normalized cost score, one curve per policy with its band."""
     everything = np.concatenate([np.concatenate(v) for v in scores.values()])
@@ -179,7 +173,7 @@ def profile_figure(scores: dict[str, list[Array]], reference: str) -> Figure:
         fraction, band_low, band_high = performance_profile(values, taus)
         style = "--" if policy == reference else "-"
         color = f"C{k % 10}"
-        ax.plot(taus, fraction, style, color=color, label=_legend(policy))
+        ax.plot(taus, fraction, style, color=color, label=figure_label(policy))
         ax.fill_between(taus, band_low, band_high, color=color, alpha=0.15, linewidth=0)
     ax.axvline(1.0, color="black", linewidth=0.8)
     ax.set_xscale("log")
@@ -214,7 +208,7 @@ def improvement_figure(scores: dict[str, list[Array]], reference: str) -> Figure
                     fontsize=7, va="center")  # fmt: skip
     ax.axvline(0.5, color="black", linewidth=0.8)
     ax.set_xlim(0.0, 1.05)
-    ax.set_yticks(range(len(others)), [_legend(p) for p in others], fontsize=8)
+    ax.set_yticks(range(len(others)), [figure_label(p) for p in others], fontsize=8)
     ax.set_ylim(len(others) - 0.5, -0.5)
     ax.grid(axis="x", alpha=0.3)
     ax.set_xlabel(

@@ -26,6 +26,7 @@ from cpf_commands.bench.verdict import (
 __all__ = [
     "display_name",
     "figure",
+    "figure_label",
     "gap_table",
     "markdown",
     "markdown_table",
@@ -39,6 +40,12 @@ VERDICT_HEADER = ("policy", "scenario", "N", "cost difference [95 %]", "P(beats)
 def display_name(policy: str) -> str:
     """A policy's name in tables: a privileged reference says that it is one."""
     return f"{policy} (privileged, not deployable)" if policy in PRIVILEGED else policy
+
+
+def figure_label(policy: str) -> str:
+    """A policy's label in figures: a folder's last part; a privileged reference says so."""
+    short = policy.rstrip("/").split("/")[-1]
+    return f"{short} (privileged)" if policy in PRIVILEGED else short
 
 
 def verdict_rows(found: Sequence[Verdict]) -> list[list[str]]:
@@ -318,7 +325,7 @@ def figure(
     spacing = 1.0 / (len(others) + 1)
     for k, policy in enumerate(others):
         color = f"C{k % 10}"
-        label: str | None = policy.rstrip("/").split("/")[-1]
+        label: str | None = figure_label(policy)
         for row_index, name in enumerate(names):
             y = row_index + (k + 1) * spacing - 0.5
             row, base = index.get((policy, name)), index.get((reference, name))
