@@ -166,7 +166,7 @@ def profile_figure(scores: dict[str, list[Array]], reference: str) -> Figure:
     """Performance profiles of the normalized cost score, one curve per policy with its band."""
     everything = np.concatenate([np.concatenate(v) for v in scores.values()])
     low, high = max(float(everything.min()), 1e-3), float(everything.max())
-    taus = np.geomspace(low * 0.9, high * 1.1, 200)
+    taus = np.geomspace(low * 0.9, high * 1.1, 400)
     fig = Figure(figsize=(8.0, 4.8), layout="constrained")
     ax = fig.subplots()
     for k, (policy, values) in enumerate(scores.items()):
@@ -176,18 +176,21 @@ def profile_figure(scores: dict[str, list[Array]], reference: str) -> Figure:
         ax.plot(taus, fraction, style, color=color, label=figure_label(policy))
         ax.fill_between(taus, band_low, band_high, color=color, alpha=0.15, linewidth=0)
     ax.axvline(1.0, color="black", linewidth=0.8)
-    ax.set_xscale("log")
-    ax.xaxis.set_major_formatter(FuncFormatter(lambda x, _: f"{x:g}"))
-    ax.xaxis.set_minor_formatter(FuncFormatter(lambda x, _: f"{x:g}" if x in _MINOR else ""))
+    wide = high / low > 10.0  # a log axis only where the scores span a decade
+    if wide:
+        ax.set_xscale("log")
+        ax.xaxis.set_major_formatter(FuncFormatter(lambda x, _: f"{x:g}"))
+        ax.xaxis.set_minor_formatter(FuncFormatter(lambda x, _: f"{x:g}" if x in _MINOR else ""))
     ax.set_ylim(-0.02, 1.02)
     ax.grid(which="both", alpha=0.3)
     ax.set_xlabel(
-        f"normalized score tau = {reference}'s mean cost / episode cost (log; > 1 is better)",
+        f"normalized score tau = {reference}'s mean cost / episode cost"
+        f"{' (log)' if wide else ''}; > 1 is better",
         fontsize=8,
     )
     ax.set_ylabel("fraction of episodes with score > tau", fontsize=8)
     ax.tick_params(labelsize=7)
-    ax.legend(fontsize=7, loc="lower left")
+    ax.legend(fontsize=7, loc="upper right")  # the curves fall to 0 on the right
     fig.suptitle(
         "Performance profiles over the scenarios (each weighted equally),\n"
         "95 % stratified bootstrap bands",
