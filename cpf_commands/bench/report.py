@@ -117,10 +117,15 @@ def _row(
     strata: list[NDArray[np.float64]],
     failures: int,
     deterministic: bool,
+    intervals: tuple[float, float, float, float] | None = None,
 ) -> dict[str, object]:
+    """A summary row; ``intervals`` (mean low, high, IQM low, high) if already bootstrapped."""
     values = np.concatenate(strata)
-    low, high = stats.bootstrap_interval(strata)
-    iqm_low, iqm_high = stats.bootstrap_interval(strata, stats.iqm)
+    if intervals is None:
+        low, high = stats.bootstrap_interval(strata)
+        iqm_low, iqm_high = stats.bootstrap_interval(strata, stats.iqm)
+    else:
+        low, high, iqm_low, iqm_high = intervals
     return {
         "policy": policy,
         "scenario": scenario,
@@ -148,16 +153,24 @@ def _row(
 
 
 def _compare(
-    row: dict[str, object], values: NDArray, reference: NDArray, metric: str, paired: bool
+    row: dict[str, object],
+    values: NDArray,
+    reference: NDArray,
+    metric: str,
+    difference: tuple[float, float] | None,
 ) -> None:
-    """Fill the reference columns of ``row`` (``paired``: the paired difference, P(beats))."""
+    """Fill the reference columns of ``row``.
+
+    With ``difference``, the bootstrap interval (low, high) of the paired
+    difference, also the paired difference and P(beats).
+    """
     reference_mean = float(reference.mean())
     if reference_mean != 0.0:
         row["normalized"] = float(values.mean()) / reference_mean
-    if not paired:
+    if difference is None:
         return
-    diff, diff_low, diff_high = stats.paired_difference(values, reference)
-    row.update(diff_reference=diff, diff_ci_low=diff_low, diff_ci_high=diff_high)
+    diff = float((values - reference).mean())
+    row.update(diff_reference=diff, diff_ci_low=difference[0], diff_ci_high=difference[1])
     p, low, high = stats.probability_of_beating(_signed(metric, values), _signed(metric, reference))
     row.update(p_beats_reference=p, p_ci_low=low, p_ci_high=high)
 
@@ -218,13 +231,29 @@ def summarize(
     for cell in cells:
         failures = int(cell.metrics["terminated"].sum())
         base = by_key.get((reference, cell.scenario))
-        for metric in METRICS:
+        matrix = np.stack([cell.metrics[metric] for metric in METRICS])  # (M, N)
+        mean_ci, iqm_ci = stats.bootstrap_rows(matrix), stats.bootstrap_rows(matrix, stats.iqm)
+        paired = base is not None and cell.policy != reference
+        if base is not None and paired:
+            differences = matrix - np.stack([base.metrics[metric] for metric in METRICS])
+            diff_ci = stats.bootstrap_rows(differences)
+        for k, metric in enumerate(METRICS):
             values = cell.metrics[metric]
             if np.all(np.isnan(values)):
                 continue
-            row = _row(cell.policy, cell.scenario, metric, [values], failures, cell.deterministic)
+            intervals = (mean_ci[0][k], mean_ci[1][k], iqm_ci[0][k], iqm_ci[1][k])
+            row = _row(
+                cell.policy,
+                cell.scenario,
+                metric,
+                [values],
+                failures,
+                cell.deterministic,
+                tuple(float(x) for x in intervals),  # type: ignore[arg-type]
+            )
             if base is not None and not np.all(np.isnan(base.metrics[metric])):
-                _compare(row, values, base.metrics[metric], metric, cell.policy != reference)
+                interval = (float(diff_ci[0][k]), float(diff_ci[1][k])) if paired else None
+                _compare(row, values, base.metrics[metric], metric, interval)
             top = by_key.get((headroom, cell.scenario))
             if metric in GAP_METRICS and base is not None and top is not None:
                 if cell.policy not in (reference, headroom):

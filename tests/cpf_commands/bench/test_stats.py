@@ -164,3 +164,13 @@ def test_no_gap_is_reported_when_the_headroom_reference_is_not_better():
     noisy = reference + np.array([1.0, -1.0, 1.0, -1.0])  # mean gap 0: nothing to close
     assert stats.gap_closed(reference, reference - 1.0, noisy) is None
     assert stats.gap_closed(reference, reference - 1.0, reference + 2.0) is None
+
+
+@pytest.mark.parametrize("size", [1, 2, 3, 7, 10, 13, 20, 40])
+def test_bootstrap_rows_is_each_rows_bootstrap_interval_bit_for_bit(size):
+    matrix = np.random.default_rng(size).normal(size=(6, size))
+    for statistic in (None, stats.iqm):
+        extra = {} if statistic is None else {"statistic": statistic}
+        low, high = stats.bootstrap_rows(matrix, **extra)
+        for k in range(matrix.shape[0]):
+            assert (low[k], high[k]) == stats.bootstrap_interval([matrix[k]], **extra)
