@@ -14,6 +14,10 @@ name                        policy
 ``backstepping_delay_comp`` ``backstepping`` with the same delay compensation
 ==========================  ===========================================================
 
+Headroom references, not deployable (``PRIVILEGED``, ``baselines.privileged``):
+``nn_dsc_privileged`` and ``backstepping_privileged``, told the true lumped
+uncertainty and given ideal links; ``make_policy`` builds them too.
+
 Example:
     >>> import cpf_env, baselines
     >>> env = cpf_env.parallel_env("wang2014", max_steps=20)
@@ -32,25 +36,31 @@ from baselines.delay_compensated import BacksteppingDelayCompensated, NNDSCDelay
 from baselines.gains import BacksteppingGains, CooperativeGains, NNDSCGains
 from baselines.nn_dsc import DSCPolicy, GlobalSpeedPolicy, NNDSCPolicy, NoAuxPolicy
 from baselines.policy import DIAGNOSTICS, Policy
+from baselines.privileged import BacksteppingPrivileged, NNDSCPrivileged, PrivilegedPolicy
 
 __all__ = [
     "DIAGNOSTICS",
+    "HEADROOM_REFERENCE",
     "POLICIES",
+    "PRIVILEGED",
     "BacksteppingDelayCompensated",
     "BacksteppingGains",
     "BacksteppingPolicy",
+    "BacksteppingPrivileged",
     "CooperativeGains",
     "DSCPolicy",
     "GlobalSpeedPolicy",
     "NNDSCDelayCompensated",
     "NNDSCGains",
     "NNDSCPolicy",
+    "NNDSCPrivileged",
     "NoAuxPolicy",
     "Policy",
+    "PrivilegedPolicy",
     "make_policy",
 ]
 
-#: Policy classes by name.
+#: Deployable policy classes by name (local observation only).
 POLICIES: dict[str, type[Policy]] = {
     policy.name: policy
     for policy in (
@@ -64,19 +74,28 @@ POLICIES: dict[str, type[Policy]] = {
     )
 }
 
+#: Privileged references by name: not deployable, they read the simulator (headroom).
+PRIVILEGED: dict[str, type[PrivilegedPolicy]] = {
+    policy.name: policy for policy in (NNDSCPrivileged, BacksteppingPrivileged)
+}
+#: The privileged reference the benchmark's share of the gap closed is measured against.
+HEADROOM_REFERENCE = NNDSCPrivileged.name
+
 
 def make_policy(name: str, env: object, **options: Any) -> Policy:
     """Build the policy ``name`` for the scenario of ``env``.
 
     Args:
-        name: A key of ``POLICIES``.
+        name: A key of ``POLICIES`` or of ``PRIVILEGED``.
         env: A ``CooperativePathFollowingEnv``, a ``FleetSim``, any object with a
-            ``.scenario``, a ``Scenario`` or a scenario name.
+            ``.scenario``, a ``Scenario`` or a scenario name (a privileged
+            reference built without a simulator must be bound to one before acting).
         **options: Gains of the policy's gains dataclass (e.g. ``K2=(30, 30, 5)``).
 
     Raises:
         ValueError: Unknown name or option (the message lists the valid ones).
     """
-    if name not in POLICIES:
-        raise ValueError(f"unknown policy {name!r}; choose one of {sorted(POLICIES)}.")
-    return POLICIES[name](env, **options)
+    known: dict[str, type[Policy]] = {**POLICIES, **PRIVILEGED}
+    if name not in known:
+        raise ValueError(f"unknown policy {name!r}; choose one of {sorted(known)}.")
+    return known[name](env, **options)

@@ -55,7 +55,9 @@ __all__ = [
     "KINETICS_BACKSTEPPING",
     "KINETICS_NN_DSC",
     "KINETICS_PYTHON",
+    "NO_KNOWLEDGE",
     "CooperativeOutputs",
+    "KnownDynamics",
     "PolicyConstants",
     "PolicyOutputs",
     "PolicyStates",
@@ -84,6 +86,7 @@ class PolicyConstants(NamedTuple):
     use_aux: bool  # saturation auxiliary system (else e2 = z2)
     global_speed: bool  # vhat = v0(t) from the schedule (ablation), no estimator
     delay_compensation: bool  # theta_j - theta_i advanced by age dt vhat_j
+    privileged: bool  # the true lumped uncertainty is given (KnownDynamics), not estimated
     n_slots: int  # K neighbour slots
     slot_size: int  # 3 + m floats per slot
     msg_size: int  # m
@@ -119,6 +122,21 @@ class PolicyStates(NamedTuple):
     tau0: np.ndarray  # (B, n, 3) last command (N, N, N m)
     started: np.ndarray  # (B,) bool: acted since the last reset
     steps: np.ndarray  # (B,) int64 control steps since the last reset
+
+
+class KnownDynamics(NamedTuple):
+    """What a privileged reference is told per acting row (``cpf_env.sim.privileged``).
+
+    Read only when ``PolicyConstants.privileged``; the deployable policies get
+    ``NO_KNOWLEDGE`` (no rows).
+    """
+
+    lumped: np.ndarray  # (R, n, 3) f with M nu' = tau - f, true model (N, N, N m)
+    mass: np.ndarray  # (R, n, 3, 3) true mass matrices (kg, kg m, kg m^2)
+
+
+#: The knowledge of a deployable policy: none.
+NO_KNOWLEDGE = KnownDynamics(np.zeros((0, 0, 3)), np.zeros((0, 0, 3, 3)))
 
 
 class PolicyOutputs(NamedTuple):
@@ -210,6 +228,7 @@ def _cooperate(
 def _nn_dsc(
     c: PolicyConstants,
     s: PolicyStates,
+    known: KnownDynamics,
     out: PolicyOutputs,
     obs: np.ndarray,
     b: int,
@@ -222,7 +241,9 @@ def _nn_dsc(
 ) -> None:
     """Command [29] of one vessel; advances nubar, pi, What and the kept tau0 to k + 1.
 
-    ``work`` (>= 4, 3) and ``sigma`` (l,) are scratch space.
+    A privileged reference replaces the NN's estimate by the true
+    f + M nubar' of [26] (``known``, row r). ``work`` (>= 4, 3) and ``sigma``
+    (l,) are scratch space.
     """
     alpha, nubar, nubar_dot, e2 = work[0], work[1], work[2], work[3]
     for q in range(3):
@@ -259,6 +280,12 @@ def _nn_dsc(
                 s.weights[b, i, h, q] = c.leak_decay * s.weights[b, i, h, q] - c.adapt_gain * (
                     sigma[h] * e2[q]
                 )
+    if c.privileged:  # [26] told, not learned: f + M nubar'
+        for q in range(3):
+            told = known.lumped[r, i, q]
+            for p in range(3):
+                told = told + known.mass[r, i, q, p] * nubar_dot[p]
+            out.nn_output[r, i, q] = told
     for q in range(3):
         tau0 = -c.k2[q] * e2[q] - obs[Z1 + q] + out.nn_output[r, i, q]  # [29]
         out.tau_command[r, i, q] = tau0
@@ -270,6 +297,7 @@ def _nn_dsc(
 @numba.njit(cache=True, inline="always")
 def _backstepping(
     c: PolicyConstants,
+    known: KnownDynamics,
     out: PolicyOutputs,
     obs: np.ndarray,
     r: int,
@@ -281,7 +309,9 @@ def _backstepping(
 ) -> None:
     """tau0 = M alpha' + C(nu) nu + D(nu) nu - K2 (nu - alpha) - z1 with the analytic alpha'.
 
-    ``work`` (>= 11, 3) is scratch space.
+    Nominal M, C, D; a privileged reference uses the true M and the true
+    lumped f in place of C(nu) nu + D(nu) nu (``known``, row r). ``work``
+    (>= 11, 3) is scratch space.
     """
     u, v, yaw_rate = obs[NU], obs[NU + 1], obs[NU + 2]
     s_z1 = (-obs[Z1 + 1], obs[Z1], 0.0)  # S z1, S = [[0, -1, 0], [1, 0, 0], [0, 0, 0]]
@@ -311,11 +341,16 @@ def _backstepping(
             hydro[row, q] = coriolis[row, q] + damping[row, q]
     for row in range(3):
         model = 0.0
-        for q in range(3):
-            model = model + c.mass[i, row, q] * alpha_dot[q]  # M alpha'
         hydrodynamic = 0.0
-        for q in range(3):
-            hydrodynamic = hydrodynamic + hydro[row, q] * obs[NU + q]
+        if c.privileged:
+            for q in range(3):
+                model = model + known.mass[r, i, row, q] * alpha_dot[q]  # M alpha', true M
+            hydrodynamic = known.lumped[r, i, row]
+        else:
+            for q in range(3):
+                model = model + c.mass[i, row, q] * alpha_dot[q]  # M alpha'
+            for q in range(3):
+                hydrodynamic = hydrodynamic + hydro[row, q] * obs[NU + q]
         tau0 = (model + hydrodynamic) - c.k2[row] * (obs[NU + row] - alpha[row]) - obs[Z1 + row]
         out.tau_command[r, i, row] = tau0
         out.alpha[r, i, row] = alpha[row]
@@ -334,6 +369,7 @@ def _act_fleet(
     s: PolicyStates,
     obs: np.ndarray,
     fleets: np.ndarray,
+    known: KnownDynamics,
     out: PolicyOutputs,
     r: int,
     work: np.ndarray,
@@ -350,9 +386,9 @@ def _act_fleet(
             c, row, s.vhat[b, i], gamma, s.steps[b]
         )
         if c.kinetics == KINETICS_NN_DSC:
-            _nn_dsc(c, s, out, row, b, r, i, first, vhat, work, sigma)
+            _nn_dsc(c, s, known, out, row, b, r, i, first, vhat, work, sigma)
         else:
-            _backstepping(c, out, row, r, i, vhat, vhat_dot, theta_dot, work)
+            _backstepping(c, known, out, row, r, i, vhat, vhat_dot, theta_dot, work)
         s.vhat[b, i] = vhat_next
         s.gamma[b, i] = gamma_next
         for q in range(3):
@@ -375,17 +411,18 @@ def act_rows_serial(
     s: PolicyStates,
     obs: np.ndarray,
     fleets: np.ndarray,
+    known: KnownDynamics,
     out: PolicyOutputs,
 ) -> None:
     """Act for the fleets ``fleets`` (R,) from their observations ``obs`` (R, n, obs_dim).
 
-    Row r of ``obs`` and ``out`` belongs to fleet ``fleets[r]`` of ``s`` (distinct
-    indices); that fleet's states are read at step k and left at step k + 1.
+    Row r of ``obs``, ``known`` and ``out`` belongs to fleet ``fleets[r]`` of ``s``
+    (distinct indices); that fleet's states are read at step k and left at step k + 1.
     """
     work = np.empty((WORK_ROWS, 3))
     sigma = np.empty(c.input_weights.shape[0])
     for r in range(obs.shape[0]):
-        _act_fleet(c, s, obs, fleets, out, r, work, sigma)
+        _act_fleet(c, s, obs, fleets, known, out, r, work, sigma)
 
 
 @numba.njit(cache=True, parallel=True)
@@ -394,6 +431,7 @@ def act_rows_parallel(
     s: PolicyStates,
     obs: np.ndarray,
     fleets: np.ndarray,
+    known: KnownDynamics,
     out: PolicyOutputs,
 ) -> None:
     """``act_rows_serial`` with the fleets spread over numba's threads (same bits).
@@ -403,7 +441,7 @@ def act_rows_parallel(
     """
     hidden = c.input_weights.shape[0]
     for r in prange(obs.shape[0]):
-        _act_fleet(c, s, obs, fleets, out, r, np.empty((WORK_ROWS, 3)), np.empty(hidden))
+        _act_fleet(c, s, obs, fleets, known, out, r, np.empty((WORK_ROWS, 3)), np.empty(hidden))
 
 
 @numba.njit(cache=True)

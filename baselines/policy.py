@@ -38,7 +38,9 @@ from baselines.gains import CooperativeGains
 from baselines.interface import PolicyInterface
 from baselines.kernels import (
     KINETICS_PYTHON,
+    NO_KNOWLEDGE,
     CooperativeOutputs,
+    KnownDynamics,
     PolicyConstants,
     PolicyOutputs,
     PolicyStates,
@@ -137,6 +139,8 @@ class Policy(PolicyInterface):
     #: True: each neighbour's received theta_j is advanced by its packet age x dt x its
     #: communicated speed estimate (``baselines.delay_compensated``).
     delay_compensation: ClassVar[bool] = False
+    #: True: a headroom reference told what no vessel observes (``baselines.privileged``).
+    privileged: ClassVar[bool] = False
 
     def __init__(self, env: object, **options: Any) -> None:
         self.scenario = resolve_scenario(env)
@@ -229,7 +233,7 @@ class Policy(PolicyInterface):
             ValueError: Wrong shape, non-finite entries, a different B than
                 the previous call without ``reset()`` in between, or bad indices.
         """
-        batch = self._validate(obs)
+        batch = self._validate(self._observations(obs))
         if fleets is None:
             states = self._states_for(batch.shape[0])
             index = self._all_fleets
@@ -254,9 +258,18 @@ class Policy(PolicyInterface):
             self._act_in_python(batch, index, states, out)
         else:
             kernel = act_rows_parallel if rows >= PARALLEL_MIN_FLEETS else act_rows_serial
-            kernel(self._constants, states, batch, index, out)
+            kernel(self._constants, states, batch, index, self._knowledge(index), out)
         self.diagnostics = {name: getattr(out, name) for name in DIAGNOSTICS}
         return out.actions
+
+    def _observations(self, obs: ArrayLike) -> ArrayLike:
+        """The observations the policy acts on: ``obs`` (a privileged reference substitutes)."""
+        return obs
+
+    def _knowledge(self, fleets: NDArray[np.int64]) -> KnownDynamics:
+        """What the policy is told beyond its observation for the acting ``fleets``: nothing."""
+        del fleets
+        return NO_KNOWLEDGE
 
     def reset_fleets(self, fleets: ArrayLike) -> None:
         """Restart the internal states of some fleets; the others are untouched.
@@ -293,6 +306,7 @@ class Policy(PolicyInterface):
             "use_aux": False,
             "global_speed": self.global_speed,
             "delay_compensation": self.delay_compensation,
+            "privileged": self.privileged,
             "n_slots": self.layout.n_slots,
             "slot_size": self.layout.slot_size,
             "msg_size": self.layout.msg_size,

@@ -12,7 +12,7 @@ Measures, after a warm-up that triggers numba compilation:
 * one whole episode of the scenario with the policy (B = 1), in seconds: for
   ``wang2014``, the paper's 150 s simulation;
 * with ``--bench-seeds N``: the wall time of ``cpf-bench``'s default evaluation
-  (every baseline on the benchmark suite, N paired seeds, no files written);
+  (its default policies on the benchmark suite, N paired seeds, no files written);
 * with ``--contention B``: ``FleetSim.step`` and ``FleetVecEnv.step`` at batch B
   alone and then next to one busy competitor process (a Python loop spinning on
   one core, as a neighbour on a shared machine would), in the same run, so
@@ -89,12 +89,11 @@ def busy_competitor() -> Iterator[subprocess.Popen[bytes]]:
 
 def _bench_seconds(seeds: int) -> tuple[float, int]:
     """Wall time (s) of ``cpf-bench``'s default policies on the suite, and its episodes."""
-    from baselines import POLICIES
-    from cpf_commands.bench.run import run_bench
+    from cpf_commands.bench.run import default_policies, run_bench
     from cpf_env.scenarios.suite import list_suite
 
     start = time.perf_counter()
-    cells = run_bench(list(POLICIES), list_suite(), seeds=seeds, out=None, figures=False)
+    cells = run_bench(default_policies(), list_suite(), seeds=seeds, out=None, figures=False)
     return time.perf_counter() - start, sum(len(cell.seeds) for cell in cells)
 
 
@@ -307,7 +306,7 @@ def speed_main(argv: Sequence[str] | None = None) -> int:
         type=int,
         default=0,
         metavar="N",
-        help="also time cpf-bench's default evaluation (every baseline, the suite) with N "
+        help="also time cpf-bench's default evaluation (its default policies, the suite) with N "
         "seeds, e.g. 10 (default: 0, not timed)",
     )
     parser.add_argument("--json", action="store_true", help="print JSON instead of a table")

@@ -17,10 +17,12 @@ from cpf_commands.bench.marl_eval import write_marl_eval
 from cpf_commands.bench.run import (
     BASE_SEED,
     OUTPUT_FILES,
+    default_policies,
     labelled_policies,
     reference_label,
     run_bench,
 )
+from cpf_commands.bench.verdict import COST_MARGIN, check_margin
 from cpf_commands.common.arguments import add_scenarios_argument
 from cpf_commands.common.outputs import claim_output_folder
 from cpf_commands.common.policies import policy_argument, trusting_pickles
@@ -41,8 +43,6 @@ OUTPUT_BYTES_PER_EPISODE = 1024
 
 
 def _parser() -> argparse.ArgumentParser:
-    from baselines import POLICIES
-
     parser = argparse.ArgumentParser(
         prog="cpf-bench",
         allow_abbrev=False,
@@ -53,10 +53,12 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument(
         "--policies",
         nargs="+",
-        default=list(POLICIES),
+        default=default_policies(),
         type=policy_argument,
         metavar="POLICY",
-        help="baseline names or cpf-train --out folders (default: every baseline)",
+        help="baseline names or cpf-train --out folders (default: every deployable baseline "
+        "and the headroom reference nn_dsc_privileged, which is told the true model error "
+        "and disturbances and has ideal links: not deployable)",
     )
     add_scenarios_argument(
         parser,
@@ -111,6 +113,15 @@ def _parser() -> argparse.ArgumentParser:
         "if it runs, else the first policy)",
     )
     parser.add_argument(
+        "--cost-margin",
+        type=float,
+        default=COST_MARGIN,
+        metavar="FRACTION",
+        help="practical-equivalence margin of the verdict: a cost difference whose 95 %% "
+        "interval lies within +-FRACTION x the reference's mean cost is 'equivalent' "
+        f"(default: {COST_MARGIN:g}, i.e. {100 * COST_MARGIN:g}%%; 0 turns it off)",
+    )
+    parser.add_argument(
         "--marl-eval",
         default=None,
         metavar="FILE",
@@ -130,6 +141,8 @@ def _command(args: argparse.Namespace) -> str:
         parts += ["--split", args.split]
     if args.reference is not None:
         parts += ["--reference", args.reference]
+    if args.cost_margin != COST_MARGIN:
+        parts += ["--cost-margin", repr(args.cost_margin)]
     if args.base_seed != BASE_SEED:
         parts += ["--base-seed", str(args.base_seed)]
     if args.steps is not None:
@@ -138,9 +151,10 @@ def _command(args: argparse.Namespace) -> str:
 
 
 def _claim_output(args: argparse.Namespace) -> atomic.FolderLock:
-    """Refuse a run whose memory or output folder would fail it, before it starts; lock --out."""
+    """Refuse a run whose flags, memory or output folder would fail it; lock --out."""
     if args.seeds < 1:
         raise ValueError(f"--seeds must be >= 1, got {args.seeds}.")
+    check_margin(args.cost_margin)
     horizons = [args.steps or make_scenario(name).max_steps for name in args.scenarios]
     fleets = max(make_scenario(name).n for name in args.scenarios)
     needed = args.seeds * (max(horizons) * SERIES_BYTES_PER_STEP + fleets * STATE_BYTES_PER_VESSEL)
@@ -199,6 +213,7 @@ def bench_main(argv: Sequence[str] | None = None) -> int:
             address=args.address,
             reference=args.reference,
             split=args.split,
+            cost_margin=args.cost_margin,
         )
         if args.marl_eval is not None:
             write_marl_eval(cells, args.marl_eval)
@@ -210,7 +225,7 @@ def bench_main(argv: Sequence[str] | None = None) -> int:
         lock.release()
     elapsed = time.perf_counter() - start
     table = views.terminal_table(
-        cells, reference_label(args.reference, labelled_policies(args.policies))
+        cells, reference_label(args.reference, labelled_policies(args.policies)), args.cost_margin
     )
     if table:
         print(table)

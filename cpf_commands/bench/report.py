@@ -4,7 +4,9 @@
 metric (mean and IQM with 95 % bootstrap intervals, failures, the ratio to
 the reference policy's mean, the mean paired difference to it with its
 bootstrap interval, and the probability of beating it on a paired episode
-with Wilson's interval), plus, when the reference ran, rows over all scenarios together
+with Wilson's interval; for the cost, the share of the gap between the
+reference and the headroom reference that the policy closes), plus, when the
+reference ran, rows over all scenarios together
 (scenario ``"all"``, metric ``<metric>_normalized``): every episode divided
 by the reference's mean on its scenario, resampled by a bootstrap stratified
 by scenario. Numbers are written with ``repr`` (shortest round-trip form) and
@@ -22,10 +24,19 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from baselines import HEADROOM_REFERENCE
 from cpf_commands.bench import stats
 from cpf_commands.bench.episodes import METRICS
 
-__all__ = ["HEADLINE", "SUMMARY_COLUMNS", "CellResult", "episodes_csv", "summarize", "summary_csv"]
+__all__ = [
+    "GAP_METRICS",
+    "HEADLINE",
+    "SUMMARY_COLUMNS",
+    "CellResult",
+    "episodes_csv",
+    "summarize",
+    "summary_csv",
+]
 
 #: Metrics shown in summary.md and drawn as figures: (metric, heading), cost first.
 HEADLINE: tuple[tuple[str, str], ...] = (
@@ -66,7 +77,12 @@ SUMMARY_COLUMNS = (
     "p_beats_reference",
     "p_ci_low",
     "p_ci_high",
+    "gap_closed",
+    "gap_ci_low",
+    "gap_ci_high",
 )
+#: Metrics with a share of the gap closed (lower is better for both).
+GAP_METRICS = ("cost", "cost_window")
 
 
 @dataclass(frozen=True)
@@ -101,10 +117,15 @@ def _row(
     strata: list[NDArray[np.float64]],
     failures: int,
     deterministic: bool,
+    intervals: tuple[float, float, float, float] | None = None,
 ) -> dict[str, object]:
+    """A summary row; ``intervals`` (mean low, high, IQM low, high) if already bootstrapped."""
     values = np.concatenate(strata)
-    low, high = stats.bootstrap_interval(strata)
-    iqm_low, iqm_high = stats.bootstrap_interval(strata, stats.iqm)
+    if intervals is None:
+        low, high = stats.bootstrap_interval(strata)
+        iqm_low, iqm_high = stats.bootstrap_interval(strata, stats.iqm)
+    else:
+        low, high, iqm_low, iqm_high = intervals
     return {
         "policy": policy,
         "scenario": scenario,
@@ -125,20 +146,31 @@ def _row(
         "p_beats_reference": None,
         "p_ci_low": None,
         "p_ci_high": None,
+        "gap_closed": None,
+        "gap_ci_low": None,
+        "gap_ci_high": None,
     }
 
 
 def _compare(
-    row: dict[str, object], values: NDArray, reference: NDArray, metric: str, paired: bool
+    row: dict[str, object],
+    values: NDArray,
+    reference: NDArray,
+    metric: str,
+    difference: tuple[float, float] | None,
 ) -> None:
-    """Fill the reference columns of ``row`` (``paired``: the paired difference, P(beats))."""
+    """Fill the reference columns of ``row``.
+
+    With ``difference``, the bootstrap interval (low, high) of the paired
+    difference, also the paired difference and P(beats).
+    """
     reference_mean = float(reference.mean())
     if reference_mean != 0.0:
         row["normalized"] = float(values.mean()) / reference_mean
-    if not paired:
+    if difference is None:
         return
-    diff, diff_low, diff_high = stats.paired_difference(values, reference)
-    row.update(diff_reference=diff, diff_ci_low=diff_low, diff_ci_high=diff_high)
+    diff = float((values - reference).mean())
+    row.update(diff_reference=diff, diff_ci_low=difference[0], diff_ci_high=difference[1])
     p, low, high = stats.probability_of_beating(_signed(metric, values), _signed(metric, reference))
     row.update(p_beats_reference=p, p_ci_low=low, p_ci_high=high)
 
@@ -183,25 +215,53 @@ def _suite_rows(
     return rows
 
 
-def summarize(cells: Sequence[CellResult], reference: str = "nn_dsc") -> list[dict[str, object]]:
+def summarize(
+    cells: Sequence[CellResult], reference: str = "nn_dsc", headroom: str = HEADROOM_REFERENCE
+) -> list[dict[str, object]]:
     """Summary rows (``SUMMARY_COLUMNS``) of every cell and metric, then the suite-wide rows.
 
     Metrics a policy does not have (NaN in every episode, e.g. a speed-estimate
     error without an estimator) get no row. The suite-wide rows need the
-    reference on every scenario.
+    reference on every scenario. The gap columns (``GAP_METRICS``) need the
+    reference and the ``headroom`` reference on the scenario, and stay empty
+    where the headroom reference is not better than the reference.
     """
     by_key = {(cell.policy, cell.scenario): cell for cell in cells}
     rows: list[dict[str, object]] = []
     for cell in cells:
         failures = int(cell.metrics["terminated"].sum())
         base = by_key.get((reference, cell.scenario))
-        for metric in METRICS:
+        matrix = np.stack([cell.metrics[metric] for metric in METRICS])  # (M, N)
+        mean_ci, iqm_ci = stats.bootstrap_rows(matrix), stats.bootstrap_rows(matrix, stats.iqm)
+        paired = base is not None and cell.policy != reference
+        if base is not None and paired:
+            differences = matrix - np.stack([base.metrics[metric] for metric in METRICS])
+            diff_ci = stats.bootstrap_rows(differences)
+        for k, metric in enumerate(METRICS):
             values = cell.metrics[metric]
             if np.all(np.isnan(values)):
                 continue
-            row = _row(cell.policy, cell.scenario, metric, [values], failures, cell.deterministic)
+            intervals = (mean_ci[0][k], mean_ci[1][k], iqm_ci[0][k], iqm_ci[1][k])
+            row = _row(
+                cell.policy,
+                cell.scenario,
+                metric,
+                [values],
+                failures,
+                cell.deterministic,
+                tuple(float(x) for x in intervals),  # type: ignore[arg-type]
+            )
             if base is not None and not np.all(np.isnan(base.metrics[metric])):
-                _compare(row, values, base.metrics[metric], metric, cell.policy != reference)
+                interval = (float(diff_ci[0][k]), float(diff_ci[1][k])) if paired else None
+                _compare(row, values, base.metrics[metric], metric, interval)
+            top = by_key.get((headroom, cell.scenario))
+            if metric in GAP_METRICS and base is not None and top is not None:
+                if cell.policy not in (reference, headroom):
+                    found = stats.gap_closed(base.metrics[metric], values, top.metrics[metric])
+                    if found is not None:
+                        row.update(
+                            zip(("gap_closed", "gap_ci_low", "gap_ci_high"), found, strict=True)
+                        )
             rows.append(row)
     return rows + _suite_rows(cells, reference, by_key)
 

@@ -3,12 +3,14 @@
 Every policy (a baseline name, a ``cpf-train --out`` folder, an ``.onnx`` file
 or a policy object, all through ``cpf_commands.common.policies.resolve_policy``)
 runs every scenario on the same evaluation seeds ``base_seed + k`` (paired
-episodes), all seeds of a (policy, scenario) in one batched simulator
-(``cpf_commands.bench.episodes``). A scenario in which nothing is random
-(``cpf_env.scenarios.suite.is_deterministic``) runs one episode: its seeds would all
-give the same one. ``write_outputs`` fills the output folder with
-``episodes.csv``, ``summary.csv``, ``summary.md`` and one figure per headline
-metric; ``cpf_commands.bench.cli`` is the command around it.
+episodes). A local run puts every policy's seeds of a scenario in one
+batched simulator (``cpf_commands.common.rollout.rollout_group``: one large
+batch per scenario, the same numbers as a batch per cell); a Ray run sends
+one (policy, scenario) cell per task (``cpf_commands.bench.episodes``). A
+scenario in which nothing is random (``cpf_env.scenarios.suite.is_deterministic``)
+runs one episode: its seeds would all give the same one. ``write_outputs``
+fills the output folder with ``episodes.csv``, ``summary.csv``, ``summary.md``
+and the figures; ``cpf_commands.bench.cli`` is the command around it.
 
 Example:
     >>> from cpf_commands.bench.run import run_bench
@@ -24,18 +26,21 @@ from pathlib import Path
 
 from tqdm.auto import tqdm
 
-from cpf_commands.bench import views
+from cpf_commands.bench import profiles, views
 from cpf_commands.bench.episodes import run_episodes
 from cpf_commands.bench.report import HEADLINE, CellResult, episodes_csv, summarize, summary_csv
+from cpf_commands.bench.verdict import COST_MARGIN, check_margin
 from cpf_commands.common.outputs import foreign_files
 from cpf_commands.common.policies import (
     BenchPolicy,
     PolicySpec,
     TrustedAgentFolder,
+    baseline_names,
     policy_label,
     resolve_policy,
 )
 from cpf_commands.common.ray_runtime import start_ray
+from cpf_commands.common.rollout import rollout_group
 from cpf_env import atomic
 from cpf_env.envs.parallel import make_scenario
 from cpf_env.scenarios import Scenario
@@ -46,6 +51,7 @@ __all__ = [
     "BASE_SEED",
     "DEFAULT_REFERENCE",
     "OUTPUT_FILES",
+    "default_policies",
     "labelled_policies",
     "reference_label",
     "run_bench",
@@ -53,14 +59,33 @@ __all__ = [
     "write_outputs",
 ]
 
+#: The rliable-style figures (``cpf_commands.bench.profiles``).
+PROFILE_FIGURES = ("performance_profile.png", "probability_of_improvement.png")
 #: The files cpf-bench writes to --out (nothing else may be there: it is replaced whole).
 OUTPUT_FILES = frozenset(
-    ("episodes.csv", "summary.csv", "summary.md", *(f"{metric}.png" for metric, _ in HEADLINE))
+    (
+        "episodes.csv",
+        "summary.csv",
+        "summary.md",
+        *(f"{metric}.png" for metric, _ in HEADLINE),
+        *PROFILE_FIGURES,
+    )
 )
 #: First evaluation seed (training refuses seeds from here on: ``cpf_env.scenarios.splits``).
 BASE_SEED = EVALUATION_SEED
 #: The reference policy when none is given and it runs.
 DEFAULT_REFERENCE = "nn_dsc"
+
+
+def default_policies() -> list[str]:
+    """``cpf-bench``'s default policy set: every deployable baseline and the headroom reference.
+
+    The headroom reference (``baselines.HEADROOM_REFERENCE``, privileged, not
+    deployable) is what the share of the gap closed is measured against.
+    """
+    from baselines import HEADROOM_REFERENCE, POLICIES
+
+    return [*POLICIES, HEADROOM_REFERENCE]
 
 
 def labelled_policies(
@@ -88,6 +113,7 @@ def write_outputs(
     reference: str = "nn_dsc",
     skipped: Mapping[tuple[str, str], str] | None = None,
     figures: bool = True,
+    cost_margin: float = COST_MARGIN,
 ) -> list[dict[str, object]]:
     """Write episodes.csv, summary.csv, summary.md and one PNG per headline metric to ``out``.
 
@@ -101,6 +127,8 @@ def write_outputs(
         reference: The policy scores are relative to.
         skipped: (policy, scenario) -> why it was not run, listed in summary.md.
         figures: Write the PNG figures.
+        cost_margin: The verdict's practical-equivalence margin of the cost, a
+            fraction of the reference's mean cost.
 
     Returns:
         The summary rows.
@@ -113,12 +141,21 @@ def write_outputs(
     with atomic.staged_folder(directory) as staging:  # all files or none, no stale figure
         atomic.write_text(staging / "episodes.csv", episodes_csv(cells))
         atomic.write_text(staging / "summary.csv", summary_csv(rows))
-        text = views.markdown(rows, cells, command, reference, skipped or {})
+        text = views.markdown(rows, cells, command, reference, skipped or {}, cost_margin)
         atomic.write_text(staging / "summary.md", text)
         if figures:
-            for metric, title in HEADLINE:
-                drawing = views.figure(rows, cells, metric, title)
-                drawing.savefig(staging / f"{metric}.png", dpi=100, metadata={"Software": None})
+            drawings = {
+                f"{metric}.png": views.figure(rows, cells, metric, title)
+                for metric, title in HEADLINE
+            }
+            scores = profiles.normalized_scores(cells, reference)
+            if len(scores) > 1:  # the reference and at least one other policy on every scenario
+                drawings["performance_profile.png"] = profiles.profile_figure(scores, reference)
+                drawings["probability_of_improvement.png"] = profiles.improvement_figure(
+                    scores, reference
+                )
+            for name, drawing in drawings.items():
+                drawing.savefig(staging / name, dpi=100, metadata={"Software": None})
     return rows
 
 
@@ -158,19 +195,7 @@ def run_cell(
     label: str, spec: PolicySpec, task: Scenario, seeds: tuple[int, ...], steps: int | None
 ) -> CellResult:
     """One (policy, scenario) cell: build the policy, run its episodes, measure them."""
-    return _measure(label, resolve_policy(spec, task), task, seeds, steps)
-
-
-def _measure(
-    label: str,
-    policy: BenchPolicy,
-    task: Scenario,
-    seeds: tuple[int, ...],
-    steps: int | None,
-    progress: tqdm | None = None,
-) -> CellResult:
-    """Run a built policy's episodes on ``task`` and measure them."""
-    metrics = run_episodes(policy, task, seeds, steps=steps, progress=progress)
+    metrics = run_episodes(resolve_policy(spec, task), task, seeds, steps=steps)
     return CellResult(label, task.name, seeds, is_deterministic(task), metrics)
 
 
@@ -180,23 +205,33 @@ def _run_here(
     steps: int | None,
     progress: bool,
 ) -> list[CellResult]:
-    """The cells one after the other in this process, with a progress bar over steps."""
-    total = sum(task.max_steps if steps is None else int(steps) for *_, task, _ in jobs)
-    cells = []
+    """The cells in this process, one batch per scenario, with a progress bar over steps.
+
+    Returns the cells in the order of ``jobs``.
+    """
+    groups: dict[str, list[_Job]] = {}
+    for job in jobs:
+        groups.setdefault(job[2].name, []).append(job)
+    total = sum(group[0][2].max_steps if steps is None else int(steps) for group in groups.values())
+    results: dict[tuple[str, str], CellResult] = {}
     with tqdm(total=total, disable=not progress, unit="step", desc="cpf-bench") as bar:
-        for label, _, task, seeds in jobs:
-            bar.set_postfix_str(f"{label} on {task.name}")
-            cells.append(_measure(label, built[(label, task.name)], task, seeds, steps, bar))
-    return cells
+        for name, group in groups.items():
+            bar.set_postfix_str(f"{len(group)} policies on {name}")
+            task, seeds = group[0][2], group[0][3]
+            policies = [built[(label, name)] for label, *_ in group]
+            measured = rollout_group(policies, task, seeds, steps=steps, progress=bar)
+            for (label, *_), metrics in zip(group, measured, strict=True):
+                results[(label, name)] = CellResult(
+                    label, name, seeds, is_deterministic(task), metrics
+                )
+    return [results[(label, task.name)] for label, _, task, _ in jobs]
 
 
 def _absolute(spec: PolicySpec) -> PolicySpec:
     """An agent folder given by a relative path made absolute (Ray workers run elsewhere)."""
-    from baselines import POLICIES
-
     if isinstance(spec, TrustedAgentFolder):
         return spec  # already absolute; keeps the user's trust
-    if isinstance(spec, Path) or (isinstance(spec, str) and spec not in POLICIES):
+    if isinstance(spec, Path) or (isinstance(spec, str) and spec not in baseline_names()):
         return Path(spec).resolve()
     return spec
 
@@ -247,6 +282,7 @@ def run_bench(
     address: str | None = None,
     reference: str | None = None,
     split: str = "test",
+    cost_margin: float = COST_MARGIN,
 ) -> list[CellResult]:
     """Run every policy on every scenario for ``seeds`` paired seeds, and write the outputs.
 
@@ -270,6 +306,8 @@ def run_bench(
         split: ``test`` (the scenarios as named, on the evaluation seeds) or
             ``shift`` (each suite scenario's ``_shift`` variant, outside its
             training ranges; ``cpf_env.scenarios.splits``).
+        cost_margin: The verdict's practical-equivalence margin of the cost, a
+            fraction >= 0 of the reference's mean cost (``verdict.COST_MARGIN``).
 
     Returns:
         One ``CellResult`` per (policy, scenario), policies outermost. A policy
@@ -288,6 +326,7 @@ def run_bench(
         raise ValueError(f"--out {out} is a file; give a folder (it is created if needed).")
     if split not in SPLITS:
         raise ValueError(f"unknown split {split!r}; choose one of {list(SPLITS)}.")
+    check_margin(cost_margin)
     if split == "shift":
         scenario_names = [_shifted(name) for name in scenario_names]
     tasks = [make_scenario(name) for name in scenario_names]
@@ -310,7 +349,15 @@ def run_bench(
     else:
         cells = _run_here(jobs, built, steps, progress)
     if out is not None:
-        write_outputs(cells, out, command, reference=reference, skipped=skipped, figures=figures)
+        write_outputs(
+            cells,
+            out,
+            command,
+            reference=reference,
+            skipped=skipped,
+            figures=figures,
+            cost_margin=cost_margin,
+        )
     return cells
 
 

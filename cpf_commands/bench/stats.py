@@ -18,6 +18,10 @@ lines (rliable 1.2 does not import with pandas 3) and tested against scipy:
   and N/N, where a percentile bootstrap collapses to a point.
 * ``paired_difference``: the mean over seeds of (policy - reference) with a
   percentile bootstrap interval that resamples the pairs together.
+* ``gap_closed``: the share of the gap between the reference and a
+  headroom reference that a policy closes, (ref - policy) / (ref - headroom)
+  of the means, with a paired bootstrap interval (the seeds resampled
+  together for all three).
 
 Example:
     >>> import numpy as np
@@ -27,6 +31,7 @@ Example:
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable, Sequence
 from statistics import NormalDist
 
@@ -36,6 +41,8 @@ from numpy.typing import ArrayLike, NDArray
 __all__ = [
     "BOOTSTRAP_SEED",
     "bootstrap_interval",
+    "bootstrap_rows",
+    "gap_closed",
     "iqm",
     "paired_difference",
     "probability_of_beating",
@@ -102,15 +109,63 @@ def bootstrap_interval(
         raise ValueError("bootstrap_interval needs at least one stratum, none of them empty.")
     if not 0.0 < confidence < 1.0:
         raise ValueError(f"confidence must be in (0, 1), got {confidence}.")
-    rng = np.random.default_rng(seed)
+    draws = _resample_indices(tuple(array.size for array in arrays), replicates, seed)
     resampled = np.concatenate(
-        [array[rng.integers(0, array.size, size=(replicates, array.size))] for array in arrays],
-        axis=1,
+        [array[index] for array, index in zip(arrays, draws, strict=True)], axis=1
     )
     estimates = statistic(resampled)
     tail = 100.0 * (1.0 - confidence) / 2.0
     low, high = np.percentile(estimates, [tail, 100.0 - tail])
     return float(low), float(high)
+
+
+def bootstrap_rows(
+    samples: ArrayLike,
+    statistic: Statistic = _mean,
+    confidence: float = 0.95,
+    replicates: int = REPLICATES,
+    seed: int = BOOTSTRAP_SEED,
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """``bootstrap_interval([row])`` of every row of ``samples`` (M, N) at once.
+
+    Every row is resampled with the same draws a single stratum of N samples
+    gets, so row m's interval is ``bootstrap_interval([samples[m]], ...)``
+    bit for bit; one call instead of M (the bench's many metrics of a cell).
+
+    Returns:
+        (low, high), each (M,).
+    """
+    matrix = np.asarray(samples, dtype=np.float64)
+    if matrix.ndim != 2 or matrix.shape[1] == 0:
+        raise ValueError(f"samples must be (M, N) with N >= 1, got shape {matrix.shape}.")
+    if not 0.0 < confidence < 1.0:
+        raise ValueError(f"confidence must be in (0, 1), got {confidence}.")
+    (draw,) = _resample_indices((matrix.shape[1],), replicates, seed)
+    rows, size = matrix.shape
+    # (M R, N): the layout a single stratum's (R, N) resample has, so numpy reduces
+    # every replicate in the same order (a 3-D array may be reduced in another)
+    resampled = matrix[:, draw].reshape(rows * replicates, size)
+    estimates = statistic(resampled).reshape(rows, replicates)
+    tail = 100.0 * (1.0 - confidence) / 2.0
+    low, high = np.percentile(estimates, [tail, 100.0 - tail], axis=1)
+    return low, high
+
+
+@functools.lru_cache(maxsize=64)
+def _resample_indices(
+    sizes: tuple[int, ...], replicates: int, seed: int
+) -> tuple[NDArray[np.int64], ...]:
+    """The bootstrap's draws: per stratum of N_s samples, (replicates, N_s) indices.
+
+    One seeded generator draws the strata in order; the draws depend only on
+    the sizes, so they are made once and shared by every metric and cell of a
+    run (read-only arrays), the same numbers as drawing them each time.
+    """
+    rng = np.random.default_rng(seed)
+    draws = tuple(rng.integers(0, size, size=(replicates, size)) for size in sizes)
+    for draw in draws:
+        draw.flags.writeable = False
+    return draws
 
 
 def wilson_interval(successes: float, trials: int, confidence: float = 0.95) -> tuple[float, float]:
@@ -204,3 +259,50 @@ def probability_of_beating(
     wins = (x < y) + 0.5 * (x == y)
     low, high = wilson_interval(float(wins.sum()), int(wins.size), confidence)
     return float(wins.mean()), low, high
+
+
+def gap_closed(
+    reference: ArrayLike,
+    values: ArrayLike,
+    headroom: ArrayLike,
+    confidence: float = 0.95,
+    replicates: int = REPLICATES,
+    seed: int = BOOTSTRAP_SEED,
+) -> tuple[float, float, float] | None:
+    """Share of the reference-to-headroom gap a policy closes, with a paired bootstrap interval.
+
+    share = (mean(reference) - mean(values)) / (mean(reference) - mean(headroom)),
+    lower is better: 0 = the reference's level, 1 = the headroom reference's,
+    below 0 worse than the reference, above 1 better than the headroom. Each
+    bootstrap replicate resamples the N seeds once and applies the draw to
+    all three arrays (they ran the same seeds).
+
+    Args:
+        reference: The reference policy's values per seed (N,).
+        values: The policy's values on the same seeds (N,).
+        headroom: The headroom reference's values on the same seeds (N,).
+        confidence: Coverage of the interval.
+        replicates: Bootstrap replicates.
+        seed: Seed of the resampling generator.
+
+    Returns:
+        (share, low, high), or None when the headroom reference is not better
+        than the reference with this confidence (the lower end of the paired
+        interval of reference - headroom is not above zero): then there is no
+        gap to close and the ratio would only measure noise.
+
+    Raises:
+        ValueError: Arrays of different shapes or empty.
+    """
+    x, y = _paired(values, reference)
+    h, _ = _paired(headroom, reference)
+    gap, gap_low, _ = paired_difference(y, h, confidence, replicates, seed)
+    if not gap_low > 0.0:
+        return None
+    (draw,) = _resample_indices((y.size,), replicates, seed)
+    shares = (y[draw].mean(axis=1) - x[draw].mean(axis=1)) / (
+        y[draw].mean(axis=1) - h[draw].mean(axis=1)
+    )
+    tail = 100.0 * (1.0 - confidence) / 2.0
+    low, high = np.percentile(shares, [tail, 100.0 - tail])
+    return float((y.mean() - x.mean()) / gap), float(low), float(high)

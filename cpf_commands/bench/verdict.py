@@ -5,13 +5,19 @@ physical regression (a steady heading offset, a larger cross-track error, a
 slower fleet). The verdict therefore reads the paired cost difference and a
 declared set of physical metrics (``GUARDED``), all on the same seeds:
 
-* ``beats``: the 95 % interval of the mean paired cost difference
-  (policy - reference) lies below zero and no guarded metric regressed;
+* ``equivalent``: the 95 % interval of the mean paired cost difference
+  (policy - reference) lies inside the practical-equivalence margin
+  +-``COST_MARGIN`` x the reference's mean cost (default 1 %): whatever its
+  sign, the difference is too small to matter (``equivalent (worse: ...)``
+  if a guarded metric regressed);
+* ``beats``: otherwise, the cost interval lies below zero and no guarded
+  metric regressed;
 * ``mixed (worse: ...)``: the cost interval lies below zero but a guarded
   metric regressed (named);
 * ``loses``: the cost interval lies above zero;
-* ``no difference``: the cost interval contains zero (``no difference
-  (worse: ...)`` if a guarded metric regressed).
+* ``no difference``: the cost interval contains zero and reaches beyond the
+  margin: not resolved by these seeds (``no difference (worse: ...)`` if a
+  guarded metric regressed).
 
 A guarded metric regressed when its mean paired difference, oriented so
 that positive is worse, exceeds ``max(RELATIVE_TOLERANCE x |reference
@@ -32,9 +38,11 @@ from cpf_commands.bench import stats
 from cpf_commands.bench.report import CellResult
 
 __all__ = [
+    "COST_MARGIN",
     "GUARDED",
     "RELATIVE_TOLERANCE",
     "Verdict",
+    "check_margin",
     "suite_cost_difference",
     "verdict",
     "verdicts",
@@ -42,6 +50,8 @@ __all__ = [
 
 #: Relative tolerance of a guarded metric, as a fraction of the reference's mean.
 RELATIVE_TOLERANCE = 0.10
+#: Practical-equivalence margin of the cost, a fraction of the reference's mean cost.
+COST_MARGIN = 0.01
 #: Guarded physical metrics: name -> (short label, absolute floor, higher is better).
 GUARDED: dict[str, tuple[str, float, bool]] = {
     "cross_track_error_rms_window": ("cross-track", 1e-3, False),
@@ -64,7 +74,10 @@ class Verdict:
         cost_difference: (mean, low, high) of the paired cost difference.
         p_beats: (probability, low, high) of a lower cost on a seed (Wilson interval).
         regressed: Short labels of the guarded metrics that regressed.
-        label: ``beats``, ``mixed (worse: ...)``, ``loses`` or ``no difference``.
+        margin: The cost's practical-equivalence margin, in cost units (>= 0).
+        label: ``equivalent``, ``beats``, ``mixed (worse: ...)``, ``loses`` or
+            ``no difference`` (the last two and ``equivalent`` with ``(worse: ...)``
+            when a guarded metric regressed).
     """
 
     policy: str
@@ -74,6 +87,7 @@ class Verdict:
     cost_difference: tuple[float, float, float]
     p_beats: tuple[float, float, float]
     regressed: tuple[str, ...]
+    margin: float
     label: str
 
 
@@ -91,36 +105,65 @@ def _regressed(cell: CellResult, base: CellResult) -> tuple[str, ...]:
     return tuple(worse)
 
 
-def verdict(cell: CellResult, base: CellResult) -> Verdict:
+def verdict(cell: CellResult, base: CellResult, margin: float = COST_MARGIN) -> Verdict:
     """The verdict of ``cell`` against the reference's ``base`` (same scenario and seeds).
 
+    Args:
+        cell: The policy's episodes.
+        base: The reference's episodes on the same scenario and seeds.
+        margin: Practical-equivalence margin of the cost, a fraction (>= 0) of
+            the reference's mean cost; 0 turns it off.
+
     Raises:
-        ValueError: The cells ran different scenarios or seeds.
+        ValueError: The cells ran different scenarios or seeds, or a negative margin.
     """
     if cell.scenario != base.scenario or cell.seeds != base.seeds:
         raise ValueError(
             f"{cell.policy} and {base.policy} must run the same scenario and seeds to be compared."
         )
+    check_margin(margin)
     cost = stats.paired_difference(cell.metrics["cost"], base.metrics["cost"])
     p_beats = stats.probability_of_beating(cell.metrics["cost"], base.metrics["cost"])
     regressed = _regressed(cell, base)
     worse = f" (worse: {', '.join(regressed)})" if regressed else ""
-    if cost[2] < 0.0:
+    band = margin * abs(float(base.metrics["cost"].mean()))
+    if -band < cost[1] and cost[2] < band:
+        label = "equivalent" + worse
+    elif cost[2] < 0.0:
         label = "mixed" + worse if regressed else "beats"
     elif cost[1] > 0.0:
         label = "loses"
     else:
         label = "no difference" + worse
     return Verdict(
-        cell.policy, cell.scenario, base.policy, len(cell.seeds), cost, p_beats, regressed, label
+        cell.policy,
+        cell.scenario,
+        base.policy,
+        len(cell.seeds),
+        cost,
+        p_beats,
+        regressed,
+        band,
+        label,
     )
 
 
-def verdicts(cells: Sequence[CellResult], reference: str) -> list[Verdict]:
+def check_margin(margin: float) -> None:
+    """Raise ValueError unless ``margin`` is a finite fraction >= 0."""
+    if not (np.isfinite(margin) and margin >= 0.0):
+        raise ValueError(
+            "the cost margin (--cost-margin) must be a fraction >= 0 of the reference's mean "
+            f"cost (0.01 = 1 %), got {margin}."
+        )
+
+
+def verdicts(
+    cells: Sequence[CellResult], reference: str, margin: float = COST_MARGIN
+) -> list[Verdict]:
     """Every non-reference cell's verdict where the reference ran the same scenario."""
     bases = {cell.scenario: cell for cell in cells if cell.policy == reference}
     return [
-        verdict(cell, bases[cell.scenario])
+        verdict(cell, bases[cell.scenario], margin)
         for cell in cells
         if cell.policy != reference and cell.scenario in bases
     ]

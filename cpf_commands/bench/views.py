@@ -13,12 +13,39 @@ import numpy as np
 from matplotlib.figure import Figure
 from matplotlib.ticker import FuncFormatter
 
-from cpf_commands.bench.report import HEADLINE, CellResult
-from cpf_commands.bench.verdict import GUARDED, RELATIVE_TOLERANCE, Verdict, verdicts
+from baselines import HEADROOM_REFERENCE, PRIVILEGED
+from cpf_commands.bench.report import GAP_METRICS, HEADLINE, CellResult
+from cpf_commands.bench.verdict import (
+    COST_MARGIN,
+    GUARDED,
+    RELATIVE_TOLERANCE,
+    Verdict,
+    verdicts,
+)
 
-__all__ = ["figure", "markdown", "markdown_table", "terminal_table", "verdict_rows"]
+__all__ = [
+    "display_name",
+    "figure",
+    "figure_label",
+    "gap_table",
+    "markdown",
+    "markdown_table",
+    "terminal_table",
+    "verdict_rows",
+]
 
 VERDICT_HEADER = ("policy", "scenario", "N", "cost difference [95 %]", "P(beats) [95 %]", "verdict")
+
+
+def display_name(policy: str) -> str:
+    """A policy's name in tables: a privileged reference says that it is one."""
+    return f"{policy} (privileged, not deployable)" if policy in PRIVILEGED else policy
+
+
+def figure_label(policy: str) -> str:
+    """A policy's label in figures: a folder's last part; a privileged reference says so."""
+    short = policy.rstrip("/").split("/")[-1]
+    return f"{short} (privileged)" if policy in PRIVILEGED else short
 
 
 def verdict_rows(found: Sequence[Verdict]) -> list[list[str]]:
@@ -29,7 +56,7 @@ def verdict_rows(found: Sequence[Verdict]) -> list[list[str]]:
         p, p_low, p_high = v.p_beats
         rows.append(
             [
-                v.policy,
+                display_name(v.policy),
                 v.scenario,
                 str(v.episodes),
                 f"{diff:+.3g} [{low:+.3g}, {high:+.3g}]",
@@ -40,16 +67,17 @@ def verdict_rows(found: Sequence[Verdict]) -> list[list[str]]:
     return rows
 
 
-def terminal_table(cells: Sequence[CellResult], reference: str) -> str:
+def terminal_table(cells: Sequence[CellResult], reference: str, margin: float = COST_MARGIN) -> str:
     """The verdicts as a plain-text table for the terminal ('' without the reference)."""
-    body = verdict_rows(verdicts(cells, reference))
+    body = verdict_rows(verdicts(cells, reference, margin))
     if not body:
         return ""
     table = [list(VERDICT_HEADER), *body]
     widths = [max(len(row[k]) for row in table) for k in range(len(VERDICT_HEADER))]
     lines = ["  ".join(cell.ljust(w) for cell, w in zip(row, widths, strict=True)) for row in table]
-    return f"against {reference}:\n" + "\n".join(
-        [line.rstrip() for line in lines] + _regressions(cells, reference)
+    return (
+        f"against {reference}: (equivalent: cost interval within +-{margin:.1%} of its mean)\n"
+        + "\n".join([line.rstrip() for line in lines] + _regressions(cells, reference, margin))
     )
 
 
@@ -57,7 +85,7 @@ def terminal_table(cells: Sequence[CellResult], reference: str) -> str:
 _UNITS = {"cross-track": " m", "heading": " rad", "formation": " m"}
 
 
-def _regressions(cells: Sequence[CellResult], reference: str) -> list[str]:
+def _regressions(cells: Sequence[CellResult], reference: str, margin: float) -> list[str]:
     """One line per verdict with a regressed guarded metric: the means, policy vs reference.
 
     Final-window means in SI units (m, rad; progress as a fraction of v0 T,
@@ -66,7 +94,7 @@ def _regressions(cells: Sequence[CellResult], reference: str) -> list[str]:
     by_key = {(cell.policy, cell.scenario): cell for cell in cells}
     label_of = {label: name for name, (label, _, _) in GUARDED.items()}
     lines = []
-    for result in verdicts(cells, reference):
+    for result in verdicts(cells, reference, margin):
         if not result.regressed:
             continue
         cell, base = by_key[result.policy, result.scenario], by_key[reference, result.scenario]
@@ -98,12 +126,45 @@ def markdown_table(header: Sequence[str], body: Sequence[Sequence[str]]) -> list
     return lines + ["| " + " | ".join(row) + " |" for row in body]
 
 
+def gap_table(
+    rows: list[dict[str, object]], cells: Sequence[CellResult], metric: str, reference: str
+) -> list[str]:
+    """Markdown lines: each policy's share of the gap closed on ``metric``, per scenario.
+
+    "n/a" where the headroom reference is not better than the reference (no
+    gap to close); empty where the policy did not run.
+    """
+    index = {(r["policy"], r["scenario"]): r for r in rows if r["metric"] == metric}
+    names = list(dict.fromkeys(cell.scenario for cell in cells))
+    policies = [
+        p
+        for p in dict.fromkeys(cell.policy for cell in cells)
+        if p not in (reference, HEADROOM_REFERENCE)
+    ]
+    body = []
+    for policy in policies:
+        texts = []
+        for name in names:
+            row = index.get((policy, name))
+            if row is None or (reference, name) not in index:
+                texts.append("")
+            elif row["gap_closed"] is None:
+                texts.append("n/a")
+            else:
+                keys = ("gap_closed", "gap_ci_low", "gap_ci_high")
+                share, low, high = (float(row[k]) for k in keys)  # type: ignore[arg-type]
+                texts.append(f"{share:.2f} [{low:.2f}, {high:.2f}]")
+        body.append([display_name(policy), *texts])
+    return markdown_table(["policy", *names], body)
+
+
 def markdown(
     rows: list[dict[str, object]],
     cells: Sequence[CellResult],
     command: str,
     reference: str,
     skipped: Mapping[tuple[str, str], str],
+    margin: float = COST_MARGIN,
 ) -> str:
     """``summary.md``: the command, how to read it, and the headline metrics' tables."""
     index = {(r["policy"], r["scenario"], r["metric"]): r for r in rows}
@@ -122,7 +183,7 @@ def markdown(
         f"`P(beats)`: probability of a lower cost than {reference} on the same seed. "
         "All numbers: `summary.csv`.",
     ]
-    judged = verdicts(cells, reference)
+    judged = verdicts(cells, reference, margin)
     if judged:
         lines += [
             "",
@@ -134,10 +195,33 @@ def markdown(
             "cross-track, heading and formation error, progress, failures) worse by more "
             f"than {RELATIVE_TOLERANCE:.0%} of {reference}'s mean (and a physical floor) with "
             "its interval above zero; else `mixed` names the metric that regressed. "
-            "See docs/benchmark.md.",
+            f"`equivalent`: the whole cost interval lies within +-{margin:.1%} of {reference}'s "
+            "mean cost (the practical-equivalence margin, `--cost-margin`), too small a "
+            "difference to matter either way. See docs/benchmark.md.",
             "",
         ]
         lines += markdown_table(VERDICT_HEADER, verdict_rows(judged))
+    privileged = [p for p in policies if p in PRIVILEGED]
+    if privileged:
+        lines += [
+            "",
+            f"Privileged references ({', '.join(privileged)}): told the true lumped model error "
+            "and disturbances and given lossless, undelayed neighbour values; not deployable, "
+            "they show the headroom.",
+        ]
+    if HEADROOM_REFERENCE in policies and len(policies) > 2:
+        for metric in GAP_METRICS:
+            lines += [
+                "",
+                f"## Share of the gap to {HEADROOM_REFERENCE} closed, {metric}",
+                "",
+                f"({reference} - policy) / ({reference} - {HEADROOM_REFERENCE}) of the mean "
+                f"{metric}, with its paired 95 % bootstrap interval: 0 = {reference}'s level, 1 = "
+                f"the headroom reference's, < 0 worse than {reference}. n/a: "
+                f"{HEADROOM_REFERENCE} is not better than {reference} there (no gap to close).",
+                "",
+            ]
+            lines += gap_table(rows, cells, metric, reference)
     if skipped:
         lines += ["", "Not run (the policy does not fit the scenario):", ""]
         lines += [f"- {policy} on {name}: {why}" for (policy, name), why in skipped.items()]
@@ -146,14 +230,14 @@ def markdown(
         for policy in policies:
             found = [index.get((policy, "all", f"{m}_normalized")) for m, _ in HEADLINE]
             failures = next((str(r["failures"]) for r in found if r), "")
-            body.append([policy, *(_interval(r) for r in found), failures])
+            body.append([display_name(policy), *(_interval(r) for r in found), failures])
         lines += ["", f"## All scenarios, each episode divided by {reference}'s mean", ""]
         lines += markdown_table(["policy", *headings, "failures"], body)
     for metric, heading in HEADLINE[:2]:
         body = []
         for policy in policies:
             found = [index.get((policy, name, metric)) for name in names]
-            body.append([policy] + [_mean_and_failures(r) for r in found])
+            body.append([display_name(policy)] + [_mean_and_failures(r) for r in found])
         lines += ["", f"## {heading.capitalize()} by scenario (mean; failed episodes)", ""]
         lines += markdown_table(["policy", *names], body)
     for name in names:
@@ -173,7 +257,17 @@ def markdown(
             failures = f"{cost['failures']}/{cost['n_episodes']}"
             found = [index.get((policy, name, m)) for m, _ in HEADLINE]
             text = [_interval(r) for r in found]
-            body.append([policy, text[0], _interval(cost, "iqm"), *text[1:], failures, ratio, p])
+            body.append(
+                [
+                    display_name(policy),
+                    text[0],
+                    _interval(cost, "iqm"),
+                    *text[1:],
+                    failures,
+                    ratio,
+                    p,
+                ]
+            )
         lines += ["", f"## {name} ({count})", ""]
         header = ["policy", headings[0], "cost IQM", *headings[1:]]
         lines += markdown_table([*header, "failures", f"/ {reference}", "P(beats)"], body)
@@ -231,7 +325,7 @@ def figure(
     spacing = 1.0 / (len(others) + 1)
     for k, policy in enumerate(others):
         color = f"C{k % 10}"
-        label: str | None = policy.rstrip("/").split("/")[-1]
+        label: str | None = figure_label(policy)
         for row_index, name in enumerate(names):
             y = row_index + (k + 1) * spacing - 0.5
             row, base = index.get((policy, name)), index.get((reference, name))

@@ -38,6 +38,7 @@ __all__ = [
     "FleetPolicy",
     "PolicySpec",
     "TrustedAgentFolder",
+    "baseline_names",
     "policy_argument",
     "policy_label",
     "resolve_policy",
@@ -74,12 +75,18 @@ class TrustedAgentFolder(str):
         return folder
 
 
+def baseline_names() -> list[str]:
+    """The analytic policies by name: the deployable ones, then the privileged references."""
+    from baselines import POLICIES, PRIVILEGED
+
+    return [*POLICIES, *PRIVILEGED]
+
+
 def trusting_pickles(specs: Sequence[str]) -> list[str]:
     """A command's policy arguments with every agent folder wrapped in ``TrustedAgentFolder``."""
-    from baselines import POLICIES
-
+    names = baseline_names()
     return [
-        spec if spec in POLICIES or not Path(spec).is_dir() else TrustedAgentFolder(spec)
+        spec if spec in names or not Path(spec).is_dir() else TrustedAgentFolder(spec)
         for spec in specs
     ]
 
@@ -106,11 +113,10 @@ def policy_label(spec: PolicySpec) -> str:
 
 def _check_name(spec: str | Path) -> None:
     """Raise ValueError unless ``spec`` is a baseline name or an existing folder."""
-    from baselines import POLICIES
-
-    if str(spec) not in POLICIES and not Path(spec).is_dir() and not _is_onnx(spec):
+    names = baseline_names()
+    if str(spec) not in names and not Path(spec).is_dir() and not _is_onnx(spec):
         raise ValueError(
-            f"policy {str(spec)!r} is neither a baseline ({', '.join(sorted(POLICIES))}), "
+            f"policy {str(spec)!r} is neither a baseline ({', '.join(sorted(names))}), "
             "an existing cpf-train --out folder nor a cpf-export .onnx file."
         )
 
@@ -143,10 +149,10 @@ def resolve_policy(spec: PolicySpec, scenario: str | Scenario, **options: Any) -
         ValueError: A name that is neither a baseline nor an existing folder,
             options for a non-baseline, or a trained agent without ``agents.load_policy``.
     """
-    from baselines import POLICIES, make_policy
+    from baselines import make_policy
 
     resolved = make_scenario(scenario)
-    if isinstance(spec, str) and spec in POLICIES:
+    if isinstance(spec, str) and spec in baseline_names():
         return make_policy(spec, resolved, **options)
     if options:
         raise ValueError(

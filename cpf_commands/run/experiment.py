@@ -7,11 +7,13 @@ action earned. Besides the policy's diagnostics it records the true lumped
 uncertainty the paper's NN is meant to learn (eq. [26]; docs/model.md, section 7),
 
     f_i = C(nu) nu + D(nu) nu + Delta(nu) - tau_w(t, nu) + M nubar_d'
-        = M (nubar_d' - a_free),
+        = f_lumped + M nubar_d',
 
-where a_free is the plant's true acceleration with zero applied force: the
-second form covers current, waves and wind too, and uses the simulator's own
-right-hand side, so the physics stays written once.
+with f_lumped = -M a_free from ``cpf_env.sim.privileged.lumped_uncertainty``
+(a_free the plant's true acceleration with zero applied force): it covers
+current, waves and wind too and uses the simulator's own right-hand side, so
+the physics stays written once (the privileged references are told the same
+f).
 
 Example:
     >>> from cpf_commands.run.experiment import run_episode
@@ -34,6 +36,7 @@ from cpf_env.model.paths import encode_paths, evaluate_paths
 from cpf_env.scenarios import Scenario
 from cpf_env.sim.fleet import FleetSim
 from cpf_env.sim.metrics import Trajectory
+from cpf_env.sim.privileged import lumped_uncertainty
 
 __all__ = ["run_episode"]
 
@@ -115,7 +118,6 @@ class _TrajectoryRecorder:
     def before(self, sim: FleetSim, actions: np.ndarray, policy: BenchPolicy) -> None:
         """Record the state at t_k and the policy's diagnostics."""
         a = sim.arrays
-        free = sim.accelerations(np.zeros_like(a.tau_applied))[0]
         time = float(sim.time[0])
         self.series["time"].append(np.array(time))
         self.series["v0"].append(np.array(sim.v0_at(time)))
@@ -127,7 +129,8 @@ class _TrajectoryRecorder:
             nubar_dot = policy.diagnostics["nubar_dot"][0]
             if self._mass is None:
                 self._mass = sim.mass_matrices()[0]
-            self.extras["lumped_true"].append(np.einsum("ijk,ik->ij", self._mass, nubar_dot - free))
+            told = lumped_uncertainty(sim)[0] + np.einsum("ijk,ik->ij", self._mass, nubar_dot)
+            self.extras["lumped_true"].append(told)
         if self._observer is not None:
             self._observer.before(sim, actions, policy)
 

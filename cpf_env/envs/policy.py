@@ -23,7 +23,10 @@ own internal states, one set per fleet:
   index list. Required only by batched vector envs that restart single
   fleets (``agents.FleetVecEnv``, ``ResidualController.reset_fleets``), which
   say so when it is missing; so is ``act_batch``'s ``fleets`` argument. The
-  commands call ``act_batch(obs)`` and ``reset(seed)`` only.
+  commands call ``act_batch(obs)`` and ``reset(seed)`` only;
+- optional ``bind_simulator(sim, fleets)``: a privileged reference
+  (``baselines.privileged``, not deployable) reads the true state of the
+  FleetSim fleets it acts for; the commands' rollout calls it when present.
 
 ``isinstance(x, FleetPolicy)`` checks that ``act_batch``, ``reset`` and
 ``diagnostics`` are present (Python checks presence, not signatures).

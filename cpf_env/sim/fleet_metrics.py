@@ -82,6 +82,21 @@ METRICS: tuple[str, ...] = (
     "steps",
 )
 
+#: Steps recorded before they are turned into series together (``FleetMetrics.record``).
+CHUNK = 64
+#: Simulator arrays a step's metrics are computed from (``FleetArrays`` fields).
+_RAW = (
+    "eta",
+    "nu",
+    "theta",
+    "theta_dot",
+    "errors",
+    "reward",
+    "reward_terms",
+    "tau_applied",
+    "tau_command",
+)
+
 #: Per-step fleet series, each (S, T): sums over steps give totals, maxima give maxima.
 _SERIES = (
     "reward",
@@ -164,6 +179,9 @@ class FleetMetrics:
         self.series = {name: np.zeros((sim.num_fleets, self.horizon)) for name in _SERIES}
         self._start_thetap = np.zeros(sim.num_fleets)
         self._has_estimate = True
+        self._raw: dict[str, Array] = {}  # allocated at the first record, by the arrays' shapes
+        self._first = 0  # step of the chunk's first row
+        self._rows = 0  # rows of the chunk filled
 
     def start(self, a: arrays.FleetArrays) -> None:
         """Note where each fleet starts (after reset), for ``progress``."""
@@ -171,41 +189,87 @@ class FleetMetrics:
         self._start_thetap = rel["thetap"].mean(axis=1)
 
     def record(self, t: int, a: arrays.FleetArrays, v0: float, estimate: Array | None) -> None:
-        """Write step t's fleet values (after the step) into column t of every series.
+        """Take step t's values (after the step); they become column t of every series.
+
+        The raw arrays are kept for ``CHUNK`` steps and turned into the series
+        together (``_flush``): the same element-wise operations and per-fleet
+        reductions over the vessels as step by step, on larger arrays.
 
         Args:
-            t: Step index, 0 .. T - 1.
+            t: Step index, 0 .. T - 1, one after the other.
             a: The simulator's arrays after step t.
             v0: Leader speed the step's rate is scored against (m/s).
             estimate: (S, n) the policy's speed estimates used at step t, or None.
         """
-        x = self.series
-        rel = path_relative(a.eta, a.nu, a.theta, self._kinds, self._params)
-        path_error = a.errors[..., arrays.ERR_PATH]
-        x["reward"][:, t] = a.reward.mean(axis=1)
-        for k, name in enumerate(_TERM_COSTS):
-            x[name][:, t] = a.reward_terms[:, :, k].mean(axis=1)
-        x["path_error_sq"][:, t] = (path_error**2).mean(axis=1)
-        x["path_error_max"][:, t] = path_error.max(axis=1)
-        x["along_sq"][:, t] = (rel["along"] ** 2).mean(axis=1)
-        x["cross_sq"][:, t] = (rel["cross"] ** 2).mean(axis=1)
-        x["cross_max"][:, t] = np.abs(rel["cross"]).max(axis=1)
-        x["heading_sq"][:, t] = (rel["heading"] ** 2).mean(axis=1)
-        x["heading_max"][:, t] = np.abs(rel["heading"]).max(axis=1)
-        thetap = rel["thetap"]
-        spread = thetap.max(axis=1) - thetap.min(axis=1)
-        x["formation"][:, t] = spread * rel["path_speed"].mean(axis=1)
-        x["sog"][:, t] = rel["sog"].mean(axis=1)
-        x["sog_error_sq"][:, t] = ((rel["sog"] - v0 * rel["path_speed"]) ** 2).mean(axis=1)
-        x["thetap"][:, t] = thetap.mean(axis=1)
-        x["v0"][:, t] = v0
-        x["spread"][:, t] = a.theta.max(axis=1) - a.theta.min(axis=1)
-        x["rate_error_sq"][:, t] = ((a.theta_dot - v0) ** 2).mean(axis=1)
-        x["energy"][:, t] = ((a.tau_applied / self._tau_scale) ** 2).sum(axis=2).mean(axis=1)
-        x["saturated"][:, t] = (a.tau_command != a.tau_applied).any(axis=2).mean(axis=1)
+        if t != self._first + self._rows:
+            raise ValueError(
+                f"steps must be recorded in order; expected {self._first + self._rows}."
+            )
+        if not self._raw:
+            self._raw = {name: np.zeros((CHUNK, *np.shape(getattr(a, name)))) for name in _RAW}
+            self._raw["estimate"] = np.zeros((CHUNK, *np.shape(a.theta)))
+            self._raw["v0"] = np.zeros(CHUNK)
+        row = self._rows
+        for name in _RAW:
+            self._raw[name][row] = getattr(a, name)
+        self._raw["v0"][row] = v0
         self._has_estimate = self._has_estimate and estimate is not None
         if estimate is not None:
-            x["estimate_error_sq"][:, t] = ((np.asarray(estimate) - v0) ** 2).mean(axis=1)
+            self._raw["estimate"][row] = estimate
+        self._rows += 1
+        if self._rows == CHUNK:
+            self._flush()
+
+    def _flush(self) -> None:
+        """Write the recorded chunk's steps into the series (per fleet: mean/max over vessels)."""
+        K = self._rows
+        if K == 0:
+            return
+        r = {name: values[:K] for name, values in self._raw.items()}
+        x, steps = self.series, slice(self._first, self._first + K)
+        S, n = r["theta"].shape[1:]
+        rel = {
+            name: values.reshape(K, S, n)
+            for name, values in path_relative(
+                r["eta"].reshape(K * S, n, 3),
+                r["nu"].reshape(K * S, n, 3),
+                r["theta"].reshape(K * S, n),
+                self._kinds,
+                self._params,
+            ).items()
+        }
+        v0 = r["v0"][:, None, None]
+        path_error = r["errors"][..., arrays.ERR_PATH]
+
+        def put(name: str, value: Array) -> None:  # value (K, S) -> columns of the series
+            x[name][:, steps] = value.T
+
+        put("reward", r["reward"].mean(axis=2))
+        for k, name in enumerate(_TERM_COSTS):
+            put(name, r["reward_terms"][..., k].mean(axis=2))
+        put("path_error_sq", (path_error**2).mean(axis=2))
+        put("path_error_max", path_error.max(axis=2))
+        put("along_sq", (rel["along"] ** 2).mean(axis=2))
+        put("cross_sq", (rel["cross"] ** 2).mean(axis=2))
+        put("cross_max", np.abs(rel["cross"]).max(axis=2))
+        put("heading_sq", (rel["heading"] ** 2).mean(axis=2))
+        put("heading_max", np.abs(rel["heading"]).max(axis=2))
+        thetap = rel["thetap"]
+        spread = thetap.max(axis=2) - thetap.min(axis=2)
+        put("formation", spread * rel["path_speed"].mean(axis=2))
+        put("sog", rel["sog"].mean(axis=2))
+        put("sog_error_sq", ((rel["sog"] - v0 * rel["path_speed"]) ** 2).mean(axis=2))
+        put("thetap", thetap.mean(axis=2))
+        put("v0", np.broadcast_to(r["v0"][:, None], (K, S)))
+        put("spread", r["theta"].max(axis=2) - r["theta"].min(axis=2))
+        put("rate_error_sq", ((r["theta_dot"] - v0) ** 2).mean(axis=2))
+        energy = ((r["tau_applied"] / self._tau_scale) ** 2).sum(axis=3).mean(axis=2)
+        put("energy", energy)
+        put("saturated", (r["tau_command"] != r["tau_applied"]).any(axis=3).mean(axis=2))
+        if self._has_estimate:
+            put("estimate_error_sq", ((r["estimate"] - v0) ** 2).mean(axis=2))
+        self._first += K
+        self._rows = 0
 
     def reduce(self, end: NDArray[np.int64], failed: NDArray[np.bool_]) -> dict[str, Array]:
         """Per-episode metrics (``METRICS``), each (S,).
@@ -214,6 +278,7 @@ class FleetMetrics:
             end: (S,) steps each episode lasted (1 .. T).
             failed: (S,) whether each fleet left its path.
         """
+        self._flush()
         S = end.shape[0]
         time = np.arange(self.horizon)[None, :]
         counted = time < end[:, None]

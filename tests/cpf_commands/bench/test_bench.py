@@ -189,7 +189,9 @@ def test_identical_arguments_give_identical_files(tmp_path):
         assert bench_main([*argv, "--out", str(tmp_path / run)]) == 0
     names = sorted(path.name for path in (tmp_path / "one").iterdir())
     assert {"episodes.csv", "summary.csv", "summary.md", "cost.png"} <= set(names)
-    assert len([n for n in names if n.endswith(".png")]) == len(bench_report.HEADLINE)
+    pictures = [n for n in names if n.endswith(".png")]
+    assert len(pictures) == len(bench_report.HEADLINE) + 2  # + the two rliable-style figures
+    assert {"performance_profile.png", "probability_of_improvement.png"} <= set(pictures)
     for name in names:
         assert (tmp_path / "one" / name).read_bytes() == (tmp_path / "two" / name).read_bytes()
     summary = (tmp_path / "one" / "summary.md").read_text()
@@ -413,11 +415,13 @@ def test_commands_reject_an_unknown_policy(capsys):
         assert "neither a baseline" in capsys.readouterr().err
 
 
-def test_default_bench_is_every_baseline_on_the_suite():
+def test_default_bench_is_every_baseline_and_the_headroom_reference_on_the_suite():
+    from baselines import HEADROOM_REFERENCE, PRIVILEGED
     from cpf_commands.bench.cli import _parser
 
     args = _parser().parse_args([])
-    assert args.policies == list(POLICIES) and args.scenarios == suite.list_suite()
+    assert args.policies == [*POLICIES, HEADROOM_REFERENCE]
+    assert HEADROOM_REFERENCE in PRIVILEGED and args.scenarios == suite.list_suite()
     assert args.seeds == 10
 
 

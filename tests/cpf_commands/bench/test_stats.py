@@ -126,3 +126,51 @@ def test_paired_difference_is_the_mean_of_per_seed_differences():
 def test_probability_of_beating_needs_pairs():
     with pytest.raises(ValueError, match="same number of seeds"):
         stats.probability_of_beating([1.0, 2.0], [1.0])
+
+
+# --- share of the gap closed --------------------------------------------------------------
+
+
+def test_gap_closed_is_the_share_of_the_mean_gap_by_hand():
+    reference = np.array([10.0, 12.0, 14.0, 16.0])
+    headroom = reference - 4.0
+    half_way = reference - 2.0  # closes half of the gap on every seed
+    share, low, high = stats.gap_closed(reference, half_way, headroom)
+    assert (share, low, high) == pytest.approx((0.5, 0.5, 0.5))
+    assert stats.gap_closed(reference, reference + 4.0, headroom)[0] == pytest.approx(-1.0)
+    assert stats.gap_closed(reference, headroom, headroom)[0] == pytest.approx(1.0)
+
+
+def test_gap_closed_interval_matches_a_paired_bootstrap_written_out():
+    rng = np.random.default_rng(3)
+    reference = rng.normal(100.0, 5.0, size=12)
+    headroom = reference - rng.normal(20.0, 2.0, size=12)
+    policy = reference - rng.normal(8.0, 4.0, size=12)
+    share, low, high = stats.gap_closed(reference, policy, headroom, replicates=4000, seed=9)
+    draws = np.random.default_rng(9).integers(0, 12, size=(4000, 12))
+    shares = [
+        (reference[d].mean() - policy[d].mean()) / (reference[d].mean() - headroom[d].mean())
+        for d in draws
+    ]
+    assert share == pytest.approx(
+        (reference.mean() - policy.mean()) / (reference - headroom).mean()
+    )
+    assert (low, high) == pytest.approx(tuple(np.percentile(shares, [2.5, 97.5])), rel=1e-12)
+    assert low < share < high
+
+
+def test_no_gap_is_reported_when_the_headroom_reference_is_not_better():
+    reference = np.array([10.0, 12.0, 14.0, 16.0])
+    noisy = reference + np.array([1.0, -1.0, 1.0, -1.0])  # mean gap 0: nothing to close
+    assert stats.gap_closed(reference, reference - 1.0, noisy) is None
+    assert stats.gap_closed(reference, reference - 1.0, reference + 2.0) is None
+
+
+@pytest.mark.parametrize("size", [1, 2, 3, 7, 10, 13, 20, 40])
+def test_bootstrap_rows_is_each_rows_bootstrap_interval_bit_for_bit(size):
+    matrix = np.random.default_rng(size).normal(size=(6, size))
+    for statistic in (None, stats.iqm):
+        extra = {} if statistic is None else {"statistic": statistic}
+        low, high = stats.bootstrap_rows(matrix, **extra)
+        for k in range(matrix.shape[0]):
+            assert (low[k], high[k]) == stats.bootstrap_interval([matrix[k]], **extra)

@@ -128,3 +128,48 @@ def test_terminal_names_the_regressed_metrics_with_their_values():
     assert "mixed (worse: heading)" in text
     assert "p on bench_mild, worse than nn_dsc: heading 0.03 rad vs 0.01 rad" in text
     assert "worse than" not in terminal_table([REFERENCE, _cell("q", BASE_COST - 50.0)], "nn_dsc")
+
+
+# --- the practical-equivalence margin of the cost ---------------------------------------------
+
+
+def test_a_difference_inside_the_margin_is_equivalent_whatever_its_sign():
+    tiny = BASE_COST * (1.0 - 1e-4)  # 0.01 % lower on every seed: resolved, but immaterial
+    assert verdict(_cell("p", tiny), REFERENCE).label == "equivalent"
+    assert verdict(_cell("p", BASE_COST * (1.0 + 1e-4)), REFERENCE).label == "equivalent"
+    assert verdict(_cell("p", tiny), REFERENCE, margin=0.0).label == "beats"
+    v = verdict(_cell("p", BASE_COST * (1.0 + 1e-4)), REFERENCE, margin=0.0)
+    assert v.label == "loses" and v.margin == 0.0
+
+
+def test_the_margin_scales_with_the_reference_cost_and_needs_the_whole_interval_inside():
+    v = verdict(_cell("p", BASE_COST - 0.5), REFERENCE)  # 0.48 % of 104.5, zero spread
+    assert v.margin == pytest.approx(0.01 * BASE_COST.mean())
+    assert v.label == "equivalent"
+    assert verdict(_cell("p", BASE_COST - 0.5), REFERENCE, margin=0.004).label == "beats"
+    # mean -0.5 but the interval reaches past -1.045 (the margin): resolved as beats, not equivalent
+    spread = BASE_COST - 0.5 + np.array([1.5, -2.5] * 5)
+    assert verdict(_cell("p", spread), REFERENCE).label == "no difference"
+
+
+def test_an_equivalent_cost_still_names_a_regressed_guarded_metric():
+    worse = np.full(10, 0.01 * 30)
+    v = verdict(_cell("p", BASE_COST * (1.0 - 1e-4), heading_error_rms_window=worse), REFERENCE)
+    assert v.label == "equivalent (worse: heading)"
+
+
+def test_a_negative_or_nan_margin_is_refused_before_anything_runs(tmp_path, capsys):
+    with pytest.raises(ValueError, match="cost margin"):
+        verdict(_cell("p", BASE_COST), REFERENCE, margin=-0.01)
+    for bad in ("-0.01", "nan"):
+        with pytest.raises(SystemExit):
+            bench_main(["--cost-margin", bad, "--out", str(tmp_path / "out"), "--quiet"])
+        assert "--cost-margin" in capsys.readouterr().err
+    assert not (tmp_path / "out").exists()
+
+
+def test_help_states_the_default_margin(capsys):
+    with pytest.raises(SystemExit):
+        bench_main(["--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert "--cost-margin FRACTION" in text and "(default: 0.01, i.e. 1%; 0 turns it off)" in text
