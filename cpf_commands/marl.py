@@ -1,0 +1,52 @@
+"""``cpf-marl``: BenchMARL's Hydra command line, with cpf_env's tasks registered.
+
+BenchMARL's own ``benchmarl/run.py`` looks tasks up in its installed registry
+and config folder, which know nothing of this package. This command is that
+script with ``agents.marl.tasks`` imported first (it registers ``cpf/<task>``)
+and ``agents/marl/conf`` as the primary config folder, which puts BenchMARL's
+configs (algorithms, models, experiment) on Hydra's search path. Every
+BenchMARL override works as documented there::
+
+    cpf-marl algorithm=mappo task=cpf/bench_lossy_links experiment.max_n_iters=20 \\
+        "experiment.loggers=[csv]" task.max_steps=100
+
+Needs BenchMARL (``docs/marl.md`` gives the install lines).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import torch
+
+import agents.marl
+from agents.marl.compat import import_benchmarl
+
+__all__ = ["marl_main"]
+
+CONF = Path(agents.marl.__file__).parent / "conf"
+
+
+def marl_main() -> None:
+    """Parse Hydra overrides from the command line and run the BenchMARL experiment."""
+    import_benchmarl()
+    import hydra
+    from hydra.core.hydra_config import HydraConfig
+    from omegaconf import DictConfig, OmegaConf
+
+    import agents.marl.tasks  # noqa: F401  (registers the cpf/<task> tasks)
+    from benchmarl.hydra_config import load_experiment_from_hydra
+
+    @hydra.main(version_base=None, config_path=str(CONF), config_name="config")
+    def run(cfg: DictConfig) -> None:
+        choices = HydraConfig.get().runtime.choices
+        print(f"\nAlgorithm: {choices.algorithm}, Task: {choices.task}\n")
+        print(OmegaConf.to_yaml(cfg))
+        load_experiment_from_hydra(cfg, task_name=choices.task).run()
+
+    torch.set_num_threads(1)  # small networks, a shared machine: one thread is faster
+    run()
+
+
+if __name__ == "__main__":
+    marl_main()
