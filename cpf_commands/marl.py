@@ -7,8 +7,8 @@ and ``agents/marl/conf`` as the primary config folder, which puts BenchMARL's
 configs (algorithms, models, experiment) on Hydra's search path. Every
 BenchMARL override works as documented there::
 
-    cpf-marl algorithm=mappo task=cpf/bench_lossy_links experiment.max_n_iters=20 \\
-        "experiment.loggers=[csv]" task.max_steps=100
+    cpf-marl algorithm=mappo task=cpf/bench_lossy_links experiment.max_n_iters=20
+    cpf-marl algorithm=ippo task=cpf/bench_mild "experiment.loggers=[csv]" task.max_steps=100
 
 Needs BenchMARL (``docs/marl.md`` gives the install lines).
 """
@@ -31,18 +31,18 @@ def marl_main() -> None:
     """Parse Hydra overrides from the command line and run the BenchMARL experiment."""
     import_benchmarl()
     import hydra
+    from benchmarl.hydra_config import load_experiment_from_hydra
     from hydra.core.hydra_config import HydraConfig
     from omegaconf import DictConfig, OmegaConf
 
     import agents.marl.tasks  # noqa: F401  (registers the cpf/<task> tasks)
-    from benchmarl.hydra_config import load_experiment_from_hydra
 
     @hydra.main(version_base=None, config_path=str(CONF), config_name="config")
     def run(cfg: DictConfig) -> None:
         choices = HydraConfig.get().runtime.choices
-        print(f"\nAlgorithm: {choices.algorithm}, Task: {choices.task}\n")
+        print(f"\nAlgorithm: {choices['algorithm']}, Task: {choices['task']}\n")
         print(OmegaConf.to_yaml(cfg))
-        load_experiment_from_hydra(cfg, task_name=choices.task).run()
+        load_experiment_from_hydra(cfg, task_name=choices["task"]).run()
 
     torch.set_num_threads(1)  # small networks, a shared machine: one thread is faster
     run()

@@ -119,12 +119,16 @@ def save_marl_policy(
     k = env.action_size
     weight, bias = layers[-1]
     if weight.shape[0] != 2 * k:
-        raise ValueError(f"the actor's last layer has {weight.shape[0]} outputs, not 2 k = {2 * k}.")
+        raise ValueError(
+            f"the actor's last layer has {weight.shape[0]} outputs, not 2 k = {2 * k}."
+        )
     tensors = {}
     for i, (w, b) in enumerate(layers[:-1]):
         tensors[f"hidden.{i}.weight"], tensors[f"hidden.{i}.bias"] = w, b
     tensors["output.weight"], tensors["output.bias"] = weight[:k], bias[:k]
-    tensors = {name: value.detach().to(torch.float32).contiguous() for name, value in tensors.items()}
+    tensors = {
+        name: value.detach().to(torch.float32).contiguous() for name, value in tensors.items()
+    }
     sizes = [int(layers[0][0].shape[1]), *(int(w.shape[0]) for w, _ in layers[:-1]), k]
     statistics = env.input_statistics
     record = {
@@ -148,7 +152,9 @@ def save_marl_policy(
         "format": MARL_FORMAT,
         "format_version": MARL_FORMAT_VERSION,
         "cpf_env": cpf_env.__version__,
-        "files": {name: {"sha256": _sha256(data), "bytes": len(data)} for name, data in files.items()},
+        "files": {
+            name: {"sha256": _sha256(data), "bytes": len(data)} for name, data in files.items()
+        },
     }
     target = Path(folder)
     with atomic.staged_folder(target) as staging:

@@ -99,7 +99,9 @@ def checked_config(config: dict[str, Any]) -> CpfTaskConfig:
     fields = {field.name for field in dataclasses.fields(CpfTaskConfig)}
     unknown = sorted(set(config) - fields)
     if unknown:
-        raise ValueError(f"unknown cpf task config fields {unknown}; the fields are {sorted(fields)}.")
+        raise ValueError(
+            f"unknown cpf task config fields {unknown}; the fields are {sorted(fields)}."
+        )
     if "scenario" not in config:
         raise ValueError("a cpf task config needs 'scenario' (a registered scenario name).")
     checked = CpfTaskConfig(**config)
@@ -119,7 +121,9 @@ class CpfTaskClass(TaskClass):
             ValueError: Discrete actions, a held-out scenario or evaluation seeds.
         """
         if not continuous_actions:
-            raise ValueError("cpf tasks have continuous actions only; set prefer_continuous_actions.")
+            raise ValueError(
+                "cpf tasks have continuous actions only; set prefer_continuous_actions."
+            )
         config = checked_config(self.config)
         first = 0 if seed is None else int(seed)
         check_training(config.scenario, range(first, first + int(num_envs)))
@@ -241,4 +245,7 @@ class CpfTask(Task):
         config.pop("defaults", None)
         return self.get_task(config=dataclasses.asdict(checked_config(config)))
 
-task_config_registry.update({f"{ENV_NAME}/{task.name.lower()}": task for task in CpfTask})
+
+task_config_registry.update(
+    {f"{ENV_NAME}/{name.lower()}": task for name, task in CpfTask.__members__.items()}
+)

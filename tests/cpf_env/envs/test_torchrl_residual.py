@@ -179,7 +179,7 @@ def test_bad_residual_input_is_refused_and_leaves_the_state_alone() -> None:
     with pytest.raises(ValueError, match="real floating-point"):
         env.step(td.clone().set((GROUP, "action"), torch.zeros(2, 5, 3, dtype=torch.complex64)))
     assert np.array_equal(env.sim.arrays.eta, before)
-    with pytest.raises(TypeError, match="agents.marl.make_env"):
+    with pytest.raises(TypeError, match=r"agents\.marl\.make_env"):
         TorchRLFleetEnv("bench_mild", num_fleets=2, base_policy="nn_dsc")  # type: ignore[arg-type]
     with pytest.raises(ValueError, match="has none: give base_policy="):
         TorchRLFleetEnv("bench_mild", num_fleets=2, normalize=True)
