@@ -53,7 +53,7 @@ from benchmarl.utils import _read_yaml_config  # noqa: E402
 from torchrl.data import Composite  # noqa: E402
 from torchrl.envs import EnvBase  # noqa: E402
 
-__all__ = ["CONF", "ENV_NAME", "CpfTask", "CpfTaskClass", "CpfTaskConfig"]
+__all__ = ["CONF", "ENV_NAME", "CpfTask", "CpfTaskClass", "CpfTaskConfig", "CpfTaskEnum"]
 
 #: BenchMARL's environment name of these tasks (``task=cpf/<task>``).
 ENV_NAME = "cpf"
@@ -215,7 +215,18 @@ def _fleet_env(env: EnvBase) -> TorchRLFleetEnv:
     return base
 
 
-class CpfTask(Task):
+class CpfTaskEnum(Task):
+    """What every enum of cpf tasks shares: configs from ``conf/task/cpf/`` beside this module."""
+
+    def get_from_yaml(self, path: str | None = None) -> TaskClass:
+        """The task with its config from ``path``, default ``conf/task/cpf/<task>.yaml`` here."""
+        default = CONF / "task" / ENV_NAME / f"{self.name.lower()}.yaml"
+        config = dict(_read_yaml_config(str(default if path is None else path)))
+        config.pop("defaults", None)
+        return self.get_task(config=dataclasses.asdict(checked_config(config)))
+
+
+class CpfTask(CpfTaskEnum):
     """The cpf_env training scenarios as BenchMARL tasks (``get_from_yaml()`` for the default)."""
 
     WANG2014 = None
@@ -237,13 +248,6 @@ class CpfTask(Task):
     def associated_class() -> type[TaskClass]:
         """``CpfTaskClass``."""
         return CpfTaskClass
-
-    def get_from_yaml(self, path: str | None = None) -> TaskClass:
-        """The task with its config from ``path``, default ``conf/task/cpf/<task>.yaml`` here."""
-        default = CONF / "task" / ENV_NAME / f"{self.name.lower()}.yaml"
-        config = dict(_read_yaml_config(str(default if path is None else path)))
-        config.pop("defaults", None)
-        return self.get_task(config=dataclasses.asdict(checked_config(config)))
 
 
 task_config_registry.update(

@@ -27,10 +27,15 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from cpf_env.envs.residual import ResidualController
+from cpf_env.envs.policy import FleetPolicy
+from cpf_env.envs.residual import ResidualConfig, ResidualController
+from cpf_env.scenarios import Scenario
 from cpf_env.sim.fleet import FleetSim
 
-__all__ = ["InputStatistics", "estimate_input_statistics"]
+__all__ = ["NORMALIZATION_FLEETS", "InputStatistics", "estimate_input_statistics"]
+
+#: Fleets the statistics pool (seeds 0 .. 15), whatever the number of fleets trained.
+NORMALIZATION_FLEETS = 16
 
 
 @dataclass(frozen=True)
@@ -101,32 +106,42 @@ class InputStatistics:
 
 
 def estimate_input_statistics(
-    sim: FleetSim, controller: ResidualController, steps: int = 200, seed: int = 0
+    scenario: Scenario,
+    base_policy: FleetPolicy | None,
+    config: ResidualConfig,
+    steps: int = 200,
+    fleets: int = NORMALIZATION_FLEETS,
+    seed: int = 0,
 ) -> InputStatistics:
     """Mean and variance of the learner's inputs under the base policy alone.
 
-    Runs ``steps`` control periods of every fleet of ``sim`` with a zero
-    residual, fleet k seeded ``seed + k``, and pools the inputs of all fleets,
-    vessels and steps (one shared scaling for all vessels, as one shared
-    network sees them). Fleets that end are reset and go on. The simulator and
-    the controller's base policy are left reset; reset them again before use.
+    Runs ``steps`` control periods of ``fleets`` fleets on a simulator of its
+    own with a zero residual, fleet k seeded ``seed + k``, and pools the inputs
+    of all fleets, vessels and steps (one shared scaling for all vessels, as
+    one shared network sees them). Fleets that end are reset and go on. The
+    result does not depend on how many fleets the caller trains with, so a
+    training env and an evaluation env of other sizes scale alike.
 
     Args:
-        sim: The simulator of B fleets (its state is overwritten).
-        controller: The residual composition over ``sim``'s fleets.
+        scenario: The task.
+        base_policy: The base policy (its states are reset afterwards), or None.
+        config: The residual composition (extras decide the inputs).
         steps: Control periods to pool (>= 1).
+        fleets: Fleets simulated (>= 1).
         seed: Seed of fleet 0.
 
     Returns:
-        The statistics of the float32 inputs, length ``controller.input_size``.
+        The statistics of the float32 inputs, length ``config.input_size(layout)``.
     """
-    if isinstance(steps, bool) or int(steps) != steps or steps < 1:
-        raise ValueError(f"steps must be an integer >= 1, got {steps!r}.")
-    B = sim.num_fleets
-    obs = sim.reset(seeds=[seed + k for k in range(B)])
+    for name, value in (("steps", steps), ("fleets", fleets)):
+        if isinstance(value, bool) or int(value) != value or value < 1:
+            raise ValueError(f"{name} must be an integer >= 1, got {value!r}.")
+    sim = FleetSim(scenario, num_fleets=int(fleets))
+    controller = ResidualController(scenario, base_policy, int(fleets), config)
+    obs = sim.reset(seeds=[seed + k for k in range(sim.num_fleets)])
     controller.reset()
     inputs = controller.observe(obs)
-    zero = np.zeros((B, controller.n, controller.action_size))
+    zero = np.zeros((sim.num_fleets, controller.n, controller.action_size))
     seen = []
     for _ in range(int(steps)):
         seen.append(inputs.astype(np.float32).reshape(-1, controller.input_size))
@@ -134,12 +149,10 @@ def estimate_input_statistics(
         inputs = controller.observe(obs)
         ended = sim.arrays.terminated | sim.truncated
         if ended.any():
-            fleets = np.flatnonzero(ended)
-            obs = sim.reset(fleets=fleets)
+            ending = np.flatnonzero(ended)
+            obs = sim.reset(fleets=ending)
             controller.reset_fleets(ended)
-            inputs[fleets] = controller.observe(obs[fleets], fleets=fleets)
+            inputs[ending] = controller.observe(obs[ending], fleets=ending)
     pooled = np.concatenate(seen).astype(np.float64)
-    mean, var = pooled.mean(axis=0), pooled.var(axis=0)
-    sim.reset(seeds=[seed + k for k in range(B)])
     controller.reset()
-    return InputStatistics(mean, var)
+    return InputStatistics(pooled.mean(axis=0), pooled.var(axis=0))

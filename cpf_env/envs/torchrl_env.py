@@ -142,8 +142,9 @@ class TorchRLFleetEnv(EnvBase):
             force residual, scale 0.2, no extras). Without a base policy it makes
             the learner command everything through the same composition.
         normalize: False (raw inputs), True (scale them with ``InputStatistics``
-            estimated over ``normalization_steps`` of the base policy alone, seeds
-            0 + k on a separate simulator; residual form only) or given statistics.
+            estimated over ``normalization_steps`` of the base policy alone on a
+            separate simulator of 16 fleets, seeds 0 .. 15; residual form only) or
+            given statistics.
         normalization_steps: Control periods pooled by ``normalize=True``.
         state: Also output the global ``"state"`` [B, 10 n] for centralized critics.
         **overrides: ``Scenario`` field overrides, as in ``cpf_env.parallel_env``.
@@ -240,8 +241,10 @@ class TorchRLFleetEnv(EnvBase):
                 "normalize=True estimates the statistics under the base policy, and this env "
                 "has none: give base_policy= (or residual=), or pass InputStatistics."
             )
-        probe = FleetSim(self.scenario, num_fleets=self.num_fleets)
-        return estimate_input_statistics(probe, self.controller, steps=steps)
+        controller = self.controller
+        return estimate_input_statistics(
+            self.scenario, controller.base, controller.config, steps=steps
+        )
 
     def _make_specs(self) -> None:
         """Observation, action, reward, done (and state) specs from the scenario."""

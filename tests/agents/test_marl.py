@@ -44,7 +44,7 @@ SMALL = {
 }
 
 
-def small_experiment(algorithm: str, folder: Path):  # type: ignore[no-untyped-def]
+def small_experiment(algorithm: str, folder: Path, route: type = CpfTask):  # type: ignore[no-untyped-def]
     from benchmarl.algorithms import IppoConfig, MappoConfig
     from benchmarl.experiment import Experiment, ExperimentConfig
     from benchmarl.models import MlpConfig
@@ -53,7 +53,7 @@ def small_experiment(algorithm: str, folder: Path):  # type: ignore[no-untyped-d
     for key, value in SMALL.items():
         setattr(config, key, value)
     config.save_folder = str(folder)
-    task = CpfTask.BENCH_LOSSY_LINKS.get_from_yaml()
+    task = route.BENCH_LOSSY_LINKS.get_from_yaml()  # type: ignore[attr-defined]
     task.config["normalization_steps"] = 20
     algorithm_config = {"mappo": MappoConfig, "ippo": IppoConfig}[algorithm].get_from_yaml()
     model = MlpConfig.get_from_yaml()
@@ -167,3 +167,37 @@ def test_the_hydra_command_runs_a_cpf_task(tmp_path: Path) -> None:
     result = subprocess.run(command, capture_output=True, text=True, env=env, cwd=tmp_path)
     assert result.returncode == 0, result.stderr[-2000:]
     assert "Algorithm: ippo, Task: cpf/bench_mild" in result.stdout
+
+
+def test_two_mappo_iterations_on_the_pettingzoo_route_with_distinct_worker_seeds(
+    tmp_path: Path,
+) -> None:
+    from agents.marl.pettingzoo_route import CpfPettingZooTask
+
+    torch.set_num_threads(1)
+    task = CpfPettingZooTask.BENCH_MILD.get_from_yaml()
+    make = task.get_env_fun(3, True, 4, "cpu")
+    first = [make().reset()["vessel", "observation"] for _ in range(3)]
+    assert not torch.equal(first[0], first[1]) and not torch.equal(first[1], first[2])
+    again = task.get_env_fun(3, True, 4, "cpu")
+    assert torch.equal(again().reset()["vessel", "observation"], first[0])  # seed 4 + 0
+    experiment = small_experiment("mappo", tmp_path, route=CpfPettingZooTask)
+    experiment.run()
+    assert experiment.n_iters_performed == 2
+    assert experiment.total_frames == 400
+
+
+def test_the_training_example_writes_a_curve_and_a_policy(tmp_path: Path) -> None:
+    script = Path(__file__).resolve().parents[2] / "examples" / "marl_residual.py"
+    out = tmp_path / "run"
+    command = [sys.executable, str(script), "--iterations", "1", "--out", str(out)]
+    env = {**os.environ, "NUMBA_NUM_THREADS": "1"}
+    result = subprocess.run(command, capture_output=True, text=True, env=env, cwd=tmp_path)
+    assert result.returncode == 0, result.stderr[-2000:]
+    assert "vessel-steps/s" in result.stdout
+    rows = (out / "curve.csv").read_text().splitlines()
+    assert len(rows) == 2 and rows[0].startswith("iteration,frames,vessel_steps")
+    run = json.loads((out / "run.json").read_text())
+    assert run["vessel_steps"] == 64 * 100 * 5
+    policy = load_policy(out, scenario="bench_lossy_links")
+    assert policy.name == "run"

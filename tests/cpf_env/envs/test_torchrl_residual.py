@@ -127,25 +127,29 @@ def test_normalized_inputs_are_the_statistics_applied_to_the_raw_inputs() -> Non
     assert torch.equal(first["next", GROUP, "reward"], second["next", GROUP, "reward"])
 
 
-def test_statistics_pool_a_base_only_rollout() -> None:
+def test_statistics_pool_a_base_only_rollout_of_16_fleets_whatever_b() -> None:
     scenario = scenarios.get("bench_mild").replace(max_steps=25)
-    env = TorchRLFleetEnv(
-        scenario,
-        num_fleets=2,
-        base_policy=make_policy("nn_dsc", scenario),
-        normalize=True,
-        normalization_steps=25,
-    )
-    sim = FleetSim(scenario, num_fleets=2)
-    loop = ResidualController(scenario, make_policy("nn_dsc", scenario), 2)
-    inputs = [loop.observe(sim.reset(seeds=[0, 1]))]
+    envs = [
+        TorchRLFleetEnv(
+            scenario,
+            num_fleets=b,
+            base_policy=make_policy("nn_dsc", scenario),
+            normalize=True,
+            normalization_steps=25,
+        )
+        for b in (2, 5)
+    ]
+    sim = FleetSim(scenario, num_fleets=16)
+    loop = ResidualController(scenario, make_policy("nn_dsc", scenario), 16)
+    inputs = [loop.observe(sim.reset(seeds=list(range(16))))]
     for _ in range(24):
-        inputs.append(loop.observe(sim.step(loop.compose(np.zeros((2, 5, 3))))))
+        inputs.append(loop.observe(sim.step(loop.compose(np.zeros((16, 5, 3))))))
     rows = np.concatenate([x.astype(np.float32).reshape(-1, x.shape[-1]) for x in inputs])
-    stats = env.input_statistics
-    assert stats is not None
-    np.testing.assert_allclose(stats.mean, rows.astype(np.float64).mean(axis=0), rtol=0, atol=0)
-    np.testing.assert_allclose(stats.var, rows.astype(np.float64).var(axis=0), rtol=0, atol=0)
+    for env in envs:
+        stats = env.input_statistics
+        assert stats is not None
+        assert np.array_equal(stats.mean, rows.astype(np.float64).mean(axis=0))
+        assert np.array_equal(stats.var, rows.astype(np.float64).var(axis=0))
 
 
 def test_same_seed_same_rollout_with_a_residual() -> None:
