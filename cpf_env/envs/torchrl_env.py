@@ -66,49 +66,19 @@ import numpy as np
 import torch
 from numpy.typing import NDArray
 from tensordict import TensorDict, TensorDictBase
-from torchrl.data import Bounded, Categorical, Composite, Unbounded
 from torchrl.envs import EnvBase
 
 from cpf_env.envs.input_statistics import InputStatistics, estimate_input_statistics
 from cpf_env.envs.parallel import make_scenario
 from cpf_env.envs.policy import FleetPolicy
 from cpf_env.envs.residual import ResidualConfig, ResidualController
+from cpf_env.envs.torchrl_specs import ERROR_KEYS, GROUP, FleetSpecs, action_bounds
 from cpf_env.scenarios import Scenario
-from cpf_env.sim import arrays
 from cpf_env.sim.fleet import FleetSim
 
 __all__ = ["ERROR_KEYS", "GROUP", "TorchRLFleetEnv", "action_bounds"]
 
-#: The one agent group (``PettingZooWrapper``'s default group of ``vessel_i`` agents).
-GROUP = "vessel"
-
-#: The per-vessel errors of ``info_level="minimal"``, as (info key, index into ``errors``).
-ERROR_KEYS = arrays.ERROR_KEYS
-
 _INFO_LEVELS = ("none", "minimal")
-_DONE_KEYS = ("done", "terminated", "truncated")
-#: Values of the global state per vessel: eta (3), nu (3), theta, tau_applied (3).
-STATE_PER_VESSEL = 10
-
-
-def action_bounds(scenario: Scenario) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
-    """Per-vessel action bounds, those of the ParallelEnv's ``action_space``.
-
-    Args:
-        scenario: The task.
-
-    Returns:
-        (low, high), each float32 of shape (n, 4 + m): the force limits (N, N, N m),
-        +-theta_dot_max (1/s) and +-message_max. Forces beyond the limits are legal
-        (the plant saturates them); rate and message are clipped.
-    """
-    tau_min, tau_max = scenario.tau_limits
-    n, m = scenario.n, scenario.message_size
-    rate = np.full((n, 1), scenario.theta_dot_max)
-    message = np.full((n, m), scenario.message_max)
-    low = np.concatenate([tau_min, -rate, -message], axis=1).astype(np.float32)
-    high = np.concatenate([tau_max, rate, message], axis=1).astype(np.float32)
-    return low, high
 
 
 def _checked_device(device: str | torch.device) -> torch.device:
@@ -247,53 +217,21 @@ class TorchRLFleetEnv(EnvBase):
         )
 
     def _make_specs(self) -> None:
-        """Observation, action, reward, done (and state) specs from the scenario."""
-        B, n, device = self.num_fleets, self.n, self.device
-        group = torch.Size([B, n])
-        shape = (B, n, self.input_size)
-        observation: dict[str, Any] = {
-            "observation": Unbounded(shape, dtype=torch.float32, device=device)
-        }
-        if self.info_level == "minimal":
-            infos = {
-                key: Unbounded(group, dtype=torch.float32, device=device) for key, _ in ERROR_KEYS
-            }
-            observation["info"] = Composite(infos, shape=group, device=device)
-        root: dict[str, Any] = {GROUP: Composite(observation, shape=group, device=device)}
-        if self.state:
-            size = STATE_PER_VESSEL * n
-            root["state"] = Unbounded((B, size), dtype=torch.float32, device=device)
-        self.observation_spec = Composite(root, shape=[B], device=device)
-        if self.controller is None:
-            low, high = (
-                torch.from_numpy(bound).expand(B, n, -1) for bound in action_bounds(self.scenario)
-            )
-        else:
-            low = -torch.ones((B, n, self.action_size))
-            high = torch.ones((B, n, self.action_size))
-        action = Bounded(low, high, dtype=torch.float32, device=device)
-        self.full_action_spec = Composite(
-            {GROUP: Composite({"action": action}, shape=group, device=device)},
-            shape=[B],
-            device=device,
+        """Observation, action, reward, done (and state) specs (``torchrl_specs``)."""
+        residual = None if self.controller is None else self.action_size
+        specs = FleetSpecs.build(
+            self.scenario,
+            self.num_fleets,
+            self.input_size,
+            residual,
+            self.info_level,
+            self.state,
+            self.device,
         )
-        reward = Unbounded((B, n, 1), dtype=torch.float32, device=device)
-        self.full_reward_spec = Composite(
-            {GROUP: Composite({"reward": reward}, shape=group, device=device)},
-            shape=[B],
-            device=device,
-        )
-        fleet_flags = {
-            key: Categorical(2, (B, 1), dtype=torch.bool, device=device) for key in _DONE_KEYS
-        }
-        vessel_flags = {
-            key: Categorical(2, (B, n, 1), dtype=torch.bool, device=device) for key in _DONE_KEYS
-        }
-        self.full_done_spec = Composite(
-            {**fleet_flags, GROUP: Composite(vessel_flags, shape=group, device=device)},
-            shape=[B],
-            device=device,
-        )
+        self.observation_spec = specs.observation
+        self.full_action_spec = specs.action
+        self.full_reward_spec = specs.reward
+        self.full_done_spec = specs.done
 
     # --- EnvBase interface ----------------------------------------------------------------
 
