@@ -108,10 +108,6 @@ class CpfPettingZooTaskClass(CpfTaskClass):
             ClipTransform(in_keys=[key], low=-stats.clip, high=stats.clip),
         ]
 
-    def group_map(self, env: EnvBase) -> dict[str, list[str]]:
-        """TorchRL's group of the ``vessel_i`` agents."""
-        return dict(env.group_map)
-
     @staticmethod
     def env_name() -> str:
         """``"cpf_pettingzoo"``."""

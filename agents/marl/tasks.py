@@ -43,7 +43,7 @@ from typing import Any
 from agents.marl.compat import import_benchmarl
 from agents.marl.envs import make_env
 from cpf_env.envs.residual import ResidualConfig
-from cpf_env.envs.torchrl_env import GROUP, TorchRLFleetEnv
+from cpf_env.envs.torchrl_env import GROUP
 from cpf_env.scenarios.splits import check_training
 
 import_benchmarl()
@@ -163,7 +163,7 @@ class CpfTaskClass(TaskClass):
 
     def group_map(self, env: EnvBase) -> dict[str, list[str]]:
         """``{"vessel": ["vessel_0", ...]}``."""
-        return _fleet_env(env).group_map
+        return dict(env.group_map)  # a TransformedEnv forwards it to TorchRLFleetEnv
 
     def observation_spec(self, env: EnvBase) -> Composite:
         """The vessels' local observations only (no state, no infos), without the batch."""
@@ -206,13 +206,6 @@ class CpfTaskClass(TaskClass):
     def env_name() -> str:
         """``"cpf"``."""
         return ENV_NAME
-
-
-def _fleet_env(env: EnvBase) -> TorchRLFleetEnv:
-    """The ``TorchRLFleetEnv`` under BenchMARL's transforms."""
-    base = getattr(env, "base_env", env)
-    assert isinstance(base, TorchRLFleetEnv)
-    return base
 
 
 class CpfTaskEnum(Task):
