@@ -34,7 +34,7 @@ from agents.marl.tasks import CpfTask, CpfTaskClass, CpfTaskEnum, checked_config
 from agents.vec_env import resolve_base_policy
 from cpf_env.envs.input_statistics import estimate_input_statistics
 from cpf_env.envs.parallel import make_scenario
-from cpf_env.envs.residual import ResidualConfig
+from cpf_env.envs.residual import ResidualConfig, ZeroPolicy
 from cpf_env.envs.torchrl_env import GROUP
 from cpf_env.envs.wrappers import ResidualWrapper
 from cpf_env.scenarios.splits import check_training
@@ -73,7 +73,7 @@ class CpfPettingZooTaskClass(CpfTaskClass):
             residual = _residual(config.residual(), base is None)
             wrapped = ResidualWrapper(
                 cpf_env.parallel_env(scenario, info_level="none"),
-                base,
+                ZeroPolicy(4 + scenario.message_size) if base is None else base,
                 scale=residual.scale,
                 mode=residual.mode,
                 extras=residual.extras,
@@ -129,6 +129,4 @@ class _PettingZooTaskEnum(CpfTaskEnum):
 
 
 #: ``CpfTask``'s members, each built on the PettingZoo route.
-CpfPettingZooTask = _PettingZooTaskEnum(  # type: ignore[call-arg]
-    "CpfPettingZooTask", list(CpfTask.__members__)
-)
+CpfPettingZooTask = _PettingZooTaskEnum("CpfPettingZooTask", list(CpfTask.__members__))
