@@ -15,6 +15,8 @@ Needs BenchMARL (``docs/marl.md`` gives the install lines).
 
 from __future__ import annotations
 
+import sys
+from collections.abc import Sequence
 from pathlib import Path
 
 import torch
@@ -27,11 +29,18 @@ __all__ = ["marl_main"]
 CONF = Path(agents.marl.__file__).parent / "conf"
 
 
-def marl_main() -> None:
-    """Parse Hydra overrides from the command line and run the BenchMARL experiment."""
+def marl_main(argv: Sequence[str] | None = None) -> None:
+    """Parse Hydra overrides from the command line and run the BenchMARL experiment.
+
+    Args:
+        argv: The arguments (default: ``sys.argv[1:]``): Hydra's options and
+            overrides, checked first by Hydra's own parser with abbreviations
+            refused (``--multi`` is not ``--multirun``), as every command here.
+    """
     import_benchmarl()
     import hydra
     from benchmarl.hydra_config import load_experiment_from_hydra
+    from hydra._internal.utils import get_args_parser
     from hydra.core.hydra_config import HydraConfig
     from omegaconf import DictConfig, OmegaConf
 
@@ -44,7 +53,12 @@ def marl_main() -> None:
         print(OmegaConf.to_yaml(cfg))
         load_experiment_from_hydra(cfg, task_name=choices["task"]).run()
 
+    arguments = list(sys.argv[1:] if argv is None else argv)
+    parser = get_args_parser()
+    parser.prog, parser.allow_abbrev = "cpf-marl", False
+    parser.parse_args(arguments)
     torch.set_num_threads(1)  # small networks, a shared machine: one thread is faster
+    sys.argv = [sys.argv[0], *arguments]  # Hydra reads its overrides from sys.argv
     run()
 
 
