@@ -15,6 +15,7 @@ Needs BenchMARL (``docs/marl.md`` gives the install lines).
 
 from __future__ import annotations
 
+import argparse
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -29,6 +30,23 @@ __all__ = ["marl_main"]
 CONF = Path(agents.marl.__file__).parent / "conf"
 
 
+def _arguments_parser() -> argparse.ArgumentParser:
+    """Hydra's own parser (its options, then overrides), abbreviations refused.
+
+    Without Hydra installed, a parser of overrides only, so that ``--help``
+    still answers and the missing install is reported after parsing.
+    """
+    try:
+        from hydra._internal.utils import get_args_parser
+    except ImportError:
+        parser = argparse.ArgumentParser(prog="cpf-marl", description=__doc__.splitlines()[0])
+        parser.add_argument("overrides", nargs="*", help="Hydra overrides, key=value")
+    else:
+        parser = get_args_parser()
+    parser.prog, parser.allow_abbrev = "cpf-marl", False
+    return parser
+
+
 def marl_main(argv: Sequence[str] | None = None) -> None:
     """Parse Hydra overrides from the command line and run the BenchMARL experiment.
 
@@ -36,11 +54,15 @@ def marl_main(argv: Sequence[str] | None = None) -> None:
         argv: The arguments (default: ``sys.argv[1:]``): Hydra's options and
             overrides, checked first by Hydra's own parser with abbreviations
             refused (``--multi`` is not ``--multirun``), as every command here.
+
+    Raises:
+        ImportError: BenchMARL or Hydra is missing (the message gives the install lines).
     """
+    arguments = list(sys.argv[1:] if argv is None else argv)
+    _arguments_parser().parse_args(arguments)
     import_benchmarl()
     import hydra
     from benchmarl.hydra_config import load_experiment_from_hydra
-    from hydra._internal.utils import get_args_parser
     from hydra.core.hydra_config import HydraConfig
     from omegaconf import DictConfig, OmegaConf
 
@@ -53,10 +75,6 @@ def marl_main(argv: Sequence[str] | None = None) -> None:
         print(OmegaConf.to_yaml(cfg))
         load_experiment_from_hydra(cfg, task_name=choices["task"]).run()
 
-    arguments = list(sys.argv[1:] if argv is None else argv)
-    parser = get_args_parser()
-    parser.prog, parser.allow_abbrev = "cpf-marl", False
-    parser.parse_args(arguments)
     torch.set_num_threads(1)  # small networks, a shared machine: one thread is faster
     sys.argv = [sys.argv[0], *arguments]  # Hydra reads its overrides from sys.argv
     run()
