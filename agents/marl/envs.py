@@ -37,6 +37,7 @@ def make_env(
     normalization_steps: int = 200,
     state: bool = False,
     info_level: str = "none",
+    stagger: bool = False,
     **overrides: Any,
 ) -> TorchRLFleetEnv:
     """A residual ``TorchRLFleetEnv`` over a named base policy (``FleetVecEnv``'s arguments).
@@ -55,6 +56,7 @@ def make_env(
         normalization_steps: See ``TorchRLFleetEnv``.
         state: Output the global ``"state"`` for centralized critics.
         info_level: ``"none"`` or ``"minimal"``.
+        stagger: Spread the first episodes' ends over the fleets (``TorchRLFleetEnv``).
         **overrides: ``Scenario`` field overrides (e.g. ``max_steps``).
 
     Raises:
@@ -75,4 +77,5 @@ def make_env(
         normalize=normalize,
         normalization_steps=normalization_steps,
         state=state,
+        stagger=stagger,
     )

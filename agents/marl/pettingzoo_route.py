@@ -63,6 +63,11 @@ class CpfPettingZooTaskClass(CpfTaskClass):
                 "cpf tasks have continuous actions only; set prefer_continuous_actions."
             )
         config = checked_config(self.config)
+        if config.stagger:
+            raise ValueError(
+                "stagger spreads the fleets of one batched env; the PettingZoo route has "
+                "one fleet per worker. Set stagger=false."
+            )
         first = 0 if seed is None else int(seed)
         check_training(config.scenario, range(first, first + int(num_envs) + 1))
         scenario = make_scenario(config.scenario, max_steps=config.max_steps, **config.overrides)

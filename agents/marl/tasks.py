@@ -75,6 +75,7 @@ class CpfTaskConfig:
         normalize: Scale inputs with statistics of the base policy alone.
         normalization_steps: Control periods those statistics pool.
         state: Give centralized critics the global state.
+        stagger: End the fleets' first episodes at spread horizons (native route).
         overrides: Other ``Scenario`` field overrides.
     """
 
@@ -87,6 +88,7 @@ class CpfTaskConfig:
     normalize: bool = True
     normalization_steps: int = 200
     state: bool = True
+    stagger: bool = False
     overrides: dict[str, Any] = dataclasses.field(default_factory=dict)
 
     def residual(self) -> ResidualConfig:
@@ -139,6 +141,7 @@ class CpfTaskClass(TaskClass):
                 normalize=config.normalize,
                 normalization_steps=config.normalization_steps,
                 state=config.state,
+                stagger=config.stagger,
                 max_steps=config.max_steps,
                 **config.overrides,
             )

@@ -117,6 +117,10 @@ class TorchRLFleetEnv(EnvBase):
             given statistics.
         normalization_steps: Control periods pooled by ``normalize=True``.
         state: Also output the global ``"state"`` [B, 10 n] for centralized critics.
+        stagger: After each reset of all fleets, end fleet k's episode after
+            ``max_steps - k * max_steps // B`` steps (truncated), as ``FleetVecEnv``
+            does, so that fleets do not end in lockstep and a batch of steps sees
+            every phase of an episode; a fleet reset alone runs ``max_steps``.
         **overrides: ``Scenario`` field overrides, as in ``cpf_env.parallel_env``.
 
     Attributes:
@@ -147,6 +151,7 @@ class TorchRLFleetEnv(EnvBase):
         normalize: bool | InputStatistics = False,
         normalization_steps: int = 200,
         state: bool = False,
+        stagger: bool = False,
         **overrides: Any,
     ) -> None:
         resolved = _checked_device(device)
@@ -167,9 +172,12 @@ class TorchRLFleetEnv(EnvBase):
         self.num_fleets = B = int(num_fleets)
         self.n = self.scenario.n
         self.info_level = info_level
-        self.state = bool(state)
+        if not isinstance(stagger, bool | np.bool_):
+            raise ValueError(f"stagger must be True or False, got {stagger!r}.")
+        self.state, self.stagger = bool(state), bool(stagger)
         self.group_map = {GROUP: [f"vessel_{i}" for i in range(self.n)]}
         self.sim = FleetSim(self.scenario, num_fleets=B)
+        self._horizon = np.full(B, self.scenario.max_steps, dtype=np.int64)
         residual_form = base_policy is not None or residual is not None
         self.controller = (
             ResidualController(self.scenario, base_policy, B, residual) if residual_form else None
@@ -265,11 +273,17 @@ class TorchRLFleetEnv(EnvBase):
         fleets = self._fleets_to_reset(tensordict)
         if fleets is None:
             obs = self.sim.reset()
+            self._horizon[:] = self.scenario.max_steps
+            if self.stagger:
+                self._horizon -= (
+                    np.arange(self.num_fleets) * self.scenario.max_steps // self.num_fleets
+                )
             if self.controller is not None:
                 self.controller.reset()
             self._observe(obs, None)
         elif fleets.size:
             obs = self.sim.reset(fleets=fleets)
+            self._horizon[fleets] = self.scenario.max_steps
             if self.controller is not None:
                 mask = np.zeros(self.num_fleets, dtype=bool)
                 mask[fleets] = True
@@ -357,7 +371,8 @@ class TorchRLFleetEnv(EnvBase):
         B, n, a = self.num_fleets, self.n, self.sim.arrays
         if step:
             terminated = torch.from_numpy(a.terminated.copy()).unsqueeze(-1)
-            truncated = torch.from_numpy(self.sim.truncated).unsqueeze(-1)
+            ended = (a.step >= self._horizon) & ~a.terminated
+            truncated = torch.from_numpy(ended).unsqueeze(-1)
         else:
             terminated = truncated = torch.zeros((B, 1), dtype=torch.bool)
         flags = {"done": terminated | truncated, "terminated": terminated, "truncated": truncated}

@@ -193,3 +193,24 @@ def test_bad_residual_input_is_refused_and_leaves_the_state_alone() -> None:
             num_fleets=2,
             normalize=InputStatistics(np.zeros(3), np.ones(3)),
         )
+
+
+def test_stagger_ends_the_first_episodes_at_spread_horizons_then_full_ones() -> None:
+    B, max_steps = 4, 40
+    staggered = residual_env("bench_mild", B, seed=1, stagger=True, overrides={"max_steps": 40})
+    plain = residual_env("bench_mild", B, seed=1, overrides={"max_steps": 40})
+    td, td_plain = staggered.reset(), plain.reset()
+    zero = torch.zeros((B, 5, 3))
+    ends: list[list[int]] = [[] for _ in range(B)]
+    for t in range(1, 2 * max_steps + 1):
+        step, td = staggered.step_and_maybe_reset(td.set((GROUP, "action"), zero))
+        if t < max_steps - (B - 1) * max_steps // B:  # before any fleet ends: same episodes
+            step_plain, td_plain = plain.step_and_maybe_reset(td_plain.set((GROUP, "action"), zero))
+            assert (step["next"] == step_plain["next"]).all()
+        for k in range(B):
+            if step["next", "truncated"][k]:
+                ends[k].append(t)
+        assert not step["next", "terminated"].any()
+    assert ends == [[40, 80], [30, 70], [20, 60], [10, 50]]
+    with pytest.raises(ValueError, match="stagger must be True or False"):
+        TorchRLFleetEnv("bench_mild", num_fleets=2, stagger=1)  # type: ignore[arg-type]
