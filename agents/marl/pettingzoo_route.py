@@ -17,8 +17,8 @@ TorchRL transforms in float32 (``ObservationNorm`` and a clip to +-10), so the
 inputs match the native env's to float32 rounding, not bit for bit.
 
 This route is for checking and for code that must take any PettingZoo env: it
-steps one fleet per worker in Python, about 2,100 vessel-steps/s against the
-native env's hundreds of thousands (``docs/torchrl.md``).
+steps one fleet per worker in Python, a few thousand vessel-steps/s against
+the native env's hundreds of thousands (``docs/torchrl.md``).
 """
 
 from __future__ import annotations
