@@ -4,9 +4,10 @@ BenchMARL 1.5.x declares ``torchrl>=0.10,<0.12``; this package uses TorchRL
 0.14 (``torchrl`` extra), whose ``torchrl.collectors`` calls the synchronous
 collector ``Collector`` (0.11 called it ``SyncDataCollector``). BenchMARL
 imports the old name once, in ``benchmarl.experiment.experiment``; its one
-call runs unchanged on the new class (``tests/agents/test_marl.py``). ``import_benchmarl`` adds the old name as
-an alias of the new class, only if it is missing and only for BenchMARL 1.5,
-then imports BenchMARL. Nothing else of TorchRL is touched.
+call runs unchanged on the new class (``tests/agents/test_marl.py``).
+``import_benchmarl`` adds the old name as an alias of the new class, only if
+it is missing and only for BenchMARL 1.5, then imports BenchMARL. Nothing
+else of TorchRL is touched.
 """
 
 from __future__ import annotations
