@@ -31,6 +31,7 @@ from agents.agent_folder import (
     read_agent,
 )
 from agents.legacy import is_sb3_folder, read_sb3_folder
+from agents.marl.policy_folder import is_marl_folder, load_marl_policy
 from agents.training import TrainConfig
 from agents.vec_env import resolve_base_policy
 from baselines.interface import PolicyInterface
@@ -69,6 +70,8 @@ def load_policy(
         ValueError: The scenario's observations do not fit the network.
     """
     folder = Path(path)
+    if is_marl_folder(folder):  # a BenchMARL actor (agents.marl.policy_folder)
+        return load_marl_policy(folder, scenario)
     if (folder / MANIFEST).is_file():
         record, network, normalization = read_agent(folder)
     elif is_sb3_folder(folder):

@@ -57,7 +57,7 @@ ALLOWED: dict[str, tuple[str, ...]] = {
 #: Third-party learning libraries each layer must not import (``cpf_env`` and
 #: ``baselines`` hold no learning code; the TorchRL env is the one optional view).
 NO_LEARNING = ("torch", "stable_baselines3", "torchrl", "tensordict", "ray", "gymnasium.wrappers")
-LEARNING_ALLOWED_IN = ("cpf_env.envs.torchrl_env",)
+LEARNING_ALLOWED_IN = ("cpf_env.envs.torchrl_env", "cpf_env.envs.torchrl_specs")
 
 
 def _module_name(path: Path) -> str:

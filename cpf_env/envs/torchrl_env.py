@@ -1,22 +1,36 @@
-"""``TorchRLFleetEnv``: a native batched TorchRL environment over one ``FleetSim``.
+"""``TorchRLFleetEnv``: a native batched multi-agent TorchRL environment over one ``FleetSim``.
 
 B fleets of n vessels are one TorchRL env with ``batch_size = [B]`` and one
-group of agents, ``"vessel"`` (the group ``PettingZooWrapper`` makes of the
-agents ``vessel_0 .. vessel_{n-1}``, so a policy written for one route runs on
-the other). The simulator steps every fleet with one compiled kernel call;
-arrays go to tensors in bulk, with no Python loop over fleets or vessels.
+group of agents, ``"vessel"`` (``group_map``; the group ``PettingZooWrapper``
+makes of the agents ``vessel_0 .. vessel_{n-1}``, so a policy written for one
+route runs on the other). The simulator steps every fleet with one compiled
+kernel call; arrays go to tensors in bulk, with no Python loop over fleets.
+
+Two action forms:
+
+- **raw** (no ``base_policy``, no ``residual``): the whole command, in the
+  ParallelEnv's units and bounds;
+- **residual** (``base_policy=`` a policy object and/or ``residual=`` a
+  ``ResidualConfig``): the composition of ``agents.FleetVecEnv``
+  (``cpf_env.envs.residual``): the base policy acts underneath, the action is
+  its bounded correction in [-1, 1]^k, and the observation is the learner's
+  input (local observation plus the configured local extras). A zero action
+  reproduces the base policy bit for bit.
 
 =============================  ===========  ===================================================
 key                            shape        meaning
 =============================  ===========  ===================================================
-("vessel", "observation")      [B, n, d]    float32 local observation (``ObsLayout``), bounds
-                                            of ``observation_box``; d = 18 + K (3 + m)
-("vessel", "action")           [B, n, 4+m]  float32 [tau_u (N), tau_v (N), tau_r (N m),
-                                            theta_dot (1/s), message (m)], bounds of the
-                                            ParallelEnv's ``action_space``
+("vessel", "observation")      [B, n, d]    float32 local input of each vessel: observation
+                                            (``ObsLayout``, 18 + K (3 + m)) plus the residual's
+                                            extras; scaled by ``InputStatistics`` if normalized
+("vessel", "action")           [B, n, a]    float32 raw: [tau_u (N), tau_v (N), tau_r (N m),
+                                            theta_dot (1/s), message (m)], a = 4 + m;
+                                            residual: a = k in [-1, 1]
 ("vessel", "reward")           [B, n, 1]    float32 reward of each vessel
 ("vessel", "done"/...)         [B, n, 1]    bool done, terminated, truncated of each vessel
 "done"/"terminated"/...        [B, 1]       bool, the fleet's flags (equal to its vessels')
+"state"                        [B, 10 n]    float32 global state (``state=True``): the
+                                            ParallelEnv's ``state()`` of each fleet
 ("vessel", "info", <error>)    [B, n]       float32 path_error, heading_error, sync_error,
                                             speed_error; only with ``info_level="minimal"``
 =============================  ===========  ===================================================
@@ -28,18 +42,20 @@ every TorchRL env, nothing resets by itself: ``rollout``, collectors and
 (root [B, 1] or group [B, n, 1]; a fleet resets if any of its entries is set).
 
 Seeding follows the other batched forms of this package (``FleetVecEnv``):
-``set_seed(s)`` makes fleet k draw its episodes from ``default_rng(s + k)``,
-so fleet k reproduces ``FleetSim.reset(seeds=[..., s + k, ...])`` and
-``cpf_env.parallel_env(...).reset(seed=s + k)`` bit for bit; later resets
-continue each fleet's generator. Importing ``cpf_env`` does not import this
-module (it needs the ``torchrl`` extra).
+``set_seed(s)`` (or ``seed=s``) makes fleet k draw its episodes from
+``default_rng(s + k)``, so fleet k reproduces ``FleetSim.reset(seeds=[..., s + k,
+...])`` and ``cpf_env.parallel_env(...).reset(seed=s + k)`` bit for bit; later
+resets continue each fleet's generator. Importing ``cpf_env`` does not import
+this module (it needs the ``torchrl`` extra), and this module imports no
+policy: the base policy is an object (``agents.marl`` resolves names).
 
 Example:
-    >>> env = TorchRLFleetEnv("wang2014", num_fleets=4, max_steps=50)
-    >>> _ = env.set_seed(0)
+    >>> env = TorchRLFleetEnv("wang2014", num_fleets=4, max_steps=50, seed=0)
     >>> data = env.rollout(3)
     >>> data["next", "vessel", "observation"].shape
     torch.Size([4, 3, 5, 26])
+    >>> env.group_map
+    {'vessel': ['vessel_0', 'vessel_1', 'vessel_2', 'vessel_3', 'vessel_4']}
 """
 
 from __future__ import annotations
@@ -50,56 +66,61 @@ import numpy as np
 import torch
 from numpy.typing import NDArray
 from tensordict import TensorDict, TensorDictBase
-from torchrl.data import Bounded, Categorical, Composite, Unbounded
 from torchrl.envs import EnvBase
 
+from cpf_env.envs.input_statistics import InputStatistics, estimate_input_statistics
 from cpf_env.envs.parallel import make_scenario
+from cpf_env.envs.policy import FleetPolicy
+from cpf_env.envs.residual import ResidualConfig, ResidualController
+from cpf_env.envs.torchrl_specs import ERROR_KEYS, GROUP, FleetSpecs, action_bounds
 from cpf_env.scenarios import Scenario
-from cpf_env.sim import arrays
 from cpf_env.sim.fleet import FleetSim
-from cpf_env.sim.observation import observation_box
 
 __all__ = ["ERROR_KEYS", "GROUP", "TorchRLFleetEnv", "action_bounds"]
 
-#: The one agent group (``PettingZooWrapper``'s default group of ``vessel_i`` agents).
-GROUP = "vessel"
-
-#: The per-vessel errors of ``info_level="minimal"``, as (info key, index into ``errors``).
-ERROR_KEYS = arrays.ERROR_KEYS
-
 _INFO_LEVELS = ("none", "minimal")
-_DONE_KEYS = ("done", "terminated", "truncated")
 
 
-def action_bounds(scenario: Scenario) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
-    """Per-vessel action bounds, those of the ParallelEnv's ``action_space``.
-
-    Args:
-        scenario: The task.
-
-    Returns:
-        (low, high), each float32 of shape (n, 4 + m): the force limits (N, N, N m),
-        +-theta_dot_max (1/s) and +-message_max. Forces beyond the limits are legal
-        (the plant saturates them); rate and message are clipped.
-    """
-    tau_min, tau_max = scenario.tau_limits
-    n, m = scenario.n, scenario.message_size
-    rate = np.full((n, 1), scenario.theta_dot_max)
-    message = np.full((n, m), scenario.message_max)
-    low = np.concatenate([tau_min, -rate, -message], axis=1).astype(np.float32)
-    high = np.concatenate([tau_max, rate, message], axis=1).astype(np.float32)
-    return low, high
+def _checked_device(device: str | torch.device) -> torch.device:
+    """The device, if tensors can live there (else a ValueError saying what to do)."""
+    try:
+        resolved = torch.device(device)
+        torch.empty(0, device=resolved)
+    except (RuntimeError, AssertionError, TypeError) as error:
+        raise ValueError(
+            f"device={device!r} is not usable here ({error}); give 'cpu' or an available "
+            "accelerator. The simulator runs on the CPU either way; only the outputs move."
+        ) from None
+    return resolved
 
 
 class TorchRLFleetEnv(EnvBase):
-    """B fleets x n vessels as one batched TorchRL env with one group of vessels.
+    """B fleets x n vessels as one batched multi-agent TorchRL env, one group of vessels.
 
     Args:
         scenario: A name of ``cpf_env.scenarios.list_scenarios()`` or a ``Scenario``.
         num_fleets: B, the number of fleets simulated together (the batch size).
         info_level: ``"none"`` (default, the hot path) or ``"minimal"``: also output
             the four errors of each vessel under ``("vessel", "info")``.
-        device: Must be the CPU (accepted for TorchRL's signature; see the error).
+        device: Where the outputs and specs live (the simulator stays on the CPU;
+            actions are brought back to it).
+        seed: If given, ``set_seed(seed)`` at construction (fleet k: seed + k).
+        base_policy: A ``FleetPolicy`` object acting underneath (residual form), e.g.
+            ``baselines.make_policy("nn_dsc", scenario)``; names are resolved by
+            ``agents.marl.make_env``. It must offer ``reset_fleets``.
+        residual: ``ResidualConfig`` of the residual form (default with a base policy:
+            force residual, scale 0.2, no extras). Without a base policy it makes
+            the learner command everything through the same composition.
+        normalize: False (raw inputs), True (scale them with ``InputStatistics``
+            estimated over ``normalization_steps`` of the base policy alone on a
+            separate simulator of 16 fleets, seeds 0 .. 15; residual form only) or
+            given statistics.
+        normalization_steps: Control periods pooled by ``normalize=True``.
+        state: Also output the global ``"state"`` [B, 10 n] for centralized critics.
+        stagger: After each reset of all fleets, end fleet k's episode after
+            ``max_steps - k * max_steps // B`` steps (truncated), as ``FleetVecEnv``
+            does, so that fleets do not end in lockstep and a batch of steps sees
+            every phase of an episode; a fleet reset alone runs ``max_steps``.
         **overrides: ``Scenario`` field overrides, as in ``cpf_env.parallel_env``.
 
     Attributes:
@@ -108,9 +129,14 @@ class TorchRLFleetEnv(EnvBase):
         num_fleets: B.
         n: Vessels per fleet.
         info_level: The detail level.
+        group_map: ``{"vessel": ["vessel_0", ...]}``, as TorchRL's multi-agent envs.
+        controller: The ``ResidualController`` (None in the raw form).
+        input_statistics: The ``InputStatistics`` applied, or None.
 
     Raises:
-        ValueError: A bad ``num_fleets``, ``info_level`` or ``device`` (or a bad override).
+        ValueError: A bad ``num_fleets``, ``info_level``, ``device``, ``normalize`` or seed
+            (or a bad override or residual configuration).
+        TypeError: ``base_policy`` is not a policy object.
     """
 
     def __init__(
@@ -119,14 +145,16 @@ class TorchRLFleetEnv(EnvBase):
         num_fleets: int = 64,
         info_level: str = "none",
         device: str | torch.device = "cpu",
+        seed: int | None = None,
+        base_policy: FleetPolicy | None = None,
+        residual: ResidualConfig | None = None,
+        normalize: bool | InputStatistics = False,
+        normalization_steps: int = 200,
+        state: bool = False,
+        stagger: bool = False,
         **overrides: Any,
     ) -> None:
-        if torch.device(device).type != "cpu":
-            raise ValueError(
-                f"TorchRLFleetEnv runs on the CPU (the simulator is compiled CPU code), got "
-                f"device={device!r}; move its outputs with a transform, e.g. "
-                f"env.append_transform(DeviceCastTransform({str(device)!r})), or td.to(...)."
-            )
+        resolved = _checked_device(device)
         if isinstance(num_fleets, bool) or int(num_fleets) != num_fleets or num_fleets < 1:
             raise ValueError(f"num_fleets must be an integer >= 1, got {num_fleets!r}.")
         if info_level not in _INFO_LEVELS:
@@ -134,44 +162,84 @@ class TorchRLFleetEnv(EnvBase):
                 f"info_level must be one of {_INFO_LEVELS}, got {info_level!r}. The full "
                 "diagnostics are in env.sim.arrays (eta, nu, tau_applied, reward_terms, ...)."
             )
+        if base_policy is not None and not isinstance(base_policy, FleetPolicy):
+            raise TypeError(
+                "base_policy must be a policy object (act_batch, reset, reset_fleets, "
+                f"diagnostics), got {type(base_policy).__name__}; to give a name such as "
+                "'nn_dsc', build the env with agents.marl.make_env."
+            )
         self.scenario = make_scenario(scenario, **overrides)
         self.num_fleets = B = int(num_fleets)
         self.n = self.scenario.n
         self.info_level = info_level
+        if not isinstance(stagger, bool | np.bool_):
+            raise ValueError(f"stagger must be True or False, got {stagger!r}.")
+        self.state, self.stagger = bool(state), bool(stagger)
+        self.group_map = {GROUP: [f"vessel_{i}" for i in range(self.n)]}
         self.sim = FleetSim(self.scenario, num_fleets=B)
-        super().__init__(device="cpu", batch_size=torch.Size([B]))
+        self._horizon = np.full(B, self.scenario.max_steps, dtype=np.int64)
+        residual_form = base_policy is not None or residual is not None
+        self.controller = (
+            ResidualController(self.scenario, base_policy, B, residual) if residual_form else None
+        )
+        self.input_statistics = self._statistics(normalize, normalization_steps)
+        self._inputs = np.zeros((B, self.n, self.input_size))
+        super().__init__(device=resolved, batch_size=torch.Size([B]))
         self._make_specs()
+        if seed is not None:
+            self.set_seed(seed)
+
+    @property
+    def input_size(self) -> int:
+        """d, the length of each vessel's observation entry."""
+        return self.sim.obs_dim if self.controller is None else self.controller.input_size
+
+    @property
+    def action_size(self) -> int:
+        """a, the length of each vessel's action: 4 + m raw, k residual."""
+        return self.sim.act_dim if self.controller is None else self.controller.action_size
+
+    def _statistics(self, normalize: bool | InputStatistics, steps: int) -> InputStatistics | None:
+        """The input statistics ``normalize`` asks for (estimated, given or none)."""
+        if isinstance(normalize, InputStatistics):
+            if normalize.size != self.input_size:
+                raise ValueError(
+                    f"the input statistics have {normalize.size} dimensions but the inputs "
+                    f"have {self.input_size}; estimate them for this scenario and residual."
+                )
+            return normalize
+        if not isinstance(normalize, bool | np.bool_):
+            raise ValueError(
+                f"normalize must be True, False or InputStatistics, got {normalize!r}."
+            )
+        if not normalize:
+            return None
+        if self.controller is None:
+            raise ValueError(
+                "normalize=True estimates the statistics under the base policy, and this env "
+                "has none: give base_policy= (or residual=), or pass InputStatistics."
+            )
+        controller = self.controller
+        return estimate_input_statistics(
+            self.scenario, controller.base, controller.config, steps=steps
+        )
 
     def _make_specs(self) -> None:
-        """Observation, action, reward and done specs from the scenario."""
-        B, n, sim = self.num_fleets, self.n, self.sim
-        group = torch.Size([B, n])
-        box = observation_box(sim.obs_dim)
-        obs_low = torch.from_numpy(box.low).expand(B, n, -1)
-        obs_high = torch.from_numpy(box.high).expand(B, n, -1)
-        observation: dict[str, Any] = {
-            "observation": Bounded(obs_low, obs_high, dtype=torch.float32, device=self.device)
-        }
-        if self.info_level == "minimal":
-            infos = {key: Unbounded(group, dtype=torch.float32) for key, _ in ERROR_KEYS}
-            observation["info"] = Composite(infos, shape=group)
-        self.observation_spec = Composite({GROUP: Composite(observation, shape=group)}, shape=[B])
-        low, high = (
-            torch.from_numpy(bound).expand(B, n, -1) for bound in action_bounds(self.scenario)
+        """Observation, action, reward, done (and state) specs (``torchrl_specs``)."""
+        residual = None if self.controller is None else self.action_size
+        specs = FleetSpecs.build(
+            self.scenario,
+            self.num_fleets,
+            self.input_size,
+            residual,
+            self.info_level,
+            self.state,
+            self.device,
         )
-        action = Bounded(low, high, dtype=torch.float32, device=self.device)
-        self.full_action_spec = Composite(
-            {GROUP: Composite({"action": action}, shape=group)}, shape=[B]
-        )
-        reward = Unbounded((B, n, 1), dtype=torch.float32)
-        self.full_reward_spec = Composite(
-            {GROUP: Composite({"reward": reward}, shape=group)}, shape=[B]
-        )
-        fleet_flags = {key: Categorical(2, (B, 1), dtype=torch.bool) for key in _DONE_KEYS}
-        vessel_flags = {key: Categorical(2, (B, n, 1), dtype=torch.bool) for key in _DONE_KEYS}
-        self.full_done_spec = Composite(
-            {**fleet_flags, GROUP: Composite(vessel_flags, shape=group)}, shape=[B]
-        )
+        self.observation_spec = specs.observation
+        self.full_action_spec = specs.action
+        self.full_reward_spec = specs.reward
+        self.full_done_spec = specs.done
 
     # --- EnvBase interface ----------------------------------------------------------------
 
@@ -191,6 +259,8 @@ class TorchRLFleetEnv(EnvBase):
     def _reset(self, tensordict: TensorDictBase | None = None, **kwargs: Any) -> TensorDictBase:
         """Reset the fleets selected by the ``"_reset"`` masks (all fleets without one).
 
+        The base policy's states of the reset fleets restart with them.
+
         Args:
             tensordict: May hold ``"_reset"`` [B, 1] and/or ``("vessel", "_reset")``
                 [B, n, 1]; a fleet resets if any of its entries is True.
@@ -203,37 +273,68 @@ class TorchRLFleetEnv(EnvBase):
         fleets = self._fleets_to_reset(tensordict)
         if fleets is None:
             obs = self.sim.reset()
+            self._horizon[:] = self.scenario.max_steps
+            if self.stagger:
+                self._horizon -= (
+                    np.arange(self.num_fleets) * self.scenario.max_steps // self.num_fleets
+                )
+            if self.controller is not None:
+                self.controller.reset()
+            self._observe(obs, None)
         elif fleets.size:
             obs = self.sim.reset(fleets=fleets)
-        else:
-            obs = self.sim.arrays.obs
-        return self._output(obs, step=False)
+            self._horizon[fleets] = self.scenario.max_steps
+            if self.controller is not None:
+                mask = np.zeros(self.num_fleets, dtype=bool)
+                mask[fleets] = True
+                self.controller.reset_fleets(mask)
+            self._observe(obs, fleets)
+        return self._output(step=False)
 
     def _step(self, tensordict: TensorDictBase) -> TensorDictBase:
         """Advance every fleet one control period ``dt``.
 
         Raises:
             ValueError: The action is missing, has the wrong shape, is complex or is not
-                finite (naming fleet, vessel, component); nothing is changed.
+                finite (naming fleet, vessel, component in the raw form); nothing changes.
             RuntimeError: Stepping before ``reset()``, or the plant diverged (the message
                 says where and what to change).
         """
         action = tensordict.get((GROUP, "action"), None)
-        expected = (self.num_fleets, self.n, self.sim.act_dim)
+        expected = (self.num_fleets, self.n, self.action_size)
+        form = "[B, n, 4 + m]" if self.controller is None else "[B, n, k]"
         if action is None:
             raise ValueError(
                 f"the tensordict has no ({GROUP!r}, 'action') entry; set one of shape "
-                f"[B, n, 4 + m] = {list(expected)}."
+                f"{form} = {list(expected)}."
             )
         if tuple(action.shape) != expected:
             raise ValueError(
-                f"({GROUP!r}, 'action') must have shape [B, n, 4 + m] = {list(expected)}, "
+                f"({GROUP!r}, 'action') must have shape {form} = {list(expected)}, "
                 f"got {list(action.shape)}."
             )
-        obs = self.sim.step(action.detach().cpu().numpy())
-        return self._output(obs, step=True)
+        values = action.detach().cpu().numpy()
+        if self.controller is None:
+            obs = self.sim.step(values)
+        else:
+            if not np.issubdtype(values.dtype, np.floating):
+                raise ValueError(
+                    f"residual actions must be real floating-point numbers, got {values.dtype}."
+                )
+            obs = self.sim.step(self.controller.compose(values))
+        self._observe(obs, None)
+        return self._output(step=True)
 
     # --- helpers --------------------------------------------------------------------------
+
+    def _observe(self, obs: NDArray[np.float32], fleets: NDArray[np.int64] | None) -> None:
+        """Keep the learner inputs of all fleets, or of the listed (just reset) ones."""
+        if self.controller is None:
+            self._inputs[:] = obs
+        elif fleets is None:
+            self._inputs[:] = self.controller.observe(obs)
+        else:
+            self._inputs[fleets] = self.controller.observe(obs[fleets], fleets=fleets)
 
     def _fleets_to_reset(self, tensordict: TensorDictBase | None) -> NDArray[np.int64] | None:
         """Indices of the fleets the reset masks select, or None for all (no mask given)."""
@@ -258,11 +359,10 @@ class TorchRLFleetEnv(EnvBase):
         selected = given[0] if len(given) == 1 else given[0] | given[1]
         return np.flatnonzero(selected.cpu().numpy())
 
-    def _output(self, obs: NDArray[np.float32], step: bool) -> TensorDict:
-        """Observations, flags (and rewards, infos) of every fleet as a tensordict [B].
+    def _output(self, step: bool) -> TensorDict:
+        """Observations, flags (and rewards, state, infos) of every fleet as a tensordict [B].
 
         Args:
-            obs: The simulator's observations (B, n, d) float32 (copied here).
             step: After a step: include rewards and the simulator's flags. After a
                 reset the flags are False, as TorchRL requires: a fleet whose drawn
                 start is already off its path reports ``terminated`` at its first
@@ -271,20 +371,26 @@ class TorchRLFleetEnv(EnvBase):
         B, n, a = self.num_fleets, self.n, self.sim.arrays
         if step:
             terminated = torch.from_numpy(a.terminated.copy()).unsqueeze(-1)
-            truncated = torch.from_numpy(self.sim.truncated).unsqueeze(-1)
+            ended = (a.step >= self._horizon) & ~a.terminated
+            truncated = torch.from_numpy(ended).unsqueeze(-1)
         else:
             terminated = truncated = torch.zeros((B, 1), dtype=torch.bool)
         flags = {"done": terminated | truncated, "terminated": terminated, "truncated": truncated}
         group: dict[str, Any] = {
             key: value.unsqueeze(1).expand(B, n, 1).clone() for key, value in flags.items()
         }
-        group["observation"] = torch.from_numpy(obs.copy())
+        inputs = self._inputs.astype(np.float32)
+        if self.input_statistics is not None:
+            inputs = self.input_statistics.apply(inputs)
+        group["observation"] = torch.from_numpy(inputs)
         if step:
             group["reward"] = torch.from_numpy(a.reward.astype(np.float32)).unsqueeze(-1)
         if self.info_level == "minimal":
             errors = torch.from_numpy(a.errors.astype(np.float32))
             infos = {key: errors[..., index] for key, index in ERROR_KEYS}
             group["info"] = TensorDict(infos, batch_size=(B, n))
-        return TensorDict(
-            {**flags, GROUP: TensorDict(group, batch_size=(B, n))}, batch_size=self.batch_size
-        )
+        root: dict[str, Any] = {**flags, GROUP: TensorDict(group, batch_size=(B, n))}
+        if self.state:
+            per_vessel = np.concatenate([a.eta, a.nu, a.theta[..., None], a.tau_applied], axis=-1)
+            root["state"] = torch.from_numpy(per_vessel.reshape(B, -1).astype(np.float32))
+        return TensorDict(root, batch_size=self.batch_size, device=self.device)

@@ -1,0 +1,203 @@
+"""agents.marl: BenchMARL tasks, two MAPPO iterations, the saved actor as a cpf-bench policy."""
+
+from __future__ import annotations
+
+import doctest
+import importlib.util
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pytest.importorskip("torchrl")
+if importlib.util.find_spec("benchmarl") is None:  # importing it needs agents.marl.compat first
+    pytest.skip("BenchMARL is not installed (docs/marl.md)", allow_module_level=True)
+
+import torch
+from torchrl.envs.utils import ExplorationType, set_exploration_type
+
+from agents import load_policy
+from agents.agent_folder import AgentFolderError
+from agents.marl import envs, policy_folder
+from agents.marl.tasks import CONF, CpfTask, CpfTaskClass
+from cpf_env.scenarios import paper, suite
+
+pytestmark = pytest.mark.benchmarl
+
+#: Two short iterations: 4 fleets x 50 steps per batch, one minibatch pass.
+SMALL = {
+    "max_n_iters": 2,
+    "max_n_frames": None,
+    "loggers": [],
+    "on_policy_n_envs_per_worker": 4,
+    "on_policy_collected_frames_per_batch": 200,
+    "on_policy_minibatch_size": 100,
+    "on_policy_n_minibatch_iters": 1,
+    "evaluation": False,
+    "render": False,
+    "checkpoint_at_end": False,
+    "create_json": False,
+}
+
+
+def small_experiment(algorithm: str, folder: Path, route: type = CpfTask):  # type: ignore[no-untyped-def]
+    from benchmarl.algorithms import IppoConfig, MappoConfig
+    from benchmarl.experiment import Experiment, ExperimentConfig
+    from benchmarl.models import MlpConfig
+
+    config = ExperimentConfig.get_from_yaml()
+    for key, value in SMALL.items():
+        setattr(config, key, value)
+    config.save_folder = str(folder)
+    task = route.BENCH_LOSSY_LINKS.get_from_yaml()  # type: ignore[attr-defined]
+    task.config["normalization_steps"] = 20
+    algorithm_config = {"mappo": MappoConfig, "ippo": IppoConfig}[algorithm].get_from_yaml()
+    model = MlpConfig.get_from_yaml()
+    model.num_cells = [32, 32]
+    return Experiment(
+        task=task,
+        algorithm_config=algorithm_config,
+        model_config=model,
+        critic_model_config=model,
+        seed=0,
+        config=config,
+    )
+
+
+def test_the_tasks_are_the_training_scenarios_each_with_a_config() -> None:
+    names = [task.name.lower() for task in CpfTask]
+    assert sorted(names) == sorted([*paper.__all__, *suite.SUITE])
+    for task in CpfTask:
+        loaded = task.get_from_yaml()
+        assert isinstance(loaded, CpfTaskClass)
+        assert loaded.config["scenario"] == task.name.lower()
+        assert loaded.config["max_steps"] == 200
+    assert (CONF / "config.yaml").is_file()
+
+
+def test_task_configs_are_checked_and_evaluation_seeds_refused() -> None:
+    task = CpfTask.BENCH_MILD.get_task({"scenario": "bench_mild", "max_step": 50})
+    with pytest.raises(ValueError, match=r"unknown cpf task config fields \['max_step'\]"):
+        task.get_env_fun(2, True, 0, "cpu")
+    task = CpfTask.BENCH_MILD.get_from_yaml()
+    with pytest.raises(ValueError, match="evaluation seeds"):
+        task.get_env_fun(4, True, 9_998, "cpu")
+    with pytest.raises(ValueError, match="continuous actions only"):
+        task.get_env_fun(4, False, 0, "cpu")
+    shifted = CpfTask.BENCH_MILD.get_task({"scenario": "bench_mild_shift"})
+    with pytest.raises(ValueError, match="held-out shift split"):
+        shifted.get_env_fun(4, True, 0, "cpu")
+
+
+def test_the_task_env_is_the_residual_env_with_state_and_statistics() -> None:
+    task = CpfTask.BENCH_LOSSY_LINKS.get_from_yaml()
+    task.config["normalization_steps"] = 10
+    env = task.get_env_fun(3, True, 7, "cpu")()
+    assert env.batch_size == (3,)
+    assert env.scenario.max_steps == 200
+    assert env.input_statistics is not None and env.state
+    assert task.group_map(env) == {"vessel": [f"vessel_{i}" for i in range(5)]}
+    assert set(task.observation_spec(env).keys(True, True)) == {("vessel", "observation")}
+    assert task.state_spec(env)["state"].shape == (50,)  # type: ignore[index]
+    assert task.action_spec(env)["vessel", "action"].shape == (5, 3)
+
+
+def test_make_env_resolves_names_and_refuses_unknown_ones() -> None:
+    results = doctest.testmod(envs)
+    assert results.attempted > 0 and results.failed == 0
+    env = envs.make_env("bench_mild", 2, base="none", max_steps=20)
+    assert env.full_action_spec["vessel", "action"].shape == (2, 5, 4)  # forces and rate
+    with pytest.raises(ValueError, match="unknown base policy 'nn_dcs'"):
+        envs.make_env("bench_mild", 2, base="nn_dcs")
+
+
+@pytest.mark.parametrize("algorithm", ["mappo", "ippo"])
+def test_two_iterations_then_the_saved_actor_acts_as_benchmarls(
+    algorithm: str, tmp_path: Path
+) -> None:
+    torch.set_num_threads(1)
+    experiment = small_experiment(algorithm, tmp_path)
+    experiment.run()
+    assert experiment.n_iters_performed == 2
+    assert experiment.total_frames == 400
+    folder = policy_folder.save_marl_policy(experiment, tmp_path / "agent", algorithm)
+    record = json.loads((folder / "config.json").read_text())
+    assert record["algorithm"] == algorithm and record["sizes"] == [26, 32, 32, 3]
+    assert not list(folder.glob("*.pkl")) and not list(folder.glob("*.pt"))
+    policy = load_policy(folder, scenario="bench_lossy_links")
+    env = experiment.test_env
+    td = env.reset()
+    with torch.no_grad(), set_exploration_type(ExplorationType.DETERMINISTIC):
+        expected = experiment.policy(td.clone())["vessel", "action"].numpy()
+    raw = env.base_env.sim.arrays.obs.copy()
+    policy.reset()
+    policy.act_batch(raw)
+    controller = policy._controller
+    assert controller is not None
+    residual = policy.diagnostics["residual"] / (0.2 * controller._tau_scale)
+    np.testing.assert_allclose(residual, expected, atol=2e-6)
+
+
+def test_an_edited_weight_file_is_refused(tmp_path: Path) -> None:
+    experiment = small_experiment("mappo", tmp_path)
+    folder = policy_folder.save_marl_policy(experiment, tmp_path / "agent", "mappo")
+    weights = folder / "policy.safetensors"
+    weights.write_bytes(weights.read_bytes()[:-4] + b"\0\0\0\0")
+    with pytest.raises(AgentFolderError, match="does not match its SHA-256"):
+        load_policy(folder)
+
+
+def test_the_hydra_command_runs_a_cpf_task(tmp_path: Path) -> None:
+    overrides = [
+        "algorithm=ippo",
+        "task=cpf/bench_mild",
+        "task.normalization_steps=10",
+        *(f"experiment.{key}={value}" for key, value in SMALL.items() if key != "max_n_frames"),
+        "experiment.max_n_frames=null",
+        "experiment.max_n_iters=1",
+        f"hydra.run.dir={tmp_path}",
+    ]
+    overrides = [o.replace("=False", "=false").replace("=[]", "=[]") for o in overrides]
+    command = [sys.executable, "-m", "cpf_commands.marl", *overrides]
+    env = {**os.environ, "NUMBA_NUM_THREADS": "1"}
+    result = subprocess.run(command, capture_output=True, text=True, env=env, cwd=tmp_path)
+    assert result.returncode == 0, result.stderr[-2000:]
+    assert "Algorithm: ippo, Task: cpf/bench_mild" in result.stdout
+
+
+def test_two_mappo_iterations_on_the_pettingzoo_route_with_distinct_worker_seeds(
+    tmp_path: Path,
+) -> None:
+    from agents.marl.pettingzoo_route import CpfPettingZooTask
+
+    torch.set_num_threads(1)
+    task = CpfPettingZooTask.BENCH_MILD.get_from_yaml()
+    make = task.get_env_fun(3, True, 4, "cpu")
+    first = [make().reset()["vessel", "observation"] for _ in range(3)]
+    assert not torch.equal(first[0], first[1]) and not torch.equal(first[1], first[2])
+    again = task.get_env_fun(3, True, 4, "cpu")
+    assert torch.equal(again().reset()["vessel", "observation"], first[0])  # seed 4 + 0
+    experiment = small_experiment("mappo", tmp_path, route=CpfPettingZooTask)
+    experiment.run()
+    assert experiment.n_iters_performed == 2
+    assert experiment.total_frames == 400
+
+
+def test_the_training_example_writes_a_curve_and_a_policy(tmp_path: Path) -> None:
+    script = Path(__file__).resolve().parents[2] / "examples" / "marl_residual.py"
+    out = tmp_path / "run"
+    command = [sys.executable, str(script), "--iterations", "1", "--out", str(out)]
+    env = {**os.environ, "NUMBA_NUM_THREADS": "1"}
+    result = subprocess.run(command, capture_output=True, text=True, env=env, cwd=tmp_path)
+    assert result.returncode == 0, result.stderr[-2000:]
+    assert "vessel-steps/s" in result.stdout
+    rows = (out / "curve.csv").read_text().splitlines()
+    assert len(rows) == 2 and rows[0].startswith("iteration,frames,vessel_steps")
+    run = json.loads((out / "run.json").read_text())
+    assert run["vessel_steps"] == 64 * 100 * 5
+    policy = load_policy(out, scenario="bench_lossy_links")
+    assert policy.name == "run"
