@@ -242,7 +242,7 @@ def _parser() -> argparse.ArgumentParser:
         allow_abbrev=False,
         prog="cpf-curves",
         description="Learning curves of cpf-train runs (one per training seed): IQM of the "
-        "held-out evaluation cost with 95 %% bootstrap intervals vs vessel-steps and vs "
+        "held-out evaluation cost with 95 % bootstrap intervals vs vessel-steps and vs "
         "wall-clock seconds; writes curves.csv and curves.png and prints when the IQM first "
         "beats the base policy.",
     )
