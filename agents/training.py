@@ -268,10 +268,11 @@ def _scenario_field(value: Any) -> str | tuple[str, ...]:
     names = [value] if isinstance(value, str) else list(value)
     known = scenarios.list_scenarios()
     unknown = [name for name in names if name not in known]
-    if not names or unknown or len(set(names)) != len(names):
+    if unknown:
+        raise ValueError(f"unknown scenario {unknown[0]!r}; choose one of {known}.")
+    if not names or len(set(names)) != len(names):
         raise ValueError(
-            f"scenario must be a registered name or distinct names (a mixture), got {value!r}; "
-            f"choose from {known}."
+            f"scenario must be a registered name or distinct names (a mixture), got {value!r}."
         )
     return names[0] if len(names) == 1 else tuple(names)
 
