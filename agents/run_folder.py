@@ -53,6 +53,7 @@ from agents.schedule import (
     TrainingInterrupted,
     evaluations_csv,
 )
+from agents.slot_statistics import SlotSharedVecNormalize
 from agents.training import TrainConfig, build_model, make_env, planned_timesteps
 from cpf_env import atomic
 
@@ -204,7 +205,13 @@ class TrainingRun:
         if config.balance_rewards and isinstance(self.venv, MixtureVecEnv):
             self.env = BalancedRewards(self.env, self.venv)
         if config.normalize_observations:
-            self.env = VecNormalize(self.env, norm_obs=True, norm_reward=False, gamma=config.gamma)
+            if config.shared_slot_statistics:
+                slots, size = config.learner_slots()
+                self.env = SlotSharedVecNormalize(self.env, slots, size, gamma=config.gamma)
+            else:
+                self.env = VecNormalize(
+                    self.env, norm_obs=True, norm_reward=False, gamma=config.gamma
+                )
         self.model = build_model(config, self.env)
         previous = ""
         if checkpoint is not None and (checkpoint / PROGRESS).is_file():

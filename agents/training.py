@@ -115,6 +115,8 @@ class TrainConfig:
         balance_rewards: In a mixture, divide each scenario's rewards by its running
             mean cost per step (``agents.mixture_env.BalancedRewards``), so no scenario
             steers the updates by the size of its cost alone. Ignored for one scenario.
+        shared_slot_statistics: Normalize every neighbour slot with the same pooled
+            statistics (``agents.slot_statistics``) instead of per-position ones.
     """
 
     algo: str = "ppo"
@@ -142,6 +144,7 @@ class TrainConfig:
     neighbour_slots: int | None = None
     reward_overrides: dict[str, float] = dataclasses.field(default_factory=dict)
     balance_rewards: bool = True
+    shared_slot_statistics: bool = False
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "extras", tuple(self.extras))
@@ -199,7 +202,13 @@ class TrainConfig:
                 f"(a standard deviation of exp(log_std_init) actions of range 1), got "
                 f"{self.log_std_init!r}."
             )
-        for name in ("hide_residual_from_base", "normalize_observations", "balance_rewards"):
+        flags = (
+            "hide_residual_from_base",
+            "normalize_observations",
+            "balance_rewards",
+            "shared_slot_statistics",
+        )
+        for name in flags:
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"{name} must be true or false, got {getattr(self, name)!r}.")
         if self.base != "none":
@@ -226,6 +235,13 @@ class TrainConfig:
             hide_residual_from_base=self.hide_residual_from_base,
             neighbour_slots=self.neighbour_slots,
         )
+
+    def learner_slots(self) -> tuple[int, int]:
+        """(K, floats per slot) of the learner's input: its neighbour slots' layout."""
+        layout = self.residual_config().learner_layout(
+            observation_layout(scenarios.get(self.home_scenario))
+        )
+        return layout.n_slots, layout.slot_size
 
     def scenario_overrides(self, name: str | None = None) -> dict[str, Any]:
         """``Scenario`` overrides of this run for one training scenario (default: the home one).

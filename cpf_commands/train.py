@@ -121,6 +121,12 @@ def _parser() -> argparse.ArgumentParser:
         help="in a mixture, divide each scenario's rewards by its running mean cost per step",
     )
     parser.add_argument(
+        "--shared-slot-statistics",
+        action=argparse.BooleanOptionalAction,
+        default=defaults.shared_slot_statistics,
+        help="normalize every neighbour slot with the same pooled statistics",
+    )
+    parser.add_argument(
         "--reward-weight",
         nargs="+",
         default=[],

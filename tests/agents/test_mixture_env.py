@@ -225,3 +225,30 @@ def test_each_scenarios_episode_cost_is_logged(tmp_path: Path) -> None:
         value = float(row[header.index(f"rollout/ep_cost/{name}")])
         assert value == pytest.approx(np.mean(costs[name]), rel=1e-6)
     assert len(costs["bench_mild"]) == 3 * 5 and len(costs["bench_large_fleet"]) == 2 * 10
+
+
+def test_pooled_slot_statistics_match_all_slots_taken_together() -> None:
+    """Each slot gets the mean and variance of the K slots' values pooled, component-wise."""
+    from agents.slot_statistics import SlotSharedVecNormalize, pool_slot_statistics
+
+    rng = np.random.default_rng(0)
+    layout_size, k, size = 18, 3, 4
+    values = rng.normal(size=(500, layout_size + k * size + 2)) * rng.uniform(0.1, 3, 32)
+    mean, var = values.mean(axis=0), values.var(axis=0)
+    pooled_mean, pooled_var = pool_slot_statistics(mean, var, k, size)
+    slots = values[:, 18 : 18 + k * size].reshape(-1, k, size).reshape(-1, size)  # all slots
+    for slot in range(k):
+        part = slice(18 + slot * size, 18 + (slot + 1) * size)
+        np.testing.assert_allclose(pooled_mean[part], slots.mean(axis=0))
+        np.testing.assert_allclose(pooled_var[part], slots.var(axis=0))
+    np.testing.assert_array_equal(pooled_mean[:18], mean[:18])  # own components untouched
+    np.testing.assert_array_equal(pooled_var[-2:], var[-2:])  # extras untouched
+    env = SlotSharedVecNormalize(
+        FleetVecEnv("bench_switching", 2, residual=ResidualConfig(neighbour_slots=6)), 6, 4
+    )
+    env.seed(0)
+    env.reset()
+    for _ in range(20):
+        env.step(np.zeros((env.num_envs, 3)))
+    rms = env.obs_rms.var[18:42].reshape(6, 4)
+    np.testing.assert_array_equal(rms, np.broadcast_to(rms[0], (6, 4)))  # shared by all slots
