@@ -125,6 +125,14 @@ def read_run(folder: Path) -> RunCurve:
     return RunCurve(folder.name, *columns)
 
 
+def _tick(value: float, _: object) -> str:
+    """An axis tick: millions as ``2M``, thousands as ``40k``, else the integer."""
+    for size, suffix in ((1e6, "M"), (1e3, "k")):
+        if abs(value) >= size:
+            return f"{value / size:g}{suffix}"
+    return f"{value:.0f}"
+
+
 def _summarize(axis: str, x: NDArray[np.float64], values: NDArray[np.float64]) -> Curve:
     """IQM and bootstrap interval over the runs (columns) at every point (row)."""
     intervals = np.array([bootstrap_interval([row], iqm) for row in values]).reshape(-1, 2)
@@ -204,7 +212,7 @@ def figure(curves: Sequence[Curve], base_cost: float, names: Sequence[str]) -> F
                           label="95 % bootstrap interval")  # fmt: skip
         axes.axhline(base_cost, color="k", ls="--", lw=1.2, label="base policy")
         axes.set_xlabel(labels[curve.axis])
-        axes.xaxis.set_major_formatter(FuncFormatter(lambda value, _: f"{value:,.0f}"))
+        axes.xaxis.set_major_formatter(FuncFormatter(_tick))
         axes.set_ylabel("evaluation cost (test split, lower is better)")
         axes.grid(alpha=0.3)
         if index == 0:
