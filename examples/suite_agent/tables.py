@@ -1,0 +1,77 @@
+"""Print the README's suite-agent tables from the committed benchmark summaries.
+
+    python examples/suite_agent/tables.py            # results/suite_agent
+    python examples/suite_agent/tables.py --root results/suite_agent/ablations/per_position_statistics
+
+For each split, one row per scenario: the mean episode cost of ``nn_dsc``, of
+``nn_dsc_delay_comp`` (the strongest deployable analytic baseline) and of the
+three suite agents (one per training seed), and each agent's verdict against
+both, as ``cpf-bench`` wrote them in ``summary.md`` (the verdicts against
+``nn_dsc`` come from the ``*_vs_nn_dsc`` runs, when they exist).
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+from pathlib import Path
+
+SPLITS = ("test", "shift")
+AGENT = "agents/suite_s"
+
+
+def _verdicts(summary: Path) -> dict[tuple[str, str], str]:
+    """(policy, scenario) -> verdict, from the verdict table of a ``summary.md``."""
+    found = {}
+    for line in summary.read_text().splitlines():
+        cells = [cell.strip() for cell in line.strip().strip("|").split("|")]
+        if len(cells) == 6 and cells[2].isdigit():
+            found[(cells[0], cells[1])] = cells[5].replace("worse: ", "")
+    return found
+
+
+def _costs(summary: Path) -> dict[tuple[str, str], float]:
+    """(policy, scenario) -> mean episode cost, from a ``summary.csv``."""
+    with summary.open() as file:
+        rows = [row for row in csv.DictReader(file) if row["metric"] == "cost"]
+    return {(row["policy"], row["scenario"]): float(row["mean"]) for row in rows}
+
+
+def _table(root: Path, split: str) -> list[str]:
+    folder = root / f"bench_{split}"
+    costs = _costs(folder / "summary.csv")
+    against_best = _verdicts(folder / "summary.md")
+    plain = root / f"bench_{split}_vs_nn_dsc" / "summary.md"
+    against_nn_dsc = _verdicts(plain) if plain.is_file() else {}
+    agents = sorted({p for p, _ in costs if AGENT in p}, key=lambda p: int(p.rsplit("_s", 1)[1]))
+    scenarios = list(dict.fromkeys(s for _, s in costs))
+    lines = [
+        f"`{split}` split | `nn_dsc` | `nn_dsc_delay_comp` | suite agent (3 seeds) | "
+        "verdict vs `nn_dsc_delay_comp` | verdict vs `nn_dsc` |",
+        "|---|---|---|---|---|---|",
+    ]
+    for scenario in scenarios:
+        learned = [costs[(agent, scenario)] for agent in agents]
+        best = costs[("nn_dsc_delay_comp", scenario)]
+        lines.append(
+            f"| {scenario} | {costs[('nn_dsc', scenario)]:.0f} | {best:.0f} | "
+            f"{min(learned):.0f}-{max(learned):.0f} | "
+            + "; ".join(against_best.get((a, scenario), "-") for a in agents)
+            + " | "
+            + "; ".join(against_nn_dsc.get((a, scenario), "-") for a in agents)
+            + " |"
+        )
+    lines[0] = "| " + lines[0]
+    return lines
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0], allow_abbrev=False)
+    parser.add_argument("--root", default="results/suite_agent", help="folder of bench_<split>/")
+    args = parser.parse_args()
+    for split in SPLITS:
+        print("\n".join(_table(Path(args.root), split)), end="\n\n")
+
+
+if __name__ == "__main__":
+    main()
