@@ -1,7 +1,8 @@
 """Print the README's suite-agent tables from the committed benchmark summaries.
 
-    python examples/suite_agent/tables.py            # results/suite_agent
-    python examples/suite_agent/tables.py --root results/suite_agent/ablations/per_position_statistics
+    python examples/suite_agent/tables.py        # results/suite_agent
+    python examples/suite_agent/tables.py --root \
+        results/suite_agent/ablations/per_position_statistics
 
 For each split, one row per scenario: the mean episode cost of ``nn_dsc``, of
 ``nn_dsc_delay_comp`` (the strongest deployable analytic baseline) and of the
