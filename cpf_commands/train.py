@@ -97,7 +97,9 @@ def _parser() -> argparse.ArgumentParser:
         "only), SB3's model.zip (to resume training) and progress.csv to --out.",
         formatter_class=argparse.ArgumentDefaultsHelpFormatter,
     )
-    parser.add_argument("--algo", default=defaults.algo, choices=["ppo", "sac"])
+    parser.add_argument(
+        "--algo", default=defaults.algo, choices=["ppo", "sac"], help="SB3 algorithm"
+    )
     parser.add_argument(
         "--scenario",
         nargs="+",
@@ -105,7 +107,9 @@ def _parser() -> argparse.ArgumentParser:
         choices=[*training_scenarios(), "suite"],
         metavar="SCENARIO",
         help="training scenario; several (or 'suite', the benchmark suite) train one agent on "
-        "their mixture. Choices: " + ", ".join([*training_scenarios(), "suite"]),
+        "their mixture (the README's suite agent: --config "
+        "examples/suite_agent/hyperparameters.toml). Choices: "
+        + ", ".join([*training_scenarios(), "suite"]),
     )
     parser.add_argument(
         "--neighbour-slots",
@@ -141,13 +145,22 @@ def _parser() -> argparse.ArgumentParser:
         help="base policy the agent corrects; none: the agent commands forces and rate",
     )
     parser.add_argument(
-        "--fleets", type=positive_int, default=defaults.fleets, help="fleets simulated together"
+        "--fleets",
+        type=positive_int,
+        default=defaults.fleets,
+        help="fleets simulated together (in a mixture, shared out evenly over the scenarios)",
     )
     parser.add_argument(
-        "-n", "--timesteps", type=positive_int, default=defaults.timesteps, help="vessel-steps"
+        "-n",
+        "--timesteps",
+        type=positive_int,
+        default=defaults.timesteps,
+        help="budget in vessel-steps (PPO rounds it up to whole rollouts; the rounding is printed)",
     )
     parser.add_argument("--seed", type=int, default=defaults.seed, help="training seed")
-    parser.add_argument("--out", required=True, help="output folder (required)")
+    parser.add_argument(
+        "--out", required=True, default=argparse.SUPPRESS, help="output folder (the run's folder)"
+    )
     parser.add_argument(
         "--mode", default=defaults.mode, choices=sorted(RESIDUAL_MODES), help="residual mode"
     )
