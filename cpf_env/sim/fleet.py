@@ -275,9 +275,8 @@ class FleetSim:
             raise ValueError(
                 f"actions must have shape (B, n, 4 + m) = {expected}, got {array.shape}."
             )
-        bad = np.argwhere(~np.isfinite(array))
-        if bad.size:
-            b, i, k = bad[0]
+        if not np.isfinite(array).all():  # the index search only on the error path
+            b, i, k = np.argwhere(~np.isfinite(array))[0]
             raise ValueError(
                 f"action of fleet {b}, vessel_{i}, component {k} is {array[b, i, k]}: "
                 "actions must be finite."
