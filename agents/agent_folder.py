@@ -29,17 +29,16 @@ from __future__ import annotations
 import hashlib
 import itertools
 import json
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import torch
-from numpy.typing import NDArray
 from safetensors.torch import load as load_tensors
 from safetensors.torch import save as save_tensors
 
 from cpf_env import atomic
+from cpf_env.envs.input_statistics import InputStatistics
 
 __all__ = [
     "FORMAT",
@@ -69,35 +68,10 @@ class AgentFolderError(ValueError):
     """An agent folder that is incomplete, inconsistent or not of this format."""
 
 
-@dataclass(frozen=True)
-class Normalization:
-    """Observation statistics applied as SB3's ``VecNormalize`` does at evaluation.
-
-    Attributes:
-        mean: (k,) float64 running mean of the inputs.
-        var: (k,) float64 running variance.
-        epsilon: Added to the variance before the square root.
-        clip: Normalized inputs are clipped to [-clip, clip].
-    """
-
-    mean: NDArray[np.float64]
-    var: NDArray[np.float64]
-    epsilon: float
-    clip: float
-
-    def apply(self, rows: NDArray[np.float32]) -> NDArray[np.float32]:
-        """(R, k) float32 inputs -> normalized, clipped float32 (VecNormalize's arithmetic)."""
-        scaled = (rows - self.mean) / np.sqrt(self.var + self.epsilon)
-        return np.clip(scaled, -self.clip, self.clip).astype(np.float32)
-
-    def to_json(self) -> dict[str, Any]:
-        """JSON-ready dict; floats round-trip exactly through ``json``."""
-        return {
-            "mean": [float(x) for x in self.mean],
-            "var": [float(x) for x in self.var],
-            "epsilon": float(self.epsilon),
-            "clip": float(self.clip),
-        }
+#: Observation statistics applied as SB3's ``VecNormalize`` does at evaluation: the env
+#: layer's ``InputStatistics`` (mean, var, epsilon, clip; ``apply``, ``to_json``), one
+#: implementation for the SB3 agents, the MARL actors and ``TorchRLFleetEnv(normalize=True)``.
+Normalization = InputStatistics
 
 
 class PolicyNetwork(torch.nn.Module):

@@ -37,7 +37,6 @@ from cpf_env.envs.parallel import make_scenario
 from cpf_env.envs.residual import ResidualConfig, ZeroPolicy
 from cpf_env.envs.torchrl_env import GROUP
 from cpf_env.envs.wrappers import ResidualWrapper
-from cpf_env.scenarios.splits import check_training
 
 from benchmarl.environments import TaskClass  # isort: skip  (after agents.marl.tasks)
 from torchrl.envs import ClipTransform, EnvBase, ObservationNorm, PettingZooWrapper, Transform
@@ -58,18 +57,12 @@ class CpfPettingZooTaskClass(CpfTaskClass):
         Raises:
             ValueError: Discrete actions, a held-out scenario or evaluation seeds.
         """
-        if not continuous_actions:
-            raise ValueError(
-                "cpf tasks have continuous actions only; set prefer_continuous_actions."
-            )
-        config = checked_config(self.config)
+        config, first = self.training_config(continuous_actions, seed, int(num_envs) + 1)
         if config.stagger:
             raise ValueError(
                 "stagger spreads the fleets of one batched env; the PettingZoo route has "
                 "one fleet per worker. Set stagger=false."
             )
-        first = 0 if seed is None else int(seed)
-        check_training(config.scenario, range(first, first + int(num_envs) + 1))
         scenario = make_scenario(config.scenario, max_steps=config.max_steps, **config.overrides)
         built = itertools.count()
 

@@ -39,7 +39,6 @@ from agents.agent_folder import (
     NORMALIZATION,
     WEIGHTS,
     AgentFolderError,
-    Normalization,
     PolicyNetwork,
     _read_verified,
     _sha256,
@@ -201,8 +200,7 @@ def load_marl_policy(folder: str | Path, scenario: str | Scenario | None = None)
         statistics = json.loads(_read_verified(path, NORMALIZATION, manifest))
         normalization = None
         if statistics is not None:
-            stats = InputStatistics.from_json(statistics)
-            normalization = Normalization(stats.mean, stats.var, stats.epsilon, stats.clip)
+            normalization = InputStatistics.from_json(statistics)
     except (json.JSONDecodeError, KeyError, TypeError, ValueError) as error:
         if isinstance(error, AgentFolderError):
             raise

@@ -114,6 +114,23 @@ def checked_config(config: dict[str, Any]) -> CpfTaskConfig:
 class CpfTaskClass(TaskClass):
     """BenchMARL's task class over ``TorchRLFleetEnv`` (continuous actions, one group)."""
 
+    def training_config(
+        self, continuous_actions: bool, seed: int | None, seeds: int
+    ) -> tuple[CpfTaskConfig, int]:
+        """The checked task config and the first seed of the ``seeds`` training seeds it uses.
+
+        Raises:
+            ValueError: Discrete actions, a bad config, a held-out scenario or evaluation seeds.
+        """
+        if not continuous_actions:
+            raise ValueError(
+                "cpf tasks have continuous actions only; set prefer_continuous_actions."
+            )
+        config = checked_config(self.config)
+        first = 0 if seed is None else int(seed)
+        check_training(config.scenario, range(first, first + seeds))
+        return config, first
+
     def get_env_fun(
         self, num_envs: int, continuous_actions: bool, seed: int | None, device: Any
     ) -> Callable[[], EnvBase]:
@@ -122,13 +139,7 @@ class CpfTaskClass(TaskClass):
         Raises:
             ValueError: Discrete actions, a held-out scenario or evaluation seeds.
         """
-        if not continuous_actions:
-            raise ValueError(
-                "cpf tasks have continuous actions only; set prefer_continuous_actions."
-            )
-        config = checked_config(self.config)
-        first = 0 if seed is None else int(seed)
-        check_training(config.scenario, range(first, first + int(num_envs)))
+        config, first = self.training_config(continuous_actions, seed, int(num_envs))
 
         def make() -> EnvBase:
             return make_env(
