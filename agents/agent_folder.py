@@ -48,9 +48,12 @@ __all__ = [
     "Normalization",
     "PolicyNetwork",
     "actor_tensors",
+    "agent_files",
     "network_from_tensors",
     "read_agent",
+    "read_verified",
     "write_agent",
+    "write_with_manifest",
 ]
 
 FORMAT = "cpf-agent"
@@ -126,6 +129,47 @@ def _sha256(data: bytes) -> str:
     return hashlib.sha256(data).hexdigest()
 
 
+def agent_files(
+    tensors: dict[str, torch.Tensor], normalization: Normalization | None, record: dict[str, Any]
+) -> dict[str, bytes]:
+    """The bytes of an agent's three data files: weights, normalization, config.
+
+    Args:
+        tensors: The actor's weights by ``PolicyNetwork`` name (float32).
+        normalization: The observation statistics, or None.
+        record: The ``config.json`` content.
+    """
+    return {
+        WEIGHTS: save_tensors(tensors),
+        NORMALIZATION: (
+            json.dumps(None if normalization is None else normalization.to_json()) + "\n"
+        ).encode(),
+        CONFIG: (json.dumps(record, indent=2) + "\n").encode(),
+    }
+
+
+def write_with_manifest(
+    folder: Path, files: dict[str, bytes], format_name: str, format_version: int
+) -> None:
+    """Write ``files`` and the manifest of their hashes into ``folder``, each atomically.
+
+    The caller makes the folder as a whole appear at once (``cpf_env.atomic.staged_folder``).
+    """
+    import cpf_env
+
+    for name, data in files.items():
+        atomic.write_bytes(folder / name, data)
+    manifest = {
+        "format": format_name,
+        "format_version": format_version,
+        "cpf_env": cpf_env.__version__,
+        "files": {
+            name: {"sha256": _sha256(data), "bytes": len(data)} for name, data in files.items()
+        },
+    }
+    atomic.write_text(folder / MANIFEST, json.dumps(manifest, indent=2) + "\n")
+
+
 def write_agent(
     folder: Path,
     record: dict[str, Any],
@@ -143,30 +187,11 @@ def write_agent(
         network: The actor.
         normalization: The observation statistics, or None.
     """
-    import cpf_env
-
     tensors = {name: value.detach().contiguous() for name, value in network.state_dict().items()}
-    files = {
-        WEIGHTS: save_tensors(tensors),
-        NORMALIZATION: (
-            json.dumps(None if normalization is None else normalization.to_json()) + "\n"
-        ).encode(),
-        CONFIG: (json.dumps(record, indent=2) + "\n").encode(),
-    }
-    for name, data in files.items():
-        atomic.write_bytes(folder / name, data)
-    manifest = {
-        "format": FORMAT,
-        "format_version": FORMAT_VERSION,
-        "cpf_env": cpf_env.__version__,
-        "files": {
-            name: {"sha256": _sha256(data), "bytes": len(data)} for name, data in files.items()
-        },
-    }
-    atomic.write_text(folder / MANIFEST, json.dumps(manifest, indent=2) + "\n")
+    write_with_manifest(folder, agent_files(tensors, normalization, record), FORMAT, FORMAT_VERSION)
 
 
-def _read_verified(folder: Path, name: str, manifest: dict[str, Any]) -> bytes:
+def read_verified(folder: Path, name: str, manifest: dict[str, Any]) -> bytes:
     """A file's bytes, checked against the manifest's hash."""
     path = folder / name
     entry = manifest["files"].get(name)
@@ -245,20 +270,20 @@ def read_agent(folder: Path) -> tuple[dict[str, Any], PolicyNetwork, Normalizati
 
     manifest = _read_manifest(folder)
     try:
-        record = json.loads(_read_verified(folder, CONFIG, manifest))
+        record = json.loads(read_verified(folder, CONFIG, manifest))
         config = TrainConfig.from_json(record["config"])
     except (json.JSONDecodeError, KeyError, TypeError, ValueError) as error:
         raise AgentFolderError(
             f"{folder / CONFIG} is not a valid training record: {error}"
         ) from None
     try:
-        tensors = load_tensors(_read_verified(folder, WEIGHTS, manifest))
+        tensors = load_tensors(read_verified(folder, WEIGHTS, manifest))
     except AgentFolderError:
         raise
     except Exception as error:  # safetensors raises its own error type
         raise AgentFolderError(f"{folder / WEIGHTS} is not a safetensors file: {error}") from None
     network = network_from_tensors(tensors, config.algo, config.net_arch, folder / WEIGHTS)
-    statistics = json.loads(_read_verified(folder, NORMALIZATION, manifest))
+    statistics = json.loads(read_verified(folder, NORMALIZATION, manifest))
     normalization = (
         None if statistics is None else _normalization(statistics, folder / NORMALIZATION)
     )

@@ -30,9 +30,7 @@ from typing import TYPE_CHECKING, Any
 
 import torch
 from safetensors.torch import load as load_tensors
-from safetensors.torch import save as save_tensors
 
-import cpf_env
 from agents.agent_folder import (
     CONFIG,
     MANIFEST,
@@ -40,8 +38,9 @@ from agents.agent_folder import (
     WEIGHTS,
     AgentFolderError,
     PolicyNetwork,
-    _read_verified,
-    _sha256,
+    agent_files,
+    read_verified,
+    write_with_manifest,
 )
 from cpf_env import atomic
 from cpf_env.envs.input_statistics import InputStatistics
@@ -129,7 +128,6 @@ def save_marl_policy(
         name: value.detach().to(torch.float32).contiguous() for name, value in tensors.items()
     }
     sizes = [int(layers[0][0].shape[1]), *(int(w.shape[0]) for w, _ in layers[:-1]), k]
-    statistics = env.input_statistics
     record = {
         "task": dict(experiment.task.config),
         "algorithm": algorithm,
@@ -140,26 +138,14 @@ def save_marl_policy(
         "frames": int(experiment.total_frames),
         "iterations": int(experiment.n_iters_performed),
     }
-    files = {
-        WEIGHTS: save_tensors(tensors),
-        NORMALIZATION: (
-            json.dumps(None if statistics is None else statistics.to_json()) + "\n"
-        ).encode(),
-        CONFIG: (json.dumps(record, indent=2) + "\n").encode(),
-    }
-    manifest = {
-        "format": MARL_FORMAT,
-        "format_version": MARL_FORMAT_VERSION,
-        "cpf_env": cpf_env.__version__,
-        "files": {
-            name: {"sha256": _sha256(data), "bytes": len(data)} for name, data in files.items()
-        },
-    }
     target = Path(folder)
     with atomic.staged_folder(target) as staging:
-        for name, data in files.items():
-            atomic.write_bytes(staging / name, data)
-        atomic.write_text(staging / MANIFEST, json.dumps(manifest, indent=2) + "\n")
+        write_with_manifest(
+            staging,
+            agent_files(tensors, env.input_statistics, record),
+            MARL_FORMAT,
+            MARL_FORMAT_VERSION,
+        )
     return target
 
 
@@ -185,7 +171,7 @@ def load_marl_policy(folder: str | Path, scenario: str | Scenario | None = None)
             f"cpf_env reads version {MARL_FORMAT_VERSION}."
         )
     try:
-        record = json.loads(_read_verified(path, CONFIG, manifest))
+        record = json.loads(read_verified(path, CONFIG, manifest))
         task, sizes = record["task"], [int(x) for x in record["sizes"]]
         config = TrainConfig(
             algo="ppo",
@@ -197,7 +183,7 @@ def load_marl_policy(folder: str | Path, scenario: str | Scenario | None = None)
             normalize_observations=bool(task["normalize"]),
             net_arch=tuple(sizes[1:-1]),
         )
-        statistics = json.loads(_read_verified(path, NORMALIZATION, manifest))
+        statistics = json.loads(read_verified(path, NORMALIZATION, manifest))
         normalization = None
         if statistics is not None:
             normalization = InputStatistics.from_json(statistics)
@@ -206,7 +192,7 @@ def load_marl_policy(folder: str | Path, scenario: str | Scenario | None = None)
             raise
         raise AgentFolderError(f"{path} holds an invalid MARL policy record: {error}") from None
     try:
-        tensors = load_tensors(_read_verified(path, WEIGHTS, manifest))
+        tensors = load_tensors(read_verified(path, WEIGHTS, manifest))
     except AgentFolderError:
         raise
     except Exception as error:  # safetensors raises its own error type
