@@ -1,19 +1,29 @@
 """The one rollout of the commands: policies on S fleets each, measured step by step.
 
 ``rollout_group`` runs P policies on one scenario for the same S seeds at
-once: one ``FleetSim(num_fleets=P S)``, policy p acting on fleets
-p S .. (p + 1) S - 1 (its ``act_batch`` on its S fleets every step), fleet
-p S + k reset with seed k. A fleet's numbers do not depend on the other
-fleets in the batch (the simulator, the analytic policies and the metrics
-reduce per fleet), so each policy's results are those of a run of its own,
-bit for bit; one batch costs one simulator step and one metrics record per
-control step for all policies instead of one each. ``rollout`` is the group
-of one policy. A privileged reference (``bind_simulator``) is bound to the
-simulator and its fleets. Fleets are not reset when they
+once, policy p on its own block of S fleets, fleet k of every block reset
+with seed k. The policies go into at most two batched simulators:
+
+* the compiled ones (``baselines.closed_loop.ClosedLoop.supports``: the
+  analytic baselines and the privileged references) into one
+  ``FleetSim`` stepped by ``ClosedLoop.run``, ``CHUNK`` control steps per
+  compiled call, every step written to the metrics' record in compiled code;
+* all others (trained agents, kinetic parts written in Python, and every
+  policy when an ``observer`` watches) into one ``FleetSim`` stepped from
+  Python: each policy's ``act_batch`` on its block, one simulator step and
+  one metrics record per control step for all of them. A privileged
+  reference stepped here (``bind_simulator``) is bound to its simulator and
+  fleets.
+
+A fleet's numbers do not depend on the other fleets in the batch nor on the
+simulator it runs in (the simulator, the analytic policies and the metrics
+work per fleet, and the compiled loop calls the functions the Python path
+calls), so each policy's results are those of a run of its own, bit for bit.
+``rollout`` is the group of one policy. Fleets are not reset when they
 terminate: a fleet that leaves its path is masked from then on (its later
 steps do not count, its actions are replaced by zeros so the simulator
-stays finite) and its failure flag and step are recorded. The run stops
-when every fleet of the batch has failed. Every step is measured by
+stays finite) and its failure flag and step are recorded. A simulator stops
+once all its fleets have failed. Every step is measured by
 ``cpf_env.sim.fleet_metrics.FleetMetrics`` after the step; an optional
 ``observer`` sees the simulator before and after each step (``cpf-run``
 records its trajectory that way). ``cpf-bench`` and ``cpf-run`` both step
