@@ -199,6 +199,11 @@ class ClosedLoop:
                     f"which does not fit the simulator's {sim.scenario.name!r} (vessels or "
                     "observation layout differ)."
                 )
+        if len({id(policy) for policy in members}) < len(members):
+            raise ValueError(
+                "a policy object appears twice; build one per block (its internal states "
+                "belong to one block of fleets)."
+            )
         if sim.num_fleets % len(members):
             raise ValueError(
                 f"{len(members)} policies need a number of fleets divisible by "
@@ -244,6 +249,8 @@ class ClosedLoop:
             hold_ended: Give a fleet zero actions from the step after it left its
                 path (``ended``), as ``cpf-bench`` does; its policy still acts.
             record: Where step k of this call goes (row k, every fleet), or None.
+
+        Afterwards each policy's ``diagnostics`` are those of the last step.
 
         Raises:
             ValueError: ``steps`` out of range.

@@ -127,7 +127,13 @@ def test_policies_that_read_the_simulator_through_python_are_refused():
     [
         (lambda task, sim: ClosedLoop([], sim), "at least one policy"),
         (
-            lambda task, sim: ClosedLoop([baselines.make_policy("nn_dsc", task)] * 3, sim),
+            lambda task, sim: ClosedLoop([baselines.make_policy("nn_dsc", task)] * 2, sim),
+            "appears twice",
+        ),
+        (
+            lambda task, sim: ClosedLoop(
+                [baselines.make_policy("nn_dsc", task) for _ in range(3)], sim
+            ),
             "divisible by 3",
         ),
         (
