@@ -134,7 +134,7 @@ def test_the_converted_agent_acts_as_sb3_did(tmp_path: Path) -> None:
 
     policy = load_policy(AGENT)
     record = json.loads((AGENT / "config.json").read_text())
-    config = TrainConfig.from_json({**record["config"], "fleets": 1})
+    config = TrainConfig.from_json({**record["config"], "fleets": 1, "batch_size": 160})
     model = build_model(config, VecMonitor(make_env(config)))
     assert isinstance(model, PPO)
     network = policy.actor.network  # type: ignore[attr-defined]
@@ -159,7 +159,7 @@ def test_an_old_folder_loads_with_trust_and_converts_to_the_same_actions(tmp_pat
 
     from agents.training import TrainConfig, build_model, make_env
 
-    config = TrainConfig(scenario="bench_mild", fleets=2, n_steps=16, net_arch=(8,))
+    config = TrainConfig(scenario="bench_mild", fleets=2, n_steps=16, batch_size=160, net_arch=(8,))
     env = VecNormalize(VecMonitor(make_env(config)), norm_reward=False)
     env.reset()
     for _ in range(5):  # some statistics
@@ -193,7 +193,7 @@ def test_an_old_folder_without_its_statistics_is_refused(tmp_path: Path) -> None
 
     from agents.training import TrainConfig, build_model, make_env
 
-    config = TrainConfig(scenario="bench_mild", fleets=2, n_steps=16, net_arch=(8,))
+    config = TrainConfig(scenario="bench_mild", fleets=2, n_steps=16, batch_size=160, net_arch=(8,))
     model = build_model(config, VecMonitor(make_env(config)))
     model.save(tmp_path / "model.zip")
     (tmp_path / "config.json").write_text(json.dumps({"config": config.to_json()}))

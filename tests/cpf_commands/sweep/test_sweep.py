@@ -333,7 +333,8 @@ def test_a_trial_to_run_again_starts_from_an_empty_folder(tmp_path, monkeypatch)
     ray.tune = tune  # type: ignore[attr-defined]
     monkeypatch.setitem(sys.modules, "ray", ray)
     monkeypatch.setitem(sys.modules, "ray.tune", tune)
-    fixed = {"timesteps": 64, "fleets": 2, "n_steps": 16, "normalize_observations": False}
+    fixed = {"timesteps": 64, "fleets": 2, "n_steps": 16, "batch_size": 160}
+    fixed["normalize_observations"] = False
     spec = SweepSpec(("bench_mild",), (0,), fixed=fixed, eval_seeds=0)
     params = next(spec.trials())
     stale = SweepSpec(("bench_mild",), (0,), fixed={**fixed, "timesteps": 32}, eval_seeds=0)
