@@ -385,12 +385,21 @@ class TorchRLFleetEnv(EnvBase):
         group["observation"] = torch.from_numpy(inputs)
         if step:
             group["reward"] = torch.from_numpy(a.reward.astype(np.float32)).unsqueeze(-1)
+        # Every tensor is made here, on the CPU: with the device given to each level
+        # and (on the CPU) non_blocking=False, tensordict skips its device-transfer
+        # bookkeeping, which was most of this function's time at small B.
+        device, non_blocking = self.device, False if self.device.type == "cpu" else None
         if self.info_level == "minimal":
             errors = torch.from_numpy(a.errors.astype(np.float32))
             infos = {key: errors[..., index] for key, index in ERROR_KEYS}
-            group["info"] = TensorDict(infos, batch_size=(B, n))
-        root: dict[str, Any] = {**flags, GROUP: TensorDict(group, batch_size=(B, n))}
+            group["info"] = TensorDict(
+                infos, batch_size=(B, n), device=device, non_blocking=non_blocking
+            )
+        vessels = TensorDict(group, batch_size=(B, n), device=device, non_blocking=non_blocking)
+        root: dict[str, Any] = {**flags, GROUP: vessels}
         if self.state:
             per_vessel = np.concatenate([a.eta, a.nu, a.theta[..., None], a.tau_applied], axis=-1)
             root["state"] = torch.from_numpy(per_vessel.reshape(B, -1).astype(np.float32))
-        return TensorDict(root, batch_size=self.batch_size, device=self.device)
+        return TensorDict(
+            root, batch_size=self.batch_size, device=device, non_blocking=non_blocking
+        )
