@@ -333,7 +333,7 @@ class ResidualController:
             raise ValueError(
                 f"residual actions must have shape (B, n, k) = {expected}, got {a.shape}."
             )
-        if not np.all(np.isfinite(a)):
+        if not np.isfinite(a).all():
             raise ValueError("residual actions must be finite.")
         scale = self.config.scale
         if self.config.mode == "kinematic":

@@ -350,7 +350,7 @@ STEPPED, DIVERGED_BEFORE, NONFINITE_ACTION, DIVERGED = 0, 1, 2, 3
 
 @numba.njit(cache=True)
 def _step_refusal(a: FleetArrays, actions: np.ndarray) -> int:
-    """``DIVERGED_BEFORE``, ``NONFINITE_ACTION`` or ``STEPPED`` (the step may run), changing nothing."""
+    """Why the step may not run (``DIVERGED_BEFORE``, ``NONFINITE_ACTION``) or ``STEPPED``."""
     for b in range(a.nonfinite.shape[0]):
         if a.nonfinite[b]:
             return DIVERGED_BEFORE
@@ -376,7 +376,8 @@ def step_fleets_serial(arrays: tuple, constants: tuple, actions: np.ndarray) -> 
     """Advance every fleet by one control period, one after the other.
 
     Args:
-        arrays: ``tuple(FleetArrays)``; constants: ``tuple(KernelConstants)``.
+        arrays: ``tuple(FleetArrays)``, the state (written).
+        constants: ``tuple(KernelConstants)``, the scenario.
         actions: (B, n, 4 + m) float64, C-contiguous.
 
     Returns:
