@@ -327,7 +327,7 @@ class ResidualController:
         Returns:
             (B, n, 4 + m) float64: force command (N, N, N m), theta_dot (1/s), message.
         """
-        a = np.clip(np.asarray(action, dtype=np.float64), -1.0, 1.0)
+        a = np.minimum(np.maximum(np.asarray(action, dtype=np.float64), -1.0), 1.0)  # np.clip
         expected = (self.num_fleets, self.n, self.action_size)
         if a.shape != expected:
             raise ValueError(

@@ -370,14 +370,19 @@ class TorchRLFleetEnv(EnvBase):
         """
         B, n, a = self.num_fleets, self.n, self.sim.arrays
         if step:
-            terminated = torch.from_numpy(a.terminated.copy()).unsqueeze(-1)
-            ended = (a.step >= self._horizon) & ~a.terminated
-            truncated = torch.from_numpy(ended).unsqueeze(-1)
+            terminated = a.terminated[:, None].copy()
+            truncated = ((a.step >= self._horizon) & ~a.terminated)[:, None]
         else:
-            terminated = truncated = torch.zeros((B, 1), dtype=torch.bool)
-        flags = {"done": terminated | truncated, "terminated": terminated, "truncated": truncated}
+            terminated = truncated = np.zeros((B, 1), dtype=bool)
+        fleet_flags = {
+            "done": terminated | truncated,
+            "terminated": terminated,
+            "truncated": truncated,
+        }  # (B, 1) each, in numpy (cheaper than torch at these sizes), then per vessel
+        flags = {key: torch.from_numpy(value) for key, value in fleet_flags.items()}
         group: dict[str, Any] = {
-            key: value.unsqueeze(1).expand(B, n, 1).clone() for key, value in flags.items()
+            key: torch.from_numpy(np.repeat(value[:, None], n, axis=1))
+            for key, value in fleet_flags.items()
         }
         inputs = self._inputs.astype(np.float32)
         if self.input_statistics is not None:
