@@ -14,10 +14,16 @@ With ``--vs ROOT`` the same cells are timed for the package under ``ROOT``
 (another checkout, e.g. the main branch) and for this one, in turns
 (this, other, this, other, ...: one fresh process each, ``PYTHONPATH`` pointing
 at the checkout), so that both see the same machine load; each cell's
-figure is the median over the rounds. Report the load with the figures. Usage::
+figure is the median over the rounds. Report the load with the figures.
+
+``--clock cpu`` times the process's CPU time instead of the wall clock: on a
+shared machine a waiting process's wall clock runs on while its CPU time
+does not, so the comparison is steadier; it is meaningful with one thread
+(``NUMBA_NUM_THREADS=1 OMP_NUM_THREADS=1``), since it sums every thread's
+time, spinning included. Usage::
 
     python examples/step_overhead.py --seconds 1
-    python examples/step_overhead.py --vs /path/to/main --rounds 3 --seconds 1
+    python examples/step_overhead.py --vs /path/to/main --rounds 3 --seconds 1 --clock cpu
 """
 
 from __future__ import annotations
@@ -38,12 +44,17 @@ SCENARIO = "wang2014"
 POLICY = "nn_dsc"
 
 
-def _seconds_per_call(function: Callable[[], object], min_seconds: float) -> float:
-    """Mean wall time (s) of one call of ``function``, timed for at least ``min_seconds``."""
+CLOCKS = {"wall": time.perf_counter, "cpu": time.process_time}
+
+
+def _seconds_per_call(
+    function: Callable[[], object], min_seconds: float, clock: Callable[[], float]
+) -> float:
+    """Mean time (s, of ``clock``) of one call of ``function``, for at least ``min_seconds``."""
     for _ in range(3):  # warm-up: compiled kernels, first allocations
         function()
-    calls, start = 0, time.perf_counter()
-    while (elapsed := time.perf_counter() - start) < min_seconds:
+    calls, start = 0, clock()
+    while (elapsed := clock() - start) < min_seconds:
         function()
         calls += 1
     return elapsed / calls
@@ -126,7 +137,7 @@ CELLS = (
 )
 
 
-def measure(seconds: float) -> dict[str, float | None]:
+def measure(seconds: float, clock: str = "wall") -> dict[str, float | None]:
     """Microseconds per step of every cell (``"path, B = b"``); None where an extra is missing."""
     figures: dict[str, float | None] = {}
     for path, batches in CELLS:
@@ -136,14 +147,15 @@ def measure(seconds: float) -> dict[str, float | None]:
             except ImportError:
                 figures[f"{path}, B = {batch}"] = None
                 continue
-            figures[f"{path}, B = {batch}"] = 1e6 * _seconds_per_call(step, seconds)
+            seconds_per_step = _seconds_per_call(step, seconds, CLOCKS[clock])
+            figures[f"{path}, B = {batch}"] = 1e6 * seconds_per_step
     return figures
 
 
-def _measure_in(root: Path, seconds: float) -> dict[str, float | None]:
+def _measure_in(root: Path, seconds: float, clock: str) -> dict[str, float | None]:
     """``measure`` run in a fresh process on the package under ``root``."""
     environment = {**os.environ, "PYTHONPATH": str(root)}
-    command = [sys.executable, __file__, "--json", "--seconds", str(seconds)]
+    command = [sys.executable, __file__, "--json", "--seconds", str(seconds), "--clock", clock]
     done = subprocess.run(
         command, env=environment, cwd=root, capture_output=True, text=True, check=True
     )
@@ -155,14 +167,14 @@ def _median(values: list[float | None]) -> float | None:
     return statistics.median(known) if known else None
 
 
-def _compare(other: Path, rounds: int, seconds: float) -> None:
+def _compare(other: Path, rounds: int, seconds: float, clock: str) -> None:
     """Both checkouts in turns; print the median microseconds per step and their ratio."""
     here = Path(__file__).resolve().parents[1]
     runs: dict[Path, list[dict[str, float | None]]] = {here: [], other: []}
     for _ in range(rounds):
         for root in (here, other):
-            runs[root].append(_measure_in(root, seconds))
-    print(f"| cell | this checkout (us/step) | {other} (us/step) | speed-up |")
+            runs[root].append(_measure_in(root, seconds, clock))
+    print(f"| cell | this checkout (us/step, {clock}) | {other} (us/step) | speed-up |")
     print("|---|---|---|---|")
     for cell in runs[here][0]:
         new = _median([run[cell] for run in runs[here]])
@@ -177,14 +189,15 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=1.0, help="timing per cell (s)")
     parser.add_argument("--vs", type=Path, help="another checkout to time in turns with this one")
     parser.add_argument("--rounds", type=int, default=3, help="turns of each checkout with --vs")
+    parser.add_argument("--clock", choices=sorted(CLOCKS), default="wall", help="what is timed")
     parser.add_argument("--json", action="store_true", help="print one JSON line (for --vs)")
     args = parser.parse_args()
     if args.vs is not None:
         if not (args.vs / "cpf_env" / "__init__.py").is_file():
             raise SystemExit(f"--vs {args.vs}: no cpf_env package there; give a checkout's root.")
-        _compare(args.vs.resolve(), args.rounds, args.seconds)
+        _compare(args.vs.resolve(), args.rounds, args.seconds, args.clock)
         return
-    figures = measure(args.seconds)
+    figures = measure(args.seconds, args.clock)
     if args.json:
         print(json.dumps(figures))
         return
