@@ -284,7 +284,7 @@ class CooperativePathFollowingEnv(ParallelEnv):
             raise
         a = self.sim.arrays
         terminated = bool(a.terminated[0])
-        truncated = not terminated and int(a.step[0]) >= self.scenario.max_steps  # sim.truncated
+        truncated = bool(self.sim.truncated[0])
         rewards = dict(zip(self.agents, a.reward[0].tolist(), strict=False))
         observations = self._observations(obs)
         terminations = dict.fromkeys(self.agents, terminated)
