@@ -322,14 +322,14 @@ class FleetSim:
             raise RuntimeError("call reset() before step().")
         array = np.asarray(actions)
         if array.dtype.kind not in "biuf" or array.shape != self._action_shape:
-            self._refuse_diverged_fleets()  # the errors in the order validate_actions has them
-            self.validate_actions(array)
+            self._refuse_diverged_fleets()  # raises first, as it always did, if one diverged
+            self.validate_actions(array)  # raises: not real numbers, or the wrong shape
         validated = np.array(array, dtype=np.float64, order="C")  # a copy, as validate_actions
         outcome = self._step_kernel(self._array_fields, self._constant_fields, validated)
         if outcome == kernels.DIVERGED_BEFORE:
-            self._refuse_diverged_fleets()
+            self._refuse_diverged_fleets()  # raises
         if outcome == kernels.NONFINITE_ACTION:
-            self.validate_actions(validated)  # names the first non-finite entry
+            self.validate_actions(validated)  # raises, naming the first non-finite entry
         if outcome == kernels.DIVERGED:
             raise RuntimeError(self._divergence_message())
         return self._arrays.obs
