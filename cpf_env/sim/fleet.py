@@ -331,7 +331,7 @@ class FleetSim:
         if outcome == kernels.NONFINITE_ACTION:
             self.validate_actions(validated)  # raises, naming the first non-finite entry
         if outcome == kernels.DIVERGED:
-            raise RuntimeError(self._divergence_message())
+            raise RuntimeError(self.divergence_message())
         return self._arrays.obs
 
     def _refuse_diverged_fleets(self) -> None:
@@ -343,8 +343,11 @@ class FleetSim:
                 "(reset(fleets=...)) before stepping again."
             )
 
-    def _divergence_message(self) -> str:
-        """Say which fleet, vessel and quantity became non-finite, and what to change."""
+    def divergence_message(self) -> str:
+        """Say which fleet, vessel and quantity became non-finite, and what to change.
+
+        For a simulator in which ``arrays.nonfinite`` holds for some fleet.
+        """
         a, s = self.arrays, self.scenario
         b = int(np.flatnonzero(a.nonfinite)[0])
         bad = np.argwhere(~np.isfinite(np.concatenate([a.eta[b], a.nu[b]], axis=1)))
