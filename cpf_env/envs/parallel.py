@@ -285,7 +285,7 @@ class CooperativePathFollowingEnv(ParallelEnv):
         a = self.sim.arrays
         terminated = bool(a.terminated[0])
         truncated = bool(self.sim.truncated[0])
-        rewards = {agent: float(a.reward[0, i]) for i, agent in enumerate(self.agents)}
+        rewards = dict(zip(self.agents, a.reward[0].tolist(), strict=False))
         observations = self._observations(obs)
         terminations = dict.fromkeys(self.agents, terminated)
         truncations = dict.fromkeys(self.agents, truncated)
@@ -302,13 +302,26 @@ class CooperativePathFollowingEnv(ParallelEnv):
             raise ValueError(
                 f"actions must be a dict agent -> array, got {type(actions).__name__}."
             )
-        missing = [agent for agent in self.agents if agent not in actions]
-        extra = [agent for agent in actions if agent not in self.agents]
-        if missing or extra:
+        if actions.keys() != set(self.agents):
+            missing = [agent for agent in self.agents if agent not in actions]
+            extra = [agent for agent in actions if agent not in self.agents]
             raise ValueError(
                 f"actions must have exactly one entry per live agent: missing {missing}, "
                 f"unexpected {extra}."
             )
+        batch = np.empty((1, self.scenario.n, self.sim.act_dim))
+        shape = (self.sim.act_dim,)
+        for agent in self.agents:  # the cheap checks of check_action; the rest on the batch
+            array = np.asarray(actions[agent])
+            if array.dtype.kind not in "biuf" or array.shape != shape:
+                return self._checked_batch(actions)
+            batch[0, self._index[agent]] = array
+        if not np.isfinite(batch).all():
+            return self._checked_batch(actions)
+        return batch
+
+    def _checked_batch(self, actions: dict[str, Any]) -> NDArray[np.float64]:
+        """The batch built with ``check_action`` per agent, which raises on the first bad one."""
         batch = np.empty((1, self.scenario.n, self.sim.act_dim))
         for agent in self.agents:
             batch[0, self._index[agent]] = self.check_action(agent, actions[agent])
@@ -332,26 +345,38 @@ class CooperativePathFollowingEnv(ParallelEnv):
         return array
 
     def _observations(self, obs: NDArray[np.float32]) -> dict[str, NDArray[np.float32]]:
-        return {agent: obs[0, i].copy() for i, agent in enumerate(self.possible_agents)}
+        """Each agent's row of one copy of ``obs[0]`` (no later step writes to it)."""
+        return dict(zip(self.possible_agents, obs[0].copy(), strict=True))
 
     def _infos(self) -> dict[str, dict[str, Any]]:
-        """Per-agent infos at the detail level ``self.info_level``."""
+        """Per-agent infos at the detail level ``self.info_level``.
+
+        Array entries are rows of one copy per quantity and step, so no later step
+        writes to them.
+        """
         if self.info_level == "none":
             return {agent: {} for agent in self.possible_agents}
         a = self.sim.arrays
-        infos: dict[str, dict[str, Any]] = {}
+        errors = a.errors[0].tolist()
+        infos = {
+            agent: {key: row[k] for key, k in arrays.ERROR_KEYS}
+            for agent, row in zip(self.possible_agents, errors, strict=True)
+        }
+        if self.info_level == "minimal":
+            return infos
+        tau_command, tau_applied = a.tau_command[0].copy(), a.tau_applied[0].copy()
+        saturated = tau_command != tau_applied
+        eta, nu, theta = a.eta[0].copy(), a.nu[0].copy(), a.theta[0].tolist()
+        reward_terms = a.reward_terms[0].copy()
         for i, agent in enumerate(self.possible_agents):
-            infos[agent] = {key: float(a.errors[0, i, k]) for key, k in arrays.ERROR_KEYS}
-            if self.info_level == "minimal":
-                continue
             infos[agent] |= {
-                "tau_command": a.tau_command[0, i].copy(),
-                "tau_applied": a.tau_applied[0, i].copy(),
-                "saturated": a.tau_command[0, i] != a.tau_applied[0, i],
-                "eta": a.eta[0, i].copy(),
-                "nu": a.nu[0, i].copy(),
-                "theta": float(a.theta[0, i]),
-                "reward_terms": a.reward_terms[0, i].copy(),
+                "tau_command": tau_command[i],
+                "tau_applied": tau_applied[i],
+                "saturated": saturated[i],
+                "eta": eta[i],
+                "nu": nu[i],
+                "theta": theta[i],
+                "reward_terms": reward_terms[i],
             }
         return infos
 

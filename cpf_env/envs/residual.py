@@ -327,13 +327,13 @@ class ResidualController:
         Returns:
             (B, n, 4 + m) float64: force command (N, N, N m), theta_dot (1/s), message.
         """
-        a = np.clip(np.asarray(action, dtype=np.float64), -1.0, 1.0)
+        a = np.minimum(np.maximum(np.asarray(action, dtype=np.float64), -1.0), 1.0)  # np.clip
         expected = (self.num_fleets, self.n, self.action_size)
         if a.shape != expected:
             raise ValueError(
                 f"residual actions must have shape (B, n, k) = {expected}, got {a.shape}."
             )
-        if not np.all(np.isfinite(a)):
+        if not np.isfinite(a).all():
             raise ValueError("residual actions must be finite.")
         scale = self.config.scale
         if self.config.mode == "kinematic":

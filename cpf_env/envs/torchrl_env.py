@@ -370,14 +370,19 @@ class TorchRLFleetEnv(EnvBase):
         """
         B, n, a = self.num_fleets, self.n, self.sim.arrays
         if step:
-            terminated = torch.from_numpy(a.terminated.copy()).unsqueeze(-1)
-            ended = (a.step >= self._horizon) & ~a.terminated
-            truncated = torch.from_numpy(ended).unsqueeze(-1)
+            terminated = a.terminated[:, None].copy()
+            truncated = ((a.step >= self._horizon) & ~a.terminated)[:, None]
         else:
-            terminated = truncated = torch.zeros((B, 1), dtype=torch.bool)
-        flags = {"done": terminated | truncated, "terminated": terminated, "truncated": truncated}
+            terminated = truncated = np.zeros((B, 1), dtype=bool)
+        fleet_flags = {
+            "done": terminated | truncated,
+            "terminated": terminated,
+            "truncated": truncated,
+        }  # (B, 1) each, in numpy (cheaper than torch at these sizes), then per vessel
+        flags = {key: torch.from_numpy(value) for key, value in fleet_flags.items()}
         group: dict[str, Any] = {
-            key: value.unsqueeze(1).expand(B, n, 1).clone() for key, value in flags.items()
+            key: torch.from_numpy(np.repeat(value[:, None], n, axis=1))
+            for key, value in fleet_flags.items()
         }
         inputs = self._inputs.astype(np.float32)
         if self.input_statistics is not None:
@@ -385,12 +390,21 @@ class TorchRLFleetEnv(EnvBase):
         group["observation"] = torch.from_numpy(inputs)
         if step:
             group["reward"] = torch.from_numpy(a.reward.astype(np.float32)).unsqueeze(-1)
+        # Every tensor is made here, on the CPU: with the device given to each level
+        # and (on the CPU) non_blocking=False, tensordict skips its device-transfer
+        # bookkeeping, which was most of this function's time at small B.
+        device, non_blocking = self.device, False if self.device.type == "cpu" else None
         if self.info_level == "minimal":
             errors = torch.from_numpy(a.errors.astype(np.float32))
             infos = {key: errors[..., index] for key, index in ERROR_KEYS}
-            group["info"] = TensorDict(infos, batch_size=(B, n))
-        root: dict[str, Any] = {**flags, GROUP: TensorDict(group, batch_size=(B, n))}
+            group["info"] = TensorDict(
+                infos, batch_size=(B, n), device=device, non_blocking=non_blocking
+            )
+        vessels = TensorDict(group, batch_size=(B, n), device=device, non_blocking=non_blocking)
+        root: dict[str, Any] = {**flags, GROUP: vessels}
         if self.state:
             per_vessel = np.concatenate([a.eta, a.nu, a.theta[..., None], a.tau_applied], axis=-1)
             root["state"] = torch.from_numpy(per_vessel.reshape(B, -1).astype(np.float32))
-        return TensorDict(root, batch_size=self.batch_size, device=self.device)
+        return TensorDict(
+            root, batch_size=self.batch_size, device=device, non_blocking=non_blocking
+        )

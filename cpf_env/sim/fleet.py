@@ -29,6 +29,7 @@ from cpf_env.model.vessel import PARAM_SIZE
 from cpf_env.scenarios import Scenario
 from cpf_env.scenarios.reward_weights import REWARD_TERMS
 from cpf_env.sim import arrays, kernels
+from cpf_env.sim.arrays import FleetArrays, KernelConstants
 from cpf_env.sim.observation import ObsLayout
 
 __all__ = ["FleetSim", "as_real_actions", "observation_layout"]
@@ -134,8 +135,9 @@ class FleetSim:
         layout: Observation layout (``ObsLayout``).
         obs_dim: Observation length per vessel.
         act_dim: Action length per vessel, 4 + m: (tau0 (3), theta_dot, message (m)).
-        arrays: The state and outputs (``arrays.FleetArrays``); read, do not write.
-        constants: The scenario in kernel form.
+        arrays: The state and outputs (``arrays.FleetArrays``); read, do not write
+            (read-only attribute: the kernels are handed these very arrays).
+        constants: The scenario in kernel form (read-only attribute, as ``arrays``).
     """
 
     def __init__(self, scenario: Scenario, num_fleets: int = 1) -> None:
@@ -146,14 +148,15 @@ class FleetSim:
         self.scenario = scenario
         self.num_fleets = B = int(num_fleets)
         self.n = n = scenario.n
-        self.constants = _constants(scenario)
+        self._constants = _constants(scenario)
         m = scenario.message_size
         self.layout = observation_layout(scenario)
         self.obs_dim = self.layout.size
         self.act_dim = 4 + m
+        self._action_shape = (B, n, self.act_dim)
         K = self.layout.n_slots
         self._nominal_params = np.stack([v.to_params() for v in scenario.vessel_models])
-        self.arrays = arrays.FleetArrays(
+        self._arrays = arrays.FleetArrays(
             eta=np.zeros((B, n, 3)),
             nu=np.zeros((B, n, 3)),
             theta=np.zeros((B, n)),
@@ -178,6 +181,9 @@ class FleetSim:
             terminated=np.zeros(B, dtype=bool),
             nonfinite=np.zeros(B, dtype=bool),
         )
+        # the kernels take plain tuples of the same arrays (cheaper to dispatch, see kernels)
+        self._array_fields = tuple(self._arrays)
+        self._constant_fields = tuple(self._constants)
         parallel = B >= PARALLEL_MIN_FLEETS
         self._step_kernel = kernels.step_fleets_parallel if parallel else kernels.step_fleets_serial
         self._observe_kernel = (
@@ -185,6 +191,16 @@ class FleetSim:
         )
         self._rngs = [np.random.default_rng() for _ in range(B)]
         self._needs_reset = True
+
+    @property
+    def arrays(self) -> FleetArrays:
+        """The state and per-step outputs (leading axis B; see ``arrays.FleetArrays``)."""
+        return self._arrays
+
+    @property
+    def constants(self) -> KernelConstants:
+        """The scenario in kernel form (``arrays.KernelConstants``)."""
+        return self._constants
 
     @property
     def rngs(self) -> list[np.random.Generator]:
@@ -231,7 +247,7 @@ class FleetSim:
             if seed is not None:
                 self._rngs[b] = np.random.default_rng(seed)
             self._reset_fleet(int(b), self._rngs[b])
-        self._observe_kernel(self.arrays, self.constants, index)
+        self._observe_kernel(self._array_fields, self._constant_fields, index)
         self._needs_reset = False
         return self.arrays.obs
 
@@ -270,7 +286,7 @@ class FleetSim:
                 vessel, component).
         """
         array = as_real_actions(actions)
-        expected = (self.num_fleets, self.n, self.act_dim)
+        expected = self._action_shape
         if array.shape != expected:
             raise ValueError(
                 f"actions must have shape (B, n, 4 + m) = {expected}, got {array.shape}."
@@ -304,17 +320,28 @@ class FleetSim:
         """
         if self._needs_reset:
             raise RuntimeError("call reset() before step().")
-        if self.arrays.nonfinite.any():
-            fleets = np.flatnonzero(self.arrays.nonfinite).tolist()
+        array = np.asarray(actions)
+        if array.dtype.kind not in "biuf" or array.shape != self._action_shape:
+            self._refuse_diverged_fleets()  # raises first, as it always did, if one diverged
+            self.validate_actions(array)  # raises: not real numbers, or the wrong shape
+        validated = np.array(array, dtype=np.float64, order="C")  # a copy, as validate_actions
+        outcome = self._step_kernel(self._array_fields, self._constant_fields, validated)
+        if outcome == kernels.DIVERGED_BEFORE:
+            self._refuse_diverged_fleets()  # raises
+        if outcome == kernels.NONFINITE_ACTION:
+            self.validate_actions(validated)  # raises, naming the first non-finite entry
+        if outcome == kernels.DIVERGED:
+            raise RuntimeError(self.divergence_message())
+        return self._arrays.obs
+
+    def _refuse_diverged_fleets(self) -> None:
+        """RuntimeError if a fleet diverged and has not been reset since."""
+        if self._arrays.nonfinite.any():
+            fleets = np.flatnonzero(self._arrays.nonfinite).tolist()
             raise RuntimeError(
                 f"fleet(s) {fleets} diverged and have not been reset; reset them "
                 "(reset(fleets=...)) before stepping again."
             )
-        validated = self.validate_actions(actions)
-        self._step_kernel(self.arrays, self.constants, validated)
-        if self.arrays.nonfinite.any():
-            raise RuntimeError(self.divergence_message())
-        return self.arrays.obs
 
     def divergence_message(self) -> str:
         """Say which fleet, vessel and quantity became non-finite, and what to change.

@@ -15,7 +15,8 @@ One call advances B fleets x n vessels by one control period:
 
 Arrays come in two named tuples (``cpf_env.sim.arrays``) built by
 ``cpf_env.sim.fleet``: ``FleetArrays`` (mutable state, leading axis B) and
-``KernelConstants`` (scenario constants).
+``KernelConstants`` (scenario constants); the entry kernels at the bottom take
+them as plain tuples and check the step's inputs before changing anything.
 Everything per vessel is scalar code so numba compiles one fused loop; the
 outer loop over fleets runs in parallel and fleets never interact, so fleet k
 computes the same bits whatever B is.
@@ -342,30 +343,84 @@ def reset_observation(a: FleetArrays, c: KernelConstants, b: int) -> None:
 # The loops over fleets only dispatch: numba's parfor pass can drop writes made
 # to named-tuple fields directly in a prange body, so every write lives in a
 # callee. Each comes serial (small B: no thread start-up, no waiting for a busy
-# core) and parallel; a fleet computes the same bits in either.
+# core) and parallel; a fleet computes the same bits in either. They take the
+# fields of ``FleetArrays`` and ``KernelConstants`` as plain tuples and rebuild
+# the named tuples inside: numba types a named tuple argument on a slow Python
+# path (about 4 us a call more than a tuple of the same arrays).
+
+#: What an entry step kernel did: stepped every fleet; stepped nothing because a
+#: fleet had diverged before; stepped nothing because an action is not finite;
+#: stepped every fleet and the plant of at least one diverged.
+STEPPED, DIVERGED_BEFORE, NONFINITE_ACTION, DIVERGED = 0, 1, 2, 3
+
+
 @numba.njit(cache=True)
-def step_fleets_serial(a: FleetArrays, c: KernelConstants, actions: np.ndarray) -> None:
-    """Advance every fleet by one control period, one after the other."""
+def _step_refusal(a: FleetArrays, actions: np.ndarray) -> int:
+    """Why the step may not run (``DIVERGED_BEFORE``, ``NONFINITE_ACTION``) or ``STEPPED``."""
+    for b in range(a.nonfinite.shape[0]):
+        if a.nonfinite[b]:
+            return DIVERGED_BEFORE
+    for b in range(actions.shape[0]):
+        for i in range(actions.shape[1]):
+            for k in range(actions.shape[2]):
+                if not math.isfinite(actions[b, i, k]):
+                    return NONFINITE_ACTION
+    return STEPPED
+
+
+@numba.njit(cache=True)
+def _step_outcome(a: FleetArrays) -> int:
+    """``DIVERGED`` if a fleet's state became non-finite in the step just made, else ``STEPPED``."""
+    for b in range(a.nonfinite.shape[0]):
+        if a.nonfinite[b]:
+            return DIVERGED
+    return STEPPED
+
+
+@numba.njit(cache=True)
+def step_fleets_serial(arrays: tuple, constants: tuple, actions: np.ndarray) -> int:
+    """Advance every fleet by one control period, one after the other.
+
+    Args:
+        arrays: ``tuple(FleetArrays)``, the state (written).
+        constants: ``tuple(KernelConstants)``, the scenario.
+        actions: (B, n, 4 + m) float64, C-contiguous.
+
+    Returns:
+        ``STEPPED``, ``DIVERGED_BEFORE``, ``NONFINITE_ACTION`` (nothing changed) or ``DIVERGED``.
+    """
+    a, c = FleetArrays(*arrays), KernelConstants(*constants)
+    refusal = _step_refusal(a, actions)
+    if refusal != STEPPED:
+        return refusal
     for b in range(a.eta.shape[0]):
         step_fleet(a, c, actions, b)
+    return _step_outcome(a)
 
 
 @numba.njit(cache=True, parallel=True)
-def step_fleets_parallel(a: FleetArrays, c: KernelConstants, actions: np.ndarray) -> None:
-    """Advance every fleet by one control period, fleets in parallel threads."""
+def step_fleets_parallel(arrays: tuple, constants: tuple, actions: np.ndarray) -> int:
+    """``step_fleets_serial`` with the fleets in parallel threads (the checks stay serial)."""
+    a, c = FleetArrays(*arrays), KernelConstants(*constants)
+    refusal = _step_refusal(a, actions)
+    if refusal != STEPPED:
+        return refusal
     for b in prange(a.eta.shape[0]):
         step_fleet(a, c, actions, b)
+    return _step_outcome(a)
 
 
 @numba.njit(cache=True)
-def observe_fleets_serial(a: FleetArrays, c: KernelConstants, fleets: np.ndarray) -> None:
-    """Observe the listed fleets after a reset, one after the other."""
+def observe_fleets_serial(arrays: tuple, constants: tuple, fleets: np.ndarray) -> None:
+    """Observe the listed fleets (int64 indices) after a reset, one after the other."""
+    a, c = FleetArrays(*arrays), KernelConstants(*constants)
     for index in range(fleets.shape[0]):
         reset_observation(a, c, fleets[index])
 
 
 @numba.njit(cache=True, parallel=True)
-def observe_fleets_parallel(a: FleetArrays, c: KernelConstants, fleets: np.ndarray) -> None:
-    """Observe the listed fleets after a reset, in parallel threads."""
+def observe_fleets_parallel(arrays: tuple, constants: tuple, fleets: np.ndarray) -> None:
+    """Observe the listed fleets (int64 indices) after a reset, in parallel threads."""
+    a, c = FleetArrays(*arrays), KernelConstants(*constants)
     for index in prange(fleets.shape[0]):
         reset_observation(a, c, fleets[index])

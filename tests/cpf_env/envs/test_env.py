@@ -308,6 +308,47 @@ def test_bad_actions_raise_and_change_nothing(kind: str, match: str) -> None:
         assert results[0][1][agent] == results[1][1][agent]
 
 
+@pytest.mark.parametrize(
+    ("first", "second", "match"),
+    [
+        ("nan", "short", r"vessel_1 is not finite"),
+        ("short", "nan", r"vessel_1 has shape \(4,\)"),
+        ("complex", "nan", r"action of vessel_1 must be real numbers"),
+    ],
+)
+def test_the_first_bad_action_in_agent_order_is_reported(
+    first: str, second: str, match: str
+) -> None:
+    """Checked in one pass, the actions still fail on the first bad agent, as one by one."""
+    bad = {"nan": np.array([0.0, np.nan, 0, 0, 0]), "short": GOOD[:4], "complex": GOOD + 1j}
+    env = cpf_env.parallel_env("wang2014")
+    env.reset(seed=0)
+    before = snapshot(env.sim)
+    actions = {agent: GOOD.copy() for agent in env.agents}
+    actions["vessel_1"], actions["vessel_3"] = bad[first], bad[second]
+    with pytest.raises(ValueError, match=match):
+        env.step(actions)
+    assert_unchanged(before, env.sim)
+
+
+def test_observations_and_info_arrays_are_each_agents_own() -> None:
+    """Rows of one copy per quantity: writing one agent's entry changes nothing else."""
+    env = cpf_env.parallel_env("wang2014")
+    env.reset(seed=0)
+    observations, *_, infos = env.step(
+        as_dict(env, random_actions(np.random.default_rng(1), env.sim))
+    )
+    before = snapshot(env.sim)
+    kept_obs, kept_eta = observations["vessel_1"].copy(), infos["vessel_1"]["eta"].copy()
+    for key in ("tau_command", "tau_applied", "eta", "nu", "reward_terms"):
+        infos["vessel_0"][key][:] = 7.0
+    infos["vessel_0"]["saturated"][:] = True
+    observations["vessel_0"][:] = 7.0
+    assert_unchanged(before, env.sim)
+    assert np.array_equal(observations["vessel_1"], kept_obs)
+    assert np.array_equal(infos["vessel_1"]["eta"], kept_eta)
+
+
 # --- reward -------------------------------------------------------------------------------
 
 WEIGHTS = RewardWeights(
