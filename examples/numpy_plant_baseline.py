@@ -74,7 +74,8 @@ def numpy_plant_rhs(
         scale: Factor on the paper's unmodeled dynamics and disturbance.
         t: Time (s), the same for every vessel (fleets stepped together).
         psi: Heading (rad), shape (N,).
-        u, v: Surge and sway velocity over ground, body frame (m/s), shape (N,).
+        u: Surge velocity over ground, body frame (m/s), shape (N,).
+        v: Sway velocity over ground, body frame (m/s), shape (N,).
         r: Yaw rate (rad/s), shape (N,).
         load: Held inputs.
 
@@ -247,7 +248,8 @@ def main(argv: list[str] | None = None) -> list[dict[str, float]]:
         f"NUMBA_NUM_THREADS={os.environ.get('NUMBA_NUM_THREADS', 'unset')}, "
         f"scenario {args.scenario}"
     )
-    print(f"{'B':>6} {'n':>3} {'FleetSim.step':>16} {'numpy RK4':>14} {'ratio':>7}   vessel-steps/s")
+    header = f"{'B':>6} {'n':>3} {'FleetSim.step':>16} {'numpy RK4':>14} {'ratio':>7}"
+    print(header + "   vessel-steps/s")
     rows = []
     for fleets in args.fleets:
         row = compare(args.scenario, fleets, args.seconds)

@@ -113,7 +113,7 @@ def record(path: str, fleet_counts: tuple[int, ...]) -> None:
                 for key, value in run.items():
                     arrays[f"{name}/B{fleets}/{kind}/{key}"] = value
         print(f"recorded {name}", flush=True)
-    np.savez_compressed(path, **arrays)
+    np.savez_compressed(path, allow_pickle=False, **arrays)
     print(f"{len(arrays)} arrays -> {path}")
 
 
@@ -139,6 +139,7 @@ def compare(old_path: str, new_path: str) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Record (``--out``) or compare (``--compare``); returns the exit status."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     group = parser.add_mutually_exclusive_group(required=True)
     group.add_argument("--out", help="record to this .npz file")
