@@ -41,10 +41,13 @@ from cpf_env.model.disturbances import (
     D_WIND_MEAN,
     D_WIND_STD,
     D_WIND_TC,
-    gauss_markov_step,
+    gauss_markov_drift,
+    gauss_markov_factors,
+    gauss_markov_needs_noise,
+    gauss_markov_update,
 )
 from cpf_env.model.paths import path_point
-from cpf_env.model.plant import plant_rhs, rk4_period
+from cpf_env.model.plant import plant_rhs, rk4_substep, substep_time_terms
 from cpf_env.sim.arrays import (
     ERR_HEADING,
     ERR_PATH,
@@ -77,7 +80,7 @@ def _clip(x: float, low: float, high: float) -> float:
     return min(max(x, low), high)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def topology_index(c: KernelConstants, step: int) -> int:
     """Index of the topology member active at control ``step``."""
     local = step % c.switch_period if c.switch_period > 0 else step
@@ -88,7 +91,7 @@ def topology_index(c: KernelConstants, step: int) -> int:
     return index
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def leader_speed(c: KernelConstants, time: float) -> float:
     """v0 (m/s) of the piecewise-constant schedule at ``time`` (s)."""
     value = c.v0_values[0]
@@ -98,7 +101,7 @@ def leader_speed(c: KernelConstants, time: float) -> float:
     return value
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _load(a: FleetArrays, b: int, i: int, tau: np.ndarray) -> tuple:
     """The plant's held inputs for vessel i of fleet b under applied force ``tau`` (3,)."""
     return (
@@ -110,17 +113,26 @@ def _load(a: FleetArrays, b: int, i: int, tau: np.ndarray) -> tuple:
     )  # fmt: skip
 
 
-@numba.njit(cache=True)
-def _integrate_vessel(a: FleetArrays, c: KernelConstants, b: int, i: int, t0: float) -> None:
-    """RK4 over one control period for vessel i of fleet b, forces held."""
-    state = (a.eta[b, i, 0], a.eta[b, i, 1], a.eta[b, i, 2],
-             a.nu[b, i, 0], a.nu[b, i, 1], a.nu[b, i, 2])  # fmt: skip
-    x, y, psi, u, v, r = rk4_period(
-        a.params[b, i], c.disturbances[D_SCALE], t0, c.dt, c.substeps, state,
-        _load(a, b, i, a.tau_applied[b, i]),
-    )  # fmt: skip
-    a.eta[b, i, 0], a.eta[b, i, 1], a.eta[b, i, 2] = x, y, psi
-    a.nu[b, i, 0], a.nu[b, i, 1], a.nu[b, i, 2] = u, v, r
+@numba.njit(cache=True, inline="always")
+def _integrate_fleet(a: FleetArrays, c: KernelConstants, b: int, t0: float) -> None:
+    """RK4 over one control period for every vessel of fleet b, forces held.
+
+    Sub-step by sub-step, each vessel in turn: the vessels share the time
+    terms of the paper's disturbance (one sine per fleet and time instead of
+    one per vessel), and each vessel's state passes through ``rk4_substep``
+    exactly as in ``cpf_env.model.plant.rk4_period``.
+    """
+    scale, h = c.disturbances[D_SCALE], c.dt / c.substeps
+    for k in range(c.substeps):
+        time_terms = substep_time_terms(scale, t0 + k * h, h)
+        for i in range(a.eta.shape[1]):
+            state = (a.eta[b, i, 0], a.eta[b, i, 1], a.eta[b, i, 2],
+                     a.nu[b, i, 0], a.nu[b, i, 1], a.nu[b, i, 2])  # fmt: skip
+            x, y, psi, u, v, r = rk4_substep(
+                a.params[b, i], scale, h, time_terms, state, _load(a, b, i, a.tau_applied[b, i])
+            )
+            a.eta[b, i, 0], a.eta[b, i, 1], a.eta[b, i, 2] = x, y, psi
+            a.nu[b, i, 0], a.nu[b, i, 1], a.nu[b, i, 2] = u, v, r
 
 
 @numba.njit(cache=True)
@@ -142,7 +154,7 @@ def plant_accelerations(
             out[b, i, 0], out[b, i, 1], out[b, i, 2] = rhs[3], rhs[4], rhs[5]
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _apply_action(a: FleetArrays, c: KernelConstants, actions: np.ndarray, b: int, i: int) -> None:
     """Store the command, saturate it per axis and clip rate and message."""
     for k in range(3):
@@ -154,41 +166,43 @@ def _apply_action(a: FleetArrays, c: KernelConstants, actions: np.ndarray, b: in
         a.message[b, i, q] = _clip(actions[b, i, 4 + q], -c.message_max, c.message_max)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
+def _gauss_markov(x: float, mean: float, a: float, spread: float, key: np.uint64, step: int,
+                  stream: int, index: int) -> float:  # fmt: skip
+    """One exact Gauss-Markov step; the normal is drawn only when it can change the result."""
+    drift = gauss_markov_drift(x, mean, a)
+    if not gauss_markov_needs_noise(drift, spread):
+        return drift
+    return gauss_markov_update(drift, spread, counter_rng.normal(key, step, stream, index))
+
+
+@numba.njit(cache=True, inline="always")
 def _advance_disturbances(a: FleetArrays, c: KernelConstants, b: int, step: int) -> None:
-    """Advance wave, wind and current Gauss-Markov states by one control period."""
-    d, key, dt = c.disturbances, a.key[b], c.dt
-    for i in range(a.eta.shape[1]):
-        for k in range(3):
+    """Advance wave, wind and current Gauss-Markov states by one control period.
+
+    Draws are counter-based (a pure function of key, step, stream and index),
+    so a draw skipped because it cannot change the state changes no other draw.
+    """
+    d, key = c.disturbances, a.key[b]
+    wave_a, wave_root = gauss_markov_factors(d[D_WAVE_TC], c.dt)
+    wind_a, wind_root = gauss_markov_factors(d[D_WIND_TC], c.dt)
+    current_a, current_root = gauss_markov_factors(d[D_CURRENT_TC], c.dt)
+    for k in range(3):
+        wave_mean, wave_spread = d[D_WAVE_MEAN + k], d[D_WAVE_STD + k] * wave_root
+        wind_mean, wind_spread = d[D_WIND_MEAN + k], d[D_WIND_STD + k] * wind_root
+        for i in range(a.eta.shape[1]):
             index = 3 * i + k
-            a.waves[b, i, k] = gauss_markov_step(
-                a.waves[b, i, k],
-                d[D_WAVE_MEAN + k],
-                d[D_WAVE_STD + k],
-                d[D_WAVE_TC],
-                dt,
-                counter_rng.normal(key, step, counter_rng.STREAM_WAVES, index),
-            )
-            a.wind[b, i, k] = gauss_markov_step(
-                a.wind[b, i, k],
-                d[D_WIND_MEAN + k],
-                d[D_WIND_STD + k],
-                d[D_WIND_TC],
-                dt,
-                counter_rng.normal(key, step, counter_rng.STREAM_WIND, index),
-            )
+            a.waves[b, i, k] = _gauss_markov(a.waves[b, i, k], wave_mean, wave_a, wave_spread,
+                                             key, step, counter_rng.STREAM_WAVES, index)  # fmt: skip
+            a.wind[b, i, k] = _gauss_markov(a.wind[b, i, k], wind_mean, wind_a, wind_spread,
+                                            key, step, counter_rng.STREAM_WIND, index)  # fmt: skip
+    current_spread = d[D_CURRENT_STD] * current_root
     for k in range(2):
-        a.current[b, k] = gauss_markov_step(
-            a.current[b, k],
-            d[D_CURRENT_MEAN + k],
-            d[D_CURRENT_STD],
-            d[D_CURRENT_TC],
-            dt,
-            counter_rng.normal(key, step, counter_rng.STREAM_CURRENT, k),
-        )
+        a.current[b, k] = _gauss_markov(a.current[b, k], d[D_CURRENT_MEAN + k], current_a,
+                                        current_spread, key, step, counter_rng.STREAM_CURRENT, k)  # fmt: skip
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _exchange_messages(a: FleetArrays, c: KernelConstants, b: int, step: int) -> None:
     """Send this step's packets and deliver those sent ``delay`` steps ago.
 
@@ -224,7 +238,7 @@ def _exchange_messages(a: FleetArrays, c: KernelConstants, b: int, step: int) ->
             a.recv_step[b, i, k] = sent + 1
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def observe_fleet(a: FleetArrays, c: KernelConstants, b: int, speed_reference: float) -> None:
     """Write observations, errors, rewards and flags of fleet b at its current step.
 
@@ -315,8 +329,8 @@ def step_fleet(a: FleetArrays, c: KernelConstants, actions: np.ndarray, b: int) 
     v0 = leader_speed(c, t0)
     for i in range(a.eta.shape[1]):
         _apply_action(a, c, actions, b, i)
-        _integrate_vessel(a, c, b, i, t0)
         a.theta[b, i] += c.dt * a.theta_dot[b, i]
+    _integrate_fleet(a, c, b, t0)
     _advance_disturbances(a, c, b, step)
     _exchange_messages(a, c, b, step)
     a.step[b] = step + 1
