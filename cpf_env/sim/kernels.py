@@ -46,7 +46,7 @@ from cpf_env.model.disturbances import (
     gauss_markov_needs_noise,
     gauss_markov_update,
 )
-from cpf_env.model.paths import path_point
+from cpf_env.model.paths import path_values
 from cpf_env.model.plant import plant_rhs, rk4_substep, substep_time_terms
 from cpf_env.sim.arrays import (
     ERR_HEADING,
@@ -187,19 +187,23 @@ def _advance_disturbances(a: FleetArrays, c: KernelConstants, b: int, step: int)
     wave_a, wave_root = gauss_markov_factors(d[D_WAVE_TC], c.dt)
     wind_a, wind_root = gauss_markov_factors(d[D_WIND_TC], c.dt)
     current_a, current_root = gauss_markov_factors(d[D_CURRENT_TC], c.dt)
-    for k in range(3):
-        wave_mean, wave_spread = d[D_WAVE_MEAN + k], d[D_WAVE_STD + k] * wave_root
-        wind_mean, wind_spread = d[D_WIND_MEAN + k], d[D_WIND_STD + k] * wind_root
-        for i in range(a.eta.shape[1]):
+    # Vessels outer, components inner, as the draws were written: a loop over
+    # vessels inside would be vectorized, and with Intel's SVML installed numba
+    # maps vector logarithms and cosines to SVML, whose last bits differ from libm's.
+    for i in range(a.eta.shape[1]):
+        for k in range(3):
             index = 3 * i + k
-            a.waves[b, i, k] = _gauss_markov(a.waves[b, i, k], wave_mean, wave_a, wave_spread,
-                                             key, step, counter_rng.STREAM_WAVES, index)  # fmt: skip
-            a.wind[b, i, k] = _gauss_markov(a.wind[b, i, k], wind_mean, wind_a, wind_spread,
-                                            key, step, counter_rng.STREAM_WIND, index)  # fmt: skip
+            a.waves[b, i, k] = _gauss_markov(a.waves[b, i, k], d[D_WAVE_MEAN + k], wave_a,
+                                             d[D_WAVE_STD + k] * wave_root, key, step,
+                                             counter_rng.STREAM_WAVES, index)  # fmt: skip
+            a.wind[b, i, k] = _gauss_markov(a.wind[b, i, k], d[D_WIND_MEAN + k], wind_a,
+                                            d[D_WIND_STD + k] * wind_root, key, step,
+                                            counter_rng.STREAM_WIND, index)  # fmt: skip
     current_spread = d[D_CURRENT_STD] * current_root
     for k in range(2):
         a.current[b, k] = _gauss_markov(a.current[b, k], d[D_CURRENT_MEAN + k], current_a,
-                                        current_spread, key, step, counter_rng.STREAM_CURRENT, k)  # fmt: skip
+                                        current_spread, key, step,
+                                        counter_rng.STREAM_CURRENT, k)  # fmt: skip
 
 
 @numba.njit(cache=True, inline="always")
@@ -253,20 +257,18 @@ def observe_fleet(a: FleetArrays, c: KernelConstants, b: int, speed_reference: f
     step = a.step[b]
     member = topology_index(c, step)
     v0 = leader_speed(c, step * c.dt)
-    point = np.empty((3, 3))
-    frame = np.empty((3, 3))
     terminated = False
     finite = True
     total = 0.0
     for i in range(n):
         obs = a.obs[b, i]
-        path_point(c.path_kinds[i], c.path_params[i], a.theta[b, i], point)
-        path_frame(a.eta[b, i], point, frame)
+        point = path_values(c.path_kinds[i], c.path_params[i], a.theta[b, i])
+        z1, t1, t2 = path_frame(a.eta[b, i, 0], a.eta[b, i, 1], a.eta[b, i, 2], point)
         for k in range(3):
             obs[NU + k] = a.nu[b, i, k]
-            obs[Z1 + k] = frame[0, k]
-            obs[T1 + k] = frame[1, k]
-            obs[T2 + k] = frame[2, k]
+            obs[Z1 + k] = z1[k]
+            obs[T1 + k] = t1[k]
+            obs[T2 + k] = t2[k]
             obs[TAU + k] = a.tau_applied[b, i, k]
             finite = finite and math.isfinite(a.eta[b, i, k]) and math.isfinite(a.nu[b, i, k])
         obs[THETA] = a.theta[b, i]
@@ -288,16 +290,16 @@ def observe_fleet(a: FleetArrays, c: KernelConstants, b: int, speed_reference: f
             obs[base + SLOT_AGE] = step - a.recv_step[b, i, k]
             for q in range(m):
                 obs[base + SLOT_MSG + q] = a.recv_message[b, i, k, q]
-        path_error = math.sqrt(frame[0, 0] ** 2 + frame[0, 1] ** 2)
+        path_error = math.sqrt(z1[0] ** 2 + z1[1] ** 2)
         speed_error = a.theta_dot[b, i] - speed_reference
         a.errors[b, i, ERR_PATH] = path_error
-        a.errors[b, i, ERR_HEADING] = frame[0, 2]
+        a.errors[b, i, ERR_HEADING] = z1[2]
         a.errors[b, i, ERR_SYNC] = sync
         a.errors[b, i, ERR_SPEED] = speed_error
         reward = step_reward(
             c.reward_params,
             c.dt,
-            frame[0],
+            z1,
             sync,
             speed_error,
             a.tau_applied[b, i],
