@@ -131,7 +131,7 @@ def compare(old_path: str, new_path: str) -> int:
         if not same_bytes:
             different.append((key, equal))
     runs = {key.rsplit("/", 2)[0] for key in old.files}
-    print(f"{len(old.files)} arrays of {len(runs)} records (run and step) compared")
+    print(f"{len(old.files)} arrays of {len(runs)} runs compared")
     for key, equal in different:
         print(f"DIFFERENT {key}: array_equal={equal}")
     print("all arrays bit-identical" if not different else f"{len(different)} arrays differ")

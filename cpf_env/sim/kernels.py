@@ -18,7 +18,11 @@ Arrays come in two named tuples (``cpf_env.sim.arrays``) built by
 ``KernelConstants`` (scenario constants).
 Everything per vessel is scalar code so numba compiles one fused loop; the
 outer loop over fleets runs in parallel and fleets never interact, so fleet k
-computes the same bits whatever B is.
+computes the same bits whatever B is. Within a fleet the plant advances sub-step
+by sub-step over the vessels, which share the disturbance's time terms; each
+vessel's arithmetic is that of ``cpf_env.model.plant.rk4_period``. The helpers
+are inlined into ``step_fleet``: a call that passes the two named tuples costs
+an atomic reference count per array.
 """
 
 from __future__ import annotations
