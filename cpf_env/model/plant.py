@@ -33,21 +33,11 @@ __all__ = ["plant_rhs", "plant_rhs_given", "rk4_period", "rk4_substep", "substep
 @numba.njit(cache=True, inline="always")
 def plant_rhs_given(p: NDArray[np.float64], scale: float, time_term: float, psi: float, u: float,
                     v: float, r: float, load: tuple) -> tuple:  # fmt: skip
-    """``plant_rhs`` with the time term of the paper's disturbance given.
+    """``plant_rhs`` with the time term of the paper's disturbance given instead of t.
 
-    Args:
-        p: True vessel parameters, shape (PARAM_SIZE,).
-        scale: Factor on the paper's unmodeled dynamics and disturbance.
-        time_term: ``paper_time_term(t)`` at the time of evaluation (N, N m); unused
-            when ``scale == 0``.
-        psi: Heading (rad).
-        u: Surge velocity over ground, body frame (m/s).
-        v: Sway velocity over ground, body frame (m/s).
-        r: Yaw rate (rad/s).
-        load: Held inputs, see the module docstring.
-
-    Returns:
-        (x', y', psi', u', v', r').
+    The arguments and the result are those of ``plant_rhs``, but for
+    ``time_term``: ``paper_time_term(t)`` at the time of evaluation (N, N m),
+    unused when ``scale == 0``. A fleet's vessels share it.
     """
     tx, ty, tn, fx, fy, fn, cx, cy = load
     c, s = math.cos(psi), math.sin(psi)
