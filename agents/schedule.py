@@ -292,7 +292,9 @@ class ProgressBar(BaseCallback):
         total: Vessel-steps the run ends at.
         initial: Vessel-steps already done (a resumed run).
         enabled: Show the bar.
-        schedule: The run's ``ScheduleCallback`` (its latest evaluation), or None.
+        schedule: The run's ``ScheduleCallback`` (its latest evaluation), or None; it must
+            come before the bar in the callback list, so that the bar shows the final
+            evaluation too.
     """
 
     def __init__(
@@ -319,6 +321,7 @@ class ProgressBar(BaseCallback):
             )
 
     def _on_training_end(self) -> None:
+        self._on_rollout_end()  # the final evaluation, which runs just before (callback order)
         self._bar.close()
 
 

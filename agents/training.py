@@ -34,6 +34,7 @@ minibatches (8,192) and few epochs (4).
 from __future__ import annotations
 
 import shutil
+import warnings
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import cast
@@ -92,12 +93,20 @@ def build_model(config: TrainConfig, env: VecEnv) -> BaseAlgorithm:
     """
     arch = list(config.net_arch)
     if config.algo == "ppo":
+        rollout = config.n_steps * env.num_envs
+        if config.batch_size > rollout:
+            warnings.warn(
+                f"batch_size {config.batch_size} is larger than one rollout (n_steps x vessel "
+                f"slots = {config.n_steps} x {env.num_envs} = {rollout}); PPO uses minibatches "
+                f"of {rollout}. Lower --batch-size or raise --n-steps or --fleets.",
+                stacklevel=2,
+            )
         model: BaseAlgorithm = PPO(
             "MlpPolicy",
             env,
             learning_rate=config.learning_rate,
             n_steps=config.n_steps,
-            batch_size=min(config.batch_size, config.n_steps * env.num_envs),  # <= one rollout
+            batch_size=min(config.batch_size, rollout),  # <= one rollout
             n_epochs=config.n_epochs,
             gamma=config.gamma,
             seed=config.seed,

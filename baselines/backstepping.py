@@ -26,7 +26,7 @@ from typing import Any, cast
 import numpy as np
 
 from baselines.gains import BacksteppingGains
-from baselines.kernels import KINETICS_BACKSTEPPING
+from baselines.kernel_types import KINETICS_BACKSTEPPING
 from baselines.policy import Policy
 
 __all__ = ["BacksteppingPolicy"]

@@ -56,7 +56,7 @@ import numpy as np
 
 from baselines.cooperative import exponential_euler
 from baselines.gains import NNDSCGains
-from baselines.kernels import KINETICS_NN_DSC
+from baselines.kernel_types import KINETICS_NN_DSC
 from baselines.policy import Policy
 
 __all__ = ["DSCPolicy", "GlobalSpeedPolicy", "NNDSCPolicy", "NoAuxPolicy"]

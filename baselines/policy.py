@@ -36,7 +36,7 @@ from numpy.typing import ArrayLike, NDArray
 from baselines.cooperative import LocalObservation, exponential_euler
 from baselines.gains import CooperativeGains
 from baselines.interface import PolicyInterface
-from baselines.kernels import (
+from baselines.kernel_types import (
     KINETICS_PYTHON,
     NO_KNOWLEDGE,
     CooperativeOutputs,
@@ -44,10 +44,8 @@ from baselines.kernels import (
     PolicyConstants,
     PolicyOutputs,
     PolicyStates,
-    act_rows_parallel,
-    act_rows_serial,
-    cooperative_rows,
 )
+from baselines.kernels import act_rows, cooperative_rows
 from cpf_env import scenarios
 from cpf_env.model.vessel import PARAM_SIZE
 from cpf_env.scenarios import Scenario
@@ -241,9 +239,22 @@ class Policy(PolicyInterface):
             index = self._fleet_index(fleets, batch.shape[0])
             states = self._states_for(self._all_fleets.shape[0])
         rows = batch.shape[0]
+        out = self._new_outputs(rows)
+        if self.kinetics == KINETICS_PYTHON:
+            self._act_in_python(batch, index, states, out)
+        else:
+            act_rows(
+                tuple(self._constants), tuple(states), batch, index,
+                tuple(self._knowledge(index)), tuple(out), rows >= PARALLEL_MIN_FLEETS,
+            )  # fmt: skip
+        self.diagnostics = {name: getattr(out, name) for name in DIAGNOSTICS}
+        return out.actions
+
+    def _new_outputs(self, rows: int) -> PolicyOutputs:
+        """Fresh output arrays for ``rows`` acting fleets (the diagnostics keep them)."""
         vectors = np.empty((5, rows, self.n, 3))  # one allocation per shape, C-contiguous slices
         scalars = np.empty((3, rows, self.n))
-        out = PolicyOutputs(
+        return PolicyOutputs(
             actions=np.empty((rows, self.n, self.act_dim)),
             nn_output=vectors[0],
             nubar_dot=vectors[1],
@@ -254,13 +265,6 @@ class Policy(PolicyInterface):
             omega_s=scalars[1],
             gamma=scalars[2],
         )
-        if self.kinetics == KINETICS_PYTHON:
-            self._act_in_python(batch, index, states, out)
-        else:
-            kernel = act_rows_parallel if rows >= PARALLEL_MIN_FLEETS else act_rows_serial
-            kernel(self._constants, states, batch, index, self._knowledge(index), out)
-        self.diagnostics = {name: getattr(out, name) for name in DIAGNOSTICS}
-        return out.actions
 
     def _observations(self, obs: ArrayLike) -> ArrayLike:
         """The observations the policy acts on: ``obs`` (a privileged reference substitutes)."""

@@ -41,7 +41,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from baselines.backstepping import BacksteppingPolicy
-from baselines.kernels import KnownDynamics
+from baselines.kernel_types import KnownDynamics
 from baselines.nn_dsc import NNDSCPolicy
 from baselines.policy import Policy
 from cpf_env.sim.fleet import FleetSim

@@ -266,7 +266,7 @@ def _parser() -> argparse.ArgumentParser:
 
 def _when(x: float | None, unit: str) -> str:
     if x is None:
-        return "never"
+        return "never within the runs' evaluations"
     return f"{x:,.0f} {unit}" if unit == "vessel-steps" else f"{x:,.1f} {unit}"
 
 
@@ -286,7 +286,10 @@ def curves_main(argv: Sequence[str] | None = None) -> int:
         drawing = figure(curves, base_cost, [run.name for run in runs])
         drawing.savefig(staging / "curves.png", dpi=100, metadata={"Software": None})
     steps, seconds = curves
-    print(f"cpf-curves: {len(runs)} runs; base policy cost {base_cost:.6g}")
+    print(
+        f"cpf-curves: {len(runs)} run{'s' if len(runs) != 1 else ''}; "
+        f"base policy cost {base_cost:.6g}"
+    )
     for curve, unit in ((steps, "vessel-steps"), (seconds, "s")):
         below, surely = first_below(curve, base_cost)
         print(

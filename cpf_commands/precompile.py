@@ -54,18 +54,27 @@ def precompile_main(argv: Sequence[str] | None = None) -> int:
 
 
 def _warm_policy_kernels() -> float:
-    """Run the compiled analytic policies once, serial and threaded; their wall time (s)."""
+    """Run the compiled analytic policies once, serial and threaded; their wall time (s).
+
+    Alone, and in the compiled closed loop (``baselines.closed_loop``) with and
+    without a record.
+    """
     from baselines import make_policy
+    from baselines.closed_loop import ClosedLoop
     from cpf_env import FleetSim, scenarios
     from cpf_env.sim.fleet import PARALLEL_MIN_FLEETS
+    from cpf_env.sim.recording import new_record
 
     start = time.perf_counter()
     task = scenarios.get("wang2014")
-    for num_fleets in (1, PARALLEL_MIN_FLEETS):
+    for num_fleets in (2, PARALLEL_MIN_FLEETS):
         sim = FleetSim(task, num_fleets=num_fleets)
         obs = sim.reset(seeds=list(range(num_fleets)))
         for name in ("nn_dsc", "backstepping"):
             make_policy(name, task).act_batch(obs)
+        loop = ClosedLoop([make_policy("nn_dsc", task), make_policy("nn_dsc_privileged", sim)], sim)
+        loop.run(1)
+        loop.run(1, hold_ended=True, record=new_record(sim.arrays))
     return time.perf_counter() - start
 
 

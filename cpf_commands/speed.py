@@ -6,11 +6,14 @@ Measures, after a warm-up that triggers numba compilation:
   observations and rewards, in vessel-steps per second;
 * the PettingZoo ``ParallelEnv`` (dict API, B = 1), in env-steps per second;
 * the reference policy's ``act_batch`` for the same batch sizes;
-* the closed loop (policy + batched simulator);
+* the closed loop (policy + batched simulator), stepped from Python
+  (``sim.step(policy.act_batch(obs))``) and as one compiled call per step
+  (``baselines.closed_loop.ClosedLoop.run(1)``, the same bits);
 * the training path: ``agents.FleetVecEnv.step`` with a zero residual on the
   policy, for the same batch sizes (needs the ``rl`` extra; skipped without it);
 * one whole episode of the scenario with the policy (B = 1), in seconds: for
-  ``wang2014``, the paper's 150 s simulation;
+  ``wang2014``, the paper's 150 s simulation, stepped from Python and as one
+  compiled call (``ClosedLoop.run(max_steps)``);
 * with ``--bench-seeds N``: the wall time of ``cpf-bench``'s default evaluation
   (its default policies on the benchmark suite, N paired seeds, no files written);
 * with ``--contention B``: ``FleetSim.step`` and ``FleetVecEnv.step`` at batch B
@@ -56,22 +59,36 @@ def _rate(function: Callable[[], object], min_seconds: float) -> float:
     return calls / elapsed
 
 
-def _episode_seconds(scenario: str, policy: str, steps: int | None) -> tuple[float, int, int]:
-    """Wall time (s) of one closed-loop episode at B = 1, its steps and n (after a warm-up)."""
+def _episode_seconds(
+    scenario: str, policy: str, steps: int | None, compiled: bool
+) -> tuple[float, int, int]:
+    """Wall time (s) of one closed-loop episode at B = 1, its steps and n (after a warm-up).
+
+    Stepped from Python, or (``compiled``) as one ``ClosedLoop.run`` call for
+    the whole horizon, which does not stop at a termination.
+    """
     from baselines import make_policy
+    from baselines.closed_loop import ClosedLoop
 
     task = cpf_env.scenarios.get(scenario)
     horizon = task.max_steps if steps is None else int(steps)
     sim = FleetSim(task, num_fleets=1)
     reference = make_policy(policy, sim)
-    reference.act_batch(sim.reset(seeds=[0]))  # warm-up: compiled kernels, first allocations
+    sim.reset(seeds=[0])
+    if compiled:
+        ClosedLoop(reference, sim).run(1)  # warm-up: compiled kernels
+    else:
+        reference.act_batch(sim.arrays.obs)  # warm-up: compiled kernels, first allocations
     reference.reset()
     start = time.perf_counter()
     obs = sim.reset(seeds=[0])
-    for _ in range(horizon):
-        obs = sim.step(reference.act_batch(obs))
-        if sim.arrays.terminated[0]:
-            break
+    if compiled:
+        ClosedLoop(reference, sim).run(horizon)
+    else:
+        for _ in range(horizon):
+            obs = sim.step(reference.act_batch(obs))
+            if sim.arrays.terminated[0]:
+                break
     return time.perf_counter() - start, int(sim.arrays.step[0]), sim.n
 
 
@@ -160,10 +177,11 @@ def measure(
         bench_seeds: If > 0, time ``cpf-bench``'s default evaluation with this many seeds.
     """
     from baselines import make_policy
+    from baselines.closed_loop import ClosedLoop
 
     rows: list[dict[str, object]] = []
     bar = tqdm(
-        total=4 * len(fleets) + 2 + 4 * len(contention) + (bench_seeds > 0),
+        total=5 * len(fleets) + 3 + 4 * len(contention) + (bench_seeds > 0),
         disable=not progress,
         desc="cpf-speed",
     )
@@ -192,13 +210,21 @@ def measure(
         def policy_step(reference: object = reference, obs: np.ndarray = obs) -> None:
             reference.act_batch(obs)  # type: ignore[attr-defined]
 
+        loop = ClosedLoop(reference, sim)
+
         def closed_loop(sim: FleetSim = sim, reference: object = reference) -> None:
             sim_step(sim, reference.act_batch(sim.arrays.obs))  # type: ignore[attr-defined]
+
+        def compiled_loop(sim: FleetSim = sim, loop: ClosedLoop = loop) -> None:
+            loop.run(1)
+            if sim.truncated.any() or sim.arrays.terminated.any():
+                sim.reset()
 
         for component, function in (
             ("FleetSim.step", sim_step),
             (f"{policy}.act_batch", policy_step),
             (f"{policy} + FleetSim.step", closed_loop),
+            (f"{policy} + FleetSim, ClosedLoop.run(1)", compiled_loop),
         ):
             bar.set_postfix_str(f"{component}, B = {batch}")
             add(component, batch, n, _rate(function, min_seconds))
@@ -241,11 +267,13 @@ def measure(
         add(f"cpf-bench default ({episodes} episodes)", 1, 0, episodes / seconds)
         rows[-1]["seconds"] = seconds
         bar.update()
-    bar.set_postfix_str("whole episode")
-    seconds, steps, n = _episode_seconds(scenario, policy, episode_steps)
-    add(f"{scenario} episode ({steps} steps), {policy}", 1, n, steps / seconds)
-    rows[-1]["seconds"] = seconds
-    bar.update()
+    for compiled in (False, True):
+        bar.set_postfix_str("whole episode" + (", compiled" if compiled else ""))
+        seconds, steps, n = _episode_seconds(scenario, policy, episode_steps, compiled)
+        how = "ClosedLoop.run" if compiled else "stepped"
+        add(f"{scenario} episode ({steps} steps), {policy}, {how}", 1, n, steps / seconds)
+        rows[-1]["seconds"] = seconds
+        bar.update()
     bar.close()
     return rows
 

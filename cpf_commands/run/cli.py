@@ -32,7 +32,7 @@ _CLAIM_NEEDS = {2: "NN", 5: "speed estimator"}
 
 
 def _run_parser(prog: str = "cpf-run") -> argparse.ArgumentParser:
-    from baselines import POLICIES
+    from baselines import POLICIES, PRIVILEGED
     from baselines.gains import LEAKAGE_LAWS
     from cpf_commands.run.video import FPS, FRAMES
 
@@ -54,7 +54,8 @@ def _run_parser(prog: str = "cpf-run") -> argparse.ArgumentParser:
         "--policy",
         default="nn_dsc",
         type=policy_argument,
-        help=f"a baseline ({', '.join(sorted(POLICIES))}), a cpf-train --out folder or a "
+        help=f"a baseline ({', '.join(sorted(POLICIES))}), a privileged reference "
+        f"({', '.join(sorted(PRIVILEGED))}, not deployable), a cpf-train --out folder or a "
         "cpf-export .onnx file",
     )
     parser.add_argument(
@@ -129,7 +130,13 @@ def _default_scenario(policy: str) -> str:
         scenario = json.loads(record.read_text())["config"]["scenario"]
     except (OSError, json.JSONDecodeError, KeyError, TypeError) as error:
         raise ValueError(f"{record} is not a readable training record: {error}") from None
-    return scenario if isinstance(scenario, str) else str(scenario[0])
+    if isinstance(scenario, str):
+        return scenario
+    print(
+        f"cpf-run: the agent was trained on {len(scenario)} scenarios; running its first, "
+        f"{scenario[0]} (choose another with --scenario)."
+    )
+    return str(scenario[0])
 
 
 def _video_recorder(args: argparse.Namespace) -> VideoRecorder:

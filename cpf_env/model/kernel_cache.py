@@ -56,6 +56,8 @@ KERNEL_MODULES = (
     "model.vessel",
     "sim.kernels",
     "sim.observation",
+    "sim.privileged",
+    "sim.recording",
     "sim.reward",
 )
 

@@ -313,11 +313,14 @@ class FleetSim:
         validated = self.validate_actions(actions)
         self._step_kernel(self.arrays, self.constants, validated)
         if self.arrays.nonfinite.any():
-            raise RuntimeError(self._divergence_message())
+            raise RuntimeError(self.divergence_message())
         return self.arrays.obs
 
-    def _divergence_message(self) -> str:
-        """Say which fleet, vessel and quantity became non-finite, and what to change."""
+    def divergence_message(self) -> str:
+        """Say which fleet, vessel and quantity became non-finite, and what to change.
+
+        For a simulator in which ``arrays.nonfinite`` holds for some fleet.
+        """
         a, s = self.arrays, self.scenario
         b = int(np.flatnonzero(a.nonfinite)[0])
         bad = np.argwhere(~np.isfinite(np.concatenate([a.eta[b], a.nu[b]], axis=1)))

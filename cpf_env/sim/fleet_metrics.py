@@ -40,6 +40,7 @@ from cpf_env.model.paths import encode_paths, evaluate_paths
 from cpf_env.scenarios.reward_weights import REWARD_TERMS
 from cpf_env.sim import arrays
 from cpf_env.sim.fleet import FleetSim
+from cpf_env.sim.recording import CHUNK, RECORDED, StepRecord, new_record
 
 __all__ = ["METRICS", "WINDOW_FRACTION", "FleetMetrics", "path_relative"]
 
@@ -80,21 +81,6 @@ METRICS: tuple[str, ...] = (
     *(f"{name}_window" for name in _MEASURES),
     "terminated",
     "steps",
-)
-
-#: Steps recorded before they are turned into series together (``FleetMetrics.record``).
-CHUNK = 64
-#: Simulator arrays a step's metrics are computed from (``FleetArrays`` fields).
-_RAW = (
-    "eta",
-    "nu",
-    "theta",
-    "theta_dot",
-    "errors",
-    "reward",
-    "reward_terms",
-    "tau_applied",
-    "tau_command",
 )
 
 #: Per-step fleet series, each (S, T): sums over steps give totals, maxima give maxima.
@@ -179,7 +165,8 @@ class FleetMetrics:
         self.series = {name: np.zeros((sim.num_fleets, self.horizon)) for name in _SERIES}
         self._start_thetap = np.zeros(sim.num_fleets)
         self._has_estimate = True
-        self._raw: dict[str, Array] = {}  # allocated at the first record, by the arrays' shapes
+        self._record: StepRecord | None = None  # allocated on first use, by the arrays' shapes
+        self._v0 = np.zeros(CHUNK)
         self._first = 0  # step of the chunk's first row
         self._rows = 0  # rows of the chunk filled
 
@@ -187,6 +174,17 @@ class FleetMetrics:
         """Note where each fleet starts (after reset), for ``progress``."""
         rel = path_relative(a.eta, a.nu, a.theta, self._kinds, self._params)
         self._start_thetap = rel["thetap"].mean(axis=1)
+
+    @property
+    def next_step(self) -> int:
+        """The step the next ``record`` or ``commit`` must start at."""
+        return self._first + self._rows
+
+    def buffer(self, a: arrays.FleetArrays) -> StepRecord:
+        """The chunk's record (``CHUNK`` rows), allocated on first use by the shapes of ``a``."""
+        if self._record is None:
+            self._record = new_record(a)
+        return self._record
 
     def record(self, t: int, a: arrays.FleetArrays, v0: float, estimate: Array | None) -> None:
         """Take step t's values (after the step); they become column t of every series.
@@ -201,31 +199,48 @@ class FleetMetrics:
             v0: Leader speed the step's rate is scored against (m/s).
             estimate: (S, n) the policy's speed estimates used at step t, or None.
         """
-        if t != self._first + self._rows:
-            raise ValueError(
-                f"steps must be recorded in order; expected {self._first + self._rows}."
-            )
-        if not self._raw:
-            self._raw = {name: np.zeros((CHUNK, *np.shape(getattr(a, name)))) for name in _RAW}
-            self._raw["estimate"] = np.zeros((CHUNK, *np.shape(a.theta)))
-            self._raw["v0"] = np.zeros(CHUNK)
-        row = self._rows
-        for name in _RAW:
-            self._raw[name][row] = getattr(a, name)
-        self._raw["v0"][row] = v0
+        self._check_order(t)
+        record, row = self.buffer(a), self._rows
+        for name in RECORDED:
+            getattr(record, name)[row] = getattr(a, name)
+        self._v0[row] = v0
         self._has_estimate = self._has_estimate and estimate is not None
         if estimate is not None:
-            self._raw["estimate"][row] = estimate
+            record.estimate[row] = estimate
         self._rows += 1
         if self._rows == CHUNK:
             self._flush()
 
+    def commit(self, t: int, v0: Array) -> None:
+        """Take steps t .. t + K - 1, written to rows 0 .. K - 1 of ``buffer()`` by a compiled loop.
+
+        The loop (``baselines.closed_loop``) writes every fleet's row with
+        ``cpf_env.sim.recording.record_fleet``, speed estimates included, as
+        ``record`` would have one step at a time.
+
+        Args:
+            t: The first step, ``next_step`` at the start of a chunk.
+            v0: (K,) leader speed of each step (m/s), 1 <= K <= ``CHUNK``.
+        """
+        self._check_order(t)
+        K = len(v0)
+        if self._rows != 0 or not 1 <= K <= CHUNK:
+            raise ValueError(f"commit takes 1 to {CHUNK} steps at the start of a chunk, got {K}.")
+        self._v0[:K] = v0
+        self._rows = K
+        self._flush()
+
+    def _check_order(self, t: int) -> None:
+        if t != self.next_step:
+            raise ValueError(f"steps must be recorded in order; expected {self.next_step}.")
+
     def _flush(self) -> None:
         """Write the recorded chunk's steps into the series (per fleet: mean/max over vessels)."""
         K = self._rows
-        if K == 0:
+        if K == 0 or self._record is None:
             return
-        r = {name: values[:K] for name, values in self._raw.items()}
+        r = {name: values[:K] for name, values in self._record._asdict().items()}
+        r["v0"] = self._v0[:K]
         x, steps = self.series, slice(self._first, self._first + K)
         S, n = r["theta"].shape[1:]
         rel = {

@@ -140,22 +140,28 @@ def _integrate_fleet(a: FleetArrays, c: KernelConstants, b: int, t0: float) -> N
 
 
 @numba.njit(cache=True)
-def plant_accelerations(
-    a: FleetArrays, c: KernelConstants, tau: np.ndarray, out: np.ndarray
-) -> None:
-    """True body accelerations nu' (B, n, 3) at the current state under force ``tau`` (B, n, 3).
+def vessel_acceleration(
+    a: FleetArrays, c: KernelConstants, b: int, i: int, tau: np.ndarray
+) -> tuple[float, float, float]:
+    """True body acceleration nu' of vessel i of fleet b at its current state under ``tau`` (3,).
 
     Uses the same right-hand side as the integrator, with the environmental
     forces and current of the current step; for diagnostics (e.g. the true
     lumped uncertainty the paper's NN learns), not used by the step itself.
     """
-    scale = c.disturbances[D_SCALE]
+    rhs = plant_rhs(a.params[b, i], c.disturbances[D_SCALE], a.step[b] * c.dt, a.eta[b, i, 2],
+                    a.nu[b, i, 0], a.nu[b, i, 1], a.nu[b, i, 2], _load(a, b, i, tau))  # fmt: skip
+    return rhs[3], rhs[4], rhs[5]
+
+
+@numba.njit(cache=True)
+def plant_accelerations(
+    a: FleetArrays, c: KernelConstants, tau: np.ndarray, out: np.ndarray
+) -> None:
+    """True body accelerations nu' (B, n, 3) under force ``tau`` (B, n, 3), per vessel as above."""
     for b in range(a.eta.shape[0]):
-        t = a.step[b] * c.dt
         for i in range(a.eta.shape[1]):
-            rhs = plant_rhs(a.params[b, i], scale, t, a.eta[b, i, 2], a.nu[b, i, 0],
-                            a.nu[b, i, 1], a.nu[b, i, 2], _load(a, b, i, tau[b, i]))  # fmt: skip
-            out[b, i, 0], out[b, i, 1], out[b, i, 2] = rhs[3], rhs[4], rhs[5]
+            out[b, i, 0], out[b, i, 1], out[b, i, 2] = vessel_acceleration(a, c, b, i, tau[b, i])
 
 
 @numba.njit(cache=True, inline="always")

@@ -5,7 +5,7 @@ delivered; it does not carry the plant's true model, the disturbances or
 what the neighbours hold right now. The privileged references of
 ``baselines.privileged`` are told exactly that, to show how much a
 controller could gain with perfect knowledge (they are not deployable).
-Both functions read ``FleetSim.arrays`` and write nothing to the simulator.
+Nothing here writes to the simulator.
 
 * ``lumped_uncertainty``: per vessel the force f (B, n, 3) with
   M nu' = tau - f at the current state, M the vessel's true mass matrix:
@@ -16,47 +16,114 @@ Both functions read ``FleetSim.arrays`` and write nothing to the simulator.
   links would have delivered them: each occupied neighbour slot holds
   theta_j - theta_i now, age 0 and the message j sent at the last step. On
   links without loss and delay these are the observations, bit for bit.
+
+Both are computed per fleet by compiled functions (``fleet_lumped_uncertainty``,
+``fleet_ideal_observations``), which the compiled closed loop of
+``baselines.closed_loop`` calls too, so there is one implementation.
 """
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
+import numba
 import numpy as np
 from numpy.typing import NDArray
 
-from cpf_env.sim.fleet import FleetSim
+from cpf_env.model.vessel import M11, M22, M23, M32, M33
+from cpf_env.sim.arrays import FleetArrays, KernelConstants
+from cpf_env.sim.kernels import vessel_acceleration
 from cpf_env.sim.observation import SLOT_AGE, SLOT_DTHETA, SLOT_MSG, SLOT_WEIGHT, SLOTS
 
-__all__ = ["ideal_link_observations", "lumped_uncertainty"]
+if TYPE_CHECKING:  # a kernel module imports only kernel sources at run time (kernel_cache)
+    from cpf_env.sim.fleet import FleetSim
+
+__all__ = [
+    "fleet_ideal_observations",
+    "fleet_lumped_uncertainty",
+    "ideal_link_observations",
+    "lumped_uncertainty",
+]
+
+
+@numba.njit(cache=True)
+def fleet_lumped_uncertainty(
+    a: FleetArrays, c: KernelConstants, b: int, lumped: np.ndarray, mass: np.ndarray
+) -> None:
+    """Fleet b's lumped f (n, 3) into ``lumped`` and true mass matrices (n, 3, 3) into ``mass``.
+
+    f = -M nu'(tau = 0): the plant's acceleration without control force at
+    the current state, with the wave, wind and current of the coming control
+    period, times the true mass matrix (N, N, N m; M in kg, kg m, kg m^2).
+    """
+    zero = np.zeros(3)
+    for i in range(a.eta.shape[1]):
+        p = a.params[b, i]
+        mass[i] = 0.0
+        mass[i, 0, 0] = p[M11]
+        mass[i, 1, 1], mass[i, 1, 2] = p[M22], p[M23]
+        mass[i, 2, 1], mass[i, 2, 2] = p[M32], p[M33]
+        drift = vessel_acceleration(a, c, b, i, zero)
+        for q in range(3):
+            total = 0.0
+            for j in range(3):
+                total = total + mass[i, q, j] * drift[j]
+            lumped[i, q] = -total
+
+
+@numba.njit(cache=True)
+def fleet_ideal_observations(a: FleetArrays, c: KernelConstants, b: int, out: np.ndarray) -> None:
+    """Fleet b's observations (n, obs_dim) with ideal-link neighbour slots, into ``out``.
+
+    Each value is rounded to float32, as the simulator's observations are,
+    whatever the dtype of ``out``.
+    """
+    n, m = a.eta.shape[1], a.message.shape[2]
+    for i in range(n):
+        for q in range(out.shape[1]):
+            out[i, q] = a.obs[b, i, q]
+    for k in range(c.slots.shape[1]):
+        base = SLOTS + k * (SLOT_MSG + m)
+        for i in range(n):
+            occupied = a.obs[b, i, base + SLOT_WEIGHT] != 0.0  # a link in the active graph
+            j = max(c.slots[i, k], 0)
+            # the float64 difference, rounded once to float32 as the simulator does
+            dtheta = np.float32(a.theta[b, j] - a.theta[b, i]) if occupied else np.float32(0.0)
+            out[i, base + SLOT_DTHETA] = dtheta
+            out[i, base + SLOT_AGE] = 0.0
+            for q in range(m):
+                message = np.float32(a.message[b, j, q]) if occupied else np.float32(0.0)
+                out[i, base + SLOT_MSG + q] = message
+
+
+@numba.njit(cache=True)
+def _lumped_all(a: FleetArrays, c: KernelConstants, lumped: np.ndarray, mass: np.ndarray) -> None:
+    for b in range(a.eta.shape[0]):
+        fleet_lumped_uncertainty(a, c, b, lumped[b], mass[b])
+
+
+@numba.njit(cache=True)
+def _ideal_all(a: FleetArrays, c: KernelConstants, out: np.ndarray) -> None:
+    for b in range(a.eta.shape[0]):
+        fleet_ideal_observations(a, c, b, out[b])
+
+
+def _started(sim: FleetSim, what: str) -> None:
+    if not sim.started:
+        raise RuntimeError(f"call sim.reset() before reading its {what}.")
 
 
 def lumped_uncertainty(sim: FleetSim) -> NDArray[np.float64]:
-    """The lumped f (B, n, 3) in N, N, N m: M nu' = tau - f at the current state, true model.
-
-    f = -M nu'(tau = 0): the plant's acceleration without control force,
-    times the true mass matrix, with the wave, wind and current of the
-    coming control period.
-    """
-    if not sim.started:
-        raise RuntimeError("call sim.reset() before reading its lumped uncertainty.")
-    drift = sim.accelerations(np.zeros_like(sim.arrays.tau_applied))
-    return -np.einsum("bnij,bnj->bni", sim.mass_matrices(), drift)
+    """The lumped f (B, n, 3) in N, N, N m: M nu' = tau - f at the current state, true model."""
+    _started(sim, "lumped uncertainty")
+    lumped = np.empty_like(sim.arrays.nu)
+    _lumped_all(sim.arrays, sim.constants, lumped, np.empty((*lumped.shape, 3)))
+    return lumped
 
 
 def ideal_link_observations(sim: FleetSim) -> NDArray[np.float32]:
     """The current observations (B, n, obs_dim) float32 with ideal-link neighbour slots (a copy)."""
-    if not sim.started:
-        raise RuntimeError("call sim.reset() before reading its observations.")
-    a = sim.arrays
-    obs = a.obs.copy()
-    slots = sim.constants.slots  # (n, K) neighbour index, -1 unused
-    m = a.message.shape[2]
-    for k in range(slots.shape[1]):
-        base = SLOTS + k * (SLOT_MSG + m)
-        occupied = obs[..., base + SLOT_WEIGHT] != 0.0  # (B, n): a link in the active graph
-        j = np.maximum(slots[:, k], 0)
-        dtheta = a.theta[:, j] - a.theta  # float64 difference, rounded once as the kernel does
-        obs[..., base + SLOT_DTHETA] = np.where(occupied, dtheta, 0.0)
-        obs[..., base + SLOT_AGE] = 0.0
-        for q in range(m):
-            obs[..., base + SLOT_MSG + q] = np.where(occupied, a.message[:, j, q], 0.0)
+    _started(sim, "observations")
+    obs = np.empty_like(sim.arrays.obs)
+    _ideal_all(sim.arrays, sim.constants, obs)
     return obs

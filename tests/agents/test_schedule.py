@@ -102,3 +102,13 @@ def test_cpf_train_help_lists_the_new_options(capsys: pytest.CaptureFixture[str]
     for flag in ("--eval-every", "--eval-seeds", "--checkpoint-every", "--resume",
                  "--tensorboard-log"):  # fmt: skip
         assert flag in text
+
+
+def test_the_bar_ends_on_the_final_evaluation(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "run"
+    assert train_main([*ARGV, "-n", "10", "--eval-every", "100000", "--out", str(out)]) == 0
+    first, final = _rows(out)  # at 0 vessel-steps and at the end of training
+    assert int(final["vessel_steps"]) == 160 and final["mean_cost"] != first["mean_cost"]
+    assert f"eval_cost={float(final['mean_cost']):.4g}" in capsys.readouterr().err

@@ -193,3 +193,12 @@ def test_train_config_rejects_bad_settings_before_any_training(
     """A bad setting is refused when the config is built (a sweep checks it before Ray starts)."""
     with pytest.raises(ValueError, match=message):
         TrainConfig(scenario="bench_mild", **{field: value})  # type: ignore[arg-type]
+
+
+def test_a_minibatch_larger_than_one_rollout_is_cut_to_it_with_a_warning() -> None:
+    config = TrainConfig(scenario="bench_mild", **{**TINY, "batch_size": 10_000})  # type: ignore[arg-type]
+    env = make_env(config)
+    rollout = config.n_steps * env.num_envs
+    with pytest.warns(UserWarning, match=f"larger than one rollout .* = {rollout}"):
+        model = build_model(config, VecMonitor(env))
+    assert model.batch_size == rollout  # type: ignore[attr-defined]

@@ -282,3 +282,17 @@ def test_wang2014_reports_claim_2_not_met_honestly(tmp_path, capsys):
     np.testing.assert_allclose(nn["values"]["relative_error"], [0.86, 0.87, 0.45], atol=0.01)
     np.testing.assert_allclose(nn["values"]["predicted_relative_error"], [0.856, 0.874, 0.441],
                                atol=0.005)  # fmt: skip
+
+
+def test_an_agent_of_several_scenarios_runs_its_first_and_says_so(tmp_path, capsys):
+    from cpf_commands.run.cli import _default_scenario
+
+    (tmp_path / "config.json").write_text(
+        json.dumps({"config": {"scenario": ["bench_mild", "bench_switching"]}})
+    )
+    assert _default_scenario(str(tmp_path)) == "bench_mild"
+    said = capsys.readouterr().out
+    assert "trained on 2 scenarios" in said and "--scenario" in said
+    (tmp_path / "config.json").write_text(json.dumps({"config": {"scenario": "bench_mild"}}))
+    assert _default_scenario(str(tmp_path)) == "bench_mild"
+    assert capsys.readouterr().out == ""
