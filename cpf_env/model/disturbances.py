@@ -139,25 +139,67 @@ def paper_unmodeled(u: float, v: float, r: float) -> tuple:
 
 
 @numba.njit(cache=True, inline="always")
-def paper_disturbance(t: float, u: float, v: float, r: float) -> tuple:
-    """tau_wi(t, nu) of the paper's section 4 (N, N, N m); t in s."""
-    s = 0.001 * math.sin(t)
+def paper_time_term(t: float) -> float:
+    """The time-varying part 0.001 sin(t) of tau_wi(t, nu), the same on every axis (N, N m)."""
+    return 0.001 * math.sin(t)
+
+
+@numba.njit(cache=True, inline="always")
+def paper_disturbance_given(time_term: float, u: float, v: float, r: float) -> tuple:
+    """tau_wi(t, nu) (N, N, N m) from its time term ``paper_time_term(t)``.
+
+    The time term depends on t only, so a caller evaluating many vessels at
+    one time computes it once.
+    """
+    s = time_term
     return v * v * v + 0.06 * u + s, u * r + 0.1 * u + s, 0.4 * u * r + v * v + s
 
 
 @numba.njit(cache=True, inline="always")
-def gauss_markov_step(
-    x: float, mean: float, std: float, time_constant: float, dt: float, noise: float
-) -> float:
-    """Exact one-step update of a stationary first-order Gauss-Markov process.
+def paper_disturbance(t: float, u: float, v: float, r: float) -> tuple:
+    """tau_wi(t, nu) of the paper's section 4 (N, N, N m); t in s."""
+    return paper_disturbance_given(paper_time_term(t), u, v, r)
+
+
+@numba.njit(cache=True, inline="always")
+def gauss_markov_factors(time_constant: float, dt: float) -> tuple:
+    """(a, sqrt(1 - a^2)), a = exp(-dt / T): the one-step factors of ``gauss_markov_update``.
 
     Args:
-        x: Current value.
-        mean: Process mean.
-        std: Stationary standard deviation.
-        time_constant: Correlation time (s).
+        time_constant: Correlation time T (s).
         dt: Step (s).
-        noise: A standard normal draw.
     """
     a = math.exp(-dt / time_constant)
-    return mean + a * (x - mean) + std * math.sqrt(1.0 - a * a) * noise
+    return a, math.sqrt(1.0 - a * a)
+
+
+@numba.njit(cache=True, inline="always")
+def gauss_markov_drift(x: float, mean: float, a: float) -> float:
+    """The deterministic part mean + a (x - mean) of ``gauss_markov_update``."""
+    return mean + a * (x - mean)
+
+
+@numba.njit(cache=True, inline="always")
+def gauss_markov_update(drift: float, spread: float, noise: float) -> float:
+    """Exact one-step update of a stationary first-order Gauss-Markov process.
+
+    x_next = mean + a (x - mean) + std sqrt(1 - a^2) noise, evaluated in that order.
+
+    Args:
+        drift: ``gauss_markov_drift(x, mean, a)``.
+        spread: std * sqrt(1 - a^2), with std the stationary standard deviation and
+            a, sqrt(1 - a^2) from ``gauss_markov_factors``.
+        noise: A standard normal draw.
+    """
+    return drift + spread * noise
+
+
+@numba.njit(cache=True, inline="always")
+def gauss_markov_needs_noise(drift: float, spread: float) -> bool:
+    """False when the update is ``drift`` whatever the (finite) noise draw.
+
+    With ``spread == 0`` the noise term is +0.0 or -0.0 (the sign of the draw),
+    and adding either leaves every ``drift`` unchanged but -0.0 (-0.0 + 0.0 is
+    0.0; 0.0 + -0.0 is 0.0): a process without spread needs no draw, bit for bit.
+    """
+    return spread != 0.0 or (drift == 0.0 and math.copysign(1.0, drift) < 0.0)

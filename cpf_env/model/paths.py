@@ -15,11 +15,12 @@ do not change under rotation, so psi' and psi'' come from the local curve.
 Paths are parameterized so ||(x_d', y_d')|| is about 1: theta is (close to)
 arc length in m, and its rate is roughly a speed in m/s.
 
-The physics is written once, in ``path_point``, a scalar numba function that
-reads an integer kind and a flat parameter vector and writes into a caller's
-(3, 3) buffer without allocating. The simulator's fused kernel calls it per
-vessel; Python code goes through ``evaluate_paths`` (the batched compiled
-loop), ``Path.evaluate`` and ``encode_paths``. Parameter layout of
+The physics is written once, in ``path_values``, a scalar numba function that
+reads an integer kind and a flat parameter vector and returns the values
+without allocating; ``path_point`` writes them into a caller's (3, 3) buffer.
+The simulator's fused kernel calls ``path_values`` per vessel; Python code goes
+through ``evaluate_paths`` (the batched compiled loop), ``Path.evaluate`` and
+``encode_paths``. Parameter layout of
 ``Path.encode()`` (unused slots are 0):
 
 ==========  ====  ====  ========  ==========  ==========  ======
@@ -59,6 +60,7 @@ __all__ = [
     "encode_paths",
     "evaluate_paths",
     "path_point",
+    "path_values",
 ]
 
 PATH_PARAM_SIZE = 8  # floats per encoded path
@@ -104,11 +106,37 @@ def _local_curve(kind: int, params: NDArray[np.float64], theta: float) -> tuple:
     raise ValueError("path_point: unknown path kind; use LINE, CIRCLE, SINUSOID or LEMNISCATE.")
 
 
+@numba.njit(cache=True, inline="always")
+def path_values(kind: int, params: NDArray[np.float64], theta: float) -> tuple:
+    """Evaluate a path and its first two theta-derivatives, as values (no array).
+
+    Args:
+        kind: Path kind, one of LINE, CIRCLE, SINUSOID, LEMNISCATE.
+        params: Encoded path, shape (PATH_PARAM_SIZE,), float64 (see module docstring).
+        theta: Path variable (about m).
+
+    Returns:
+        (eta_d, d eta_d/d theta, d2 eta_d/d theta2), each (x (m), y (m), psi (rad)).
+    """
+    x, y, x1, y1, x2, y2, x3, y3 = _local_curve(kind, params, theta)
+    c, s = math.cos(params[_ROT]), math.sin(params[_ROT])
+    tangent_x, tangent_y = c * x1 - s * y1, s * x1 + c * y1
+    speed_sq = x1 * x1 + y1 * y1
+    psi1 = (x1 * y2 - y1 * x2) / speed_sq
+    psi2 = ((x1 * y3 - y1 * x3) - 2.0 * psi1 * (x1 * x2 + y1 * y2)) / speed_sq
+    return (
+        (params[_X0] + c * x - s * y, params[_Y0] + s * x + c * y,
+         math.atan2(tangent_y, tangent_x)),
+        (tangent_x, tangent_y, psi1),
+        (c * x2 - s * y2, s * x2 + c * y2, psi2),
+    )  # fmt: skip
+
+
 @numba.njit(cache=True)
 def path_point(
     kind: int, params: NDArray[np.float64], theta: float, out: NDArray[np.float64]
 ) -> None:
-    """Evaluate a path and its first two theta-derivatives, without allocating.
+    """Evaluate a path and its first two theta-derivatives into a caller's buffer.
 
     Args:
         kind: Path kind, one of LINE, CIRCLE, SINUSOID, LEMNISCATE.
@@ -117,19 +145,10 @@ def path_point(
         out: Output, shape (3, 3): out[0] = eta_d, out[1] = d eta_d/d theta,
             out[2] = d2 eta_d/d theta2; columns x (m), y (m), psi (rad).
     """
-    x, y, x1, y1, x2, y2, x3, y3 = _local_curve(kind, params, theta)
-    c, s = math.cos(params[_ROT]), math.sin(params[_ROT])
-    out[0, 0] = params[_X0] + c * x - s * y
-    out[0, 1] = params[_Y0] + s * x + c * y
-    out[1, 0] = c * x1 - s * y1
-    out[1, 1] = s * x1 + c * y1
-    out[2, 0] = c * x2 - s * y2
-    out[2, 1] = s * x2 + c * y2
-    speed_sq = x1 * x1 + y1 * y1
-    psi1 = (x1 * y2 - y1 * x2) / speed_sq
-    out[0, 2] = math.atan2(out[1, 1], out[1, 0])
-    out[1, 2] = psi1
-    out[2, 2] = ((x1 * y3 - y1 * x3) - 2.0 * psi1 * (x1 * x2 + y1 * y2)) / speed_sq
+    point = path_values(kind, params, theta)
+    for row in range(3):
+        for column in range(3):
+            out[row, column] = point[row][column]
 
 
 @numba.njit(cache=True)

@@ -19,7 +19,11 @@ Arrays come in two named tuples (``cpf_env.sim.arrays``) built by
 them as plain tuples and check the step's inputs before changing anything.
 Everything per vessel is scalar code so numba compiles one fused loop; the
 outer loop over fleets runs in parallel and fleets never interact, so fleet k
-computes the same bits whatever B is.
+computes the same bits whatever B is. Within a fleet the plant advances sub-step
+by sub-step over the vessels, which share the disturbance's time terms; each
+vessel's arithmetic is that of ``cpf_env.model.plant.rk4_period``. The helpers
+are inlined into ``step_fleet``: a call that passes the two named tuples costs
+an atomic reference count per array.
 """
 
 from __future__ import annotations
@@ -42,10 +46,13 @@ from cpf_env.model.disturbances import (
     D_WIND_MEAN,
     D_WIND_STD,
     D_WIND_TC,
-    gauss_markov_step,
+    gauss_markov_drift,
+    gauss_markov_factors,
+    gauss_markov_needs_noise,
+    gauss_markov_update,
 )
-from cpf_env.model.paths import path_point
-from cpf_env.model.plant import plant_rhs, rk4_period
+from cpf_env.model.paths import path_values
+from cpf_env.model.plant import plant_rhs, rk4_substep, substep_time_terms
 from cpf_env.sim.arrays import (
     ERR_HEADING,
     ERR_PATH,
@@ -78,7 +85,7 @@ def _clip(x: float, low: float, high: float) -> float:
     return min(max(x, low), high)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def topology_index(c: KernelConstants, step: int) -> int:
     """Index of the topology member active at control ``step``."""
     local = step % c.switch_period if c.switch_period > 0 else step
@@ -89,7 +96,7 @@ def topology_index(c: KernelConstants, step: int) -> int:
     return index
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def leader_speed(c: KernelConstants, time: float) -> float:
     """v0 (m/s) of the piecewise-constant schedule at ``time`` (s)."""
     value = c.v0_values[0]
@@ -99,7 +106,7 @@ def leader_speed(c: KernelConstants, time: float) -> float:
     return value
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _load(a: FleetArrays, b: int, i: int, tau: np.ndarray) -> tuple:
     """The plant's held inputs for vessel i of fleet b under applied force ``tau`` (3,)."""
     return (
@@ -111,17 +118,26 @@ def _load(a: FleetArrays, b: int, i: int, tau: np.ndarray) -> tuple:
     )  # fmt: skip
 
 
-@numba.njit(cache=True)
-def _integrate_vessel(a: FleetArrays, c: KernelConstants, b: int, i: int, t0: float) -> None:
-    """RK4 over one control period for vessel i of fleet b, forces held."""
-    state = (a.eta[b, i, 0], a.eta[b, i, 1], a.eta[b, i, 2],
-             a.nu[b, i, 0], a.nu[b, i, 1], a.nu[b, i, 2])  # fmt: skip
-    x, y, psi, u, v, r = rk4_period(
-        a.params[b, i], c.disturbances[D_SCALE], t0, c.dt, c.substeps, state,
-        _load(a, b, i, a.tau_applied[b, i]),
-    )  # fmt: skip
-    a.eta[b, i, 0], a.eta[b, i, 1], a.eta[b, i, 2] = x, y, psi
-    a.nu[b, i, 0], a.nu[b, i, 1], a.nu[b, i, 2] = u, v, r
+@numba.njit(cache=True, inline="always")
+def _integrate_fleet(a: FleetArrays, c: KernelConstants, b: int, t0: float) -> None:
+    """RK4 over one control period for every vessel of fleet b, forces held.
+
+    Sub-step by sub-step, each vessel in turn: the vessels share the time
+    terms of the paper's disturbance (one sine per fleet and time instead of
+    one per vessel), and each vessel's state passes through ``rk4_substep``
+    exactly as in ``cpf_env.model.plant.rk4_period``.
+    """
+    scale, h = c.disturbances[D_SCALE], c.dt / c.substeps
+    for k in range(c.substeps):
+        time_terms = substep_time_terms(scale, t0 + k * h, h)
+        for i in range(a.eta.shape[1]):
+            state = (a.eta[b, i, 0], a.eta[b, i, 1], a.eta[b, i, 2],
+                     a.nu[b, i, 0], a.nu[b, i, 1], a.nu[b, i, 2])  # fmt: skip
+            x, y, psi, u, v, r = rk4_substep(
+                a.params[b, i], scale, h, time_terms, state, _load(a, b, i, a.tau_applied[b, i])
+            )
+            a.eta[b, i, 0], a.eta[b, i, 1], a.eta[b, i, 2] = x, y, psi
+            a.nu[b, i, 0], a.nu[b, i, 1], a.nu[b, i, 2] = u, v, r
 
 
 @numba.njit(cache=True)
@@ -149,7 +165,7 @@ def plant_accelerations(
             out[b, i, 0], out[b, i, 1], out[b, i, 2] = vessel_acceleration(a, c, b, i, tau[b, i])
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _apply_action(a: FleetArrays, c: KernelConstants, actions: np.ndarray, b: int, i: int) -> None:
     """Store the command, saturate it per axis and clip rate and message."""
     for k in range(3):
@@ -161,41 +177,47 @@ def _apply_action(a: FleetArrays, c: KernelConstants, actions: np.ndarray, b: in
         a.message[b, i, q] = _clip(actions[b, i, 4 + q], -c.message_max, c.message_max)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
+def _gauss_markov(x: float, mean: float, a: float, spread: float, key: np.uint64, step: int,
+                  stream: int, index: int) -> float:  # fmt: skip
+    """One exact Gauss-Markov step; the normal is drawn only when it can change the result."""
+    drift = gauss_markov_drift(x, mean, a)
+    if not gauss_markov_needs_noise(drift, spread):
+        return drift
+    return gauss_markov_update(drift, spread, counter_rng.normal(key, step, stream, index))
+
+
+@numba.njit(cache=True, inline="always")
 def _advance_disturbances(a: FleetArrays, c: KernelConstants, b: int, step: int) -> None:
-    """Advance wave, wind and current Gauss-Markov states by one control period."""
-    d, key, dt = c.disturbances, a.key[b], c.dt
+    """Advance wave, wind and current Gauss-Markov states by one control period.
+
+    Draws are counter-based (a pure function of key, step, stream and index),
+    so a draw skipped because it cannot change the state changes no other draw.
+    """
+    d, key = c.disturbances, a.key[b]
+    wave_a, wave_root = gauss_markov_factors(d[D_WAVE_TC], c.dt)
+    wind_a, wind_root = gauss_markov_factors(d[D_WIND_TC], c.dt)
+    current_a, current_root = gauss_markov_factors(d[D_CURRENT_TC], c.dt)
+    # Vessels outer, components inner, as the draws were written: a loop over
+    # vessels inside would be vectorized, and with Intel's SVML installed numba
+    # maps vector logarithms and cosines to SVML, whose last bits differ from libm's.
     for i in range(a.eta.shape[1]):
         for k in range(3):
             index = 3 * i + k
-            a.waves[b, i, k] = gauss_markov_step(
-                a.waves[b, i, k],
-                d[D_WAVE_MEAN + k],
-                d[D_WAVE_STD + k],
-                d[D_WAVE_TC],
-                dt,
-                counter_rng.normal(key, step, counter_rng.STREAM_WAVES, index),
-            )
-            a.wind[b, i, k] = gauss_markov_step(
-                a.wind[b, i, k],
-                d[D_WIND_MEAN + k],
-                d[D_WIND_STD + k],
-                d[D_WIND_TC],
-                dt,
-                counter_rng.normal(key, step, counter_rng.STREAM_WIND, index),
-            )
+            a.waves[b, i, k] = _gauss_markov(a.waves[b, i, k], d[D_WAVE_MEAN + k], wave_a,
+                                             d[D_WAVE_STD + k] * wave_root, key, step,
+                                             counter_rng.STREAM_WAVES, index)  # fmt: skip
+            a.wind[b, i, k] = _gauss_markov(a.wind[b, i, k], d[D_WIND_MEAN + k], wind_a,
+                                            d[D_WIND_STD + k] * wind_root, key, step,
+                                            counter_rng.STREAM_WIND, index)  # fmt: skip
+    current_spread = d[D_CURRENT_STD] * current_root
     for k in range(2):
-        a.current[b, k] = gauss_markov_step(
-            a.current[b, k],
-            d[D_CURRENT_MEAN + k],
-            d[D_CURRENT_STD],
-            d[D_CURRENT_TC],
-            dt,
-            counter_rng.normal(key, step, counter_rng.STREAM_CURRENT, k),
-        )
+        a.current[b, k] = _gauss_markov(a.current[b, k], d[D_CURRENT_MEAN + k], current_a,
+                                        current_spread, key, step,
+                                        counter_rng.STREAM_CURRENT, k)  # fmt: skip
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _exchange_messages(a: FleetArrays, c: KernelConstants, b: int, step: int) -> None:
     """Send this step's packets and deliver those sent ``delay`` steps ago.
 
@@ -231,7 +253,7 @@ def _exchange_messages(a: FleetArrays, c: KernelConstants, b: int, step: int) ->
             a.recv_step[b, i, k] = sent + 1
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def observe_fleet(a: FleetArrays, c: KernelConstants, b: int, speed_reference: float) -> None:
     """Write observations, errors, rewards and flags of fleet b at its current step.
 
@@ -246,20 +268,18 @@ def observe_fleet(a: FleetArrays, c: KernelConstants, b: int, speed_reference: f
     step = a.step[b]
     member = topology_index(c, step)
     v0 = leader_speed(c, step * c.dt)
-    point = np.empty((3, 3))
-    frame = np.empty((3, 3))
     terminated = False
     finite = True
     total = 0.0
     for i in range(n):
         obs = a.obs[b, i]
-        path_point(c.path_kinds[i], c.path_params[i], a.theta[b, i], point)
-        path_frame(a.eta[b, i], point, frame)
+        point = path_values(c.path_kinds[i], c.path_params[i], a.theta[b, i])
+        z1, t1, t2 = path_frame(a.eta[b, i, 0], a.eta[b, i, 1], a.eta[b, i, 2], point)
         for k in range(3):
             obs[NU + k] = a.nu[b, i, k]
-            obs[Z1 + k] = frame[0, k]
-            obs[T1 + k] = frame[1, k]
-            obs[T2 + k] = frame[2, k]
+            obs[Z1 + k] = z1[k]
+            obs[T1 + k] = t1[k]
+            obs[T2 + k] = t2[k]
             obs[TAU + k] = a.tau_applied[b, i, k]
             finite = finite and math.isfinite(a.eta[b, i, k]) and math.isfinite(a.nu[b, i, k])
         obs[THETA] = a.theta[b, i]
@@ -281,16 +301,16 @@ def observe_fleet(a: FleetArrays, c: KernelConstants, b: int, speed_reference: f
             obs[base + SLOT_AGE] = step - a.recv_step[b, i, k]
             for q in range(m):
                 obs[base + SLOT_MSG + q] = a.recv_message[b, i, k, q]
-        path_error = math.sqrt(frame[0, 0] ** 2 + frame[0, 1] ** 2)
+        path_error = math.sqrt(z1[0] ** 2 + z1[1] ** 2)
         speed_error = a.theta_dot[b, i] - speed_reference
         a.errors[b, i, ERR_PATH] = path_error
-        a.errors[b, i, ERR_HEADING] = frame[0, 2]
+        a.errors[b, i, ERR_HEADING] = z1[2]
         a.errors[b, i, ERR_SYNC] = sync
         a.errors[b, i, ERR_SPEED] = speed_error
         reward = step_reward(
             c.reward_params,
             c.dt,
-            frame[0],
+            z1,
             sync,
             speed_error,
             a.tau_applied[b, i],
@@ -322,8 +342,8 @@ def step_fleet(a: FleetArrays, c: KernelConstants, actions: np.ndarray, b: int) 
     v0 = leader_speed(c, t0)
     for i in range(a.eta.shape[1]):
         _apply_action(a, c, actions, b, i)
-        _integrate_vessel(a, c, b, i, t0)
         a.theta[b, i] += c.dt * a.theta_dot[b, i]
+    _integrate_fleet(a, c, b, t0)
     _advance_disturbances(a, c, b, step)
     _exchange_messages(a, c, b, step)
     a.step[b] = step + 1

@@ -161,19 +161,23 @@ def wrap_angle(angle: float) -> float:
 
 
 @numba.njit(cache=True, inline="always")
-def path_frame(eta: NDArray, point: NDArray, out: NDArray) -> None:
+def path_frame(x: float, y: float, psi: float, point: tuple) -> tuple:
     """Express the path error and the path derivatives in the body frame.
 
     Args:
-        eta: Pose [x, y, psi], shape (3,).
-        point: ``paths.path_point`` output, shape (3, 3): eta_d, eta_d', eta_d''.
-        out: Written with z1, t1, t2 as rows, shape (3, 3).
+        x: Earth-frame position x (m).
+        y: Earth-frame position y (m).
+        psi: Heading (rad).
+        point: ``paths.path_values`` output: eta_d, eta_d', eta_d'', each (x, y, psi).
+
+    Returns:
+        (z1, t1, t2), each (x, y, psi) in the body frame; z1's heading part wrapped.
     """
-    c, s = math.cos(eta[2]), math.sin(eta[2])
-    dx, dy = eta[0] - point[0, 0], eta[1] - point[0, 1]
-    out[0, 0], out[0, 1] = c * dx + s * dy, -s * dx + c * dy
-    out[0, 2] = wrap_angle(eta[2] - point[0, 2])
-    for row in (1, 2):
-        out[row, 0] = c * point[row, 0] + s * point[row, 1]
-        out[row, 1] = -s * point[row, 0] + c * point[row, 1]
-        out[row, 2] = point[row, 2]
+    c, s = math.cos(psi), math.sin(psi)
+    target, first, second = point
+    dx, dy = x - target[0], y - target[1]
+    return (
+        (c * dx + s * dy, -s * dx + c * dy, wrap_angle(psi - target[2])),
+        (c * first[0] + s * first[1], -s * first[0] + c * first[1], first[2]),
+        (c * second[0] + s * second[1], -s * second[0] + c * second[1], second[2]),
+    )

@@ -75,7 +75,7 @@ def _shaped(params: NDArray, term: int, error_squared: float) -> float:
 def step_reward(
     params: NDArray,
     dt: float,
-    z1: NDArray,
+    z1: tuple[float, float, float],
     sync_error: float,
     speed_error: float,
     tau: NDArray,
@@ -87,7 +87,7 @@ def step_reward(
     Args:
         params: ``RewardWeights.encode()``, shape (11,).
         dt: Control period (s).
-        z1: Body-frame path error after the step, shape (3,).
+        z1: Body-frame path error after the step (x (m), y (m), psi (rad)).
         sync_error: s_i on true path variables.
         speed_error: theta_dot_i - v0 (m/s).
         tau: Applied force, shape (3,).

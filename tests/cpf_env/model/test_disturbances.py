@@ -303,3 +303,15 @@ def test_default_disturbances_are_the_paper_only() -> None:
 def test_bad_disturbances_are_rejected(build: object, match: str) -> None:
     with pytest.raises(ValueError, match=match):
         build()  # type: ignore[operator]
+
+
+def test_a_process_without_spread_skips_only_draws_that_cannot_matter() -> None:
+    """The kernel skips the normal draw when ``gauss_markov_needs_noise`` says so: the
+    update must then equal the drift bit for bit, whatever the draw's sign."""
+    from cpf_env.model.disturbances import gauss_markov_needs_noise, gauss_markov_update
+
+    for drift in (1.5, -2.0e-300, 0.0, -0.0, 5e-324):
+        for spread in (0.0, 0.3):
+            results = [gauss_markov_update(drift, spread, noise) for noise in (1.2, -0.7)]
+            independent = all(r == drift and np.signbit(r) == np.signbit(drift) for r in results)
+            assert gauss_markov_needs_noise(drift, spread) == (not independent), (drift, spread)
