@@ -159,6 +159,41 @@ def _run_parallel(
         )  # fmt: skip
 
 
+@numba.njit(cache=True)
+def _run(
+    a: tuple,
+    c: tuple,
+    pc: tuple,
+    ps: tuple,
+    out: tuple,
+    obs: np.ndarray,
+    known: tuple,
+    actions: np.ndarray,
+    rows: np.ndarray,
+    first: int,
+    steps: int,
+    hold_ended: bool,
+    ended: np.ndarray,
+    record: tuple,
+    threaded: bool,
+) -> None:
+    """``_run_serial`` (or ``_run_parallel`` if ``threaded``) given plain tuples of the fields.
+
+    numba's dispatcher types plain tuples of arrays on a fast path and named
+    tuples field by field in Python (``baselines.kernels.act_rows``); the
+    named tuples are rebuilt here, in compiled code.
+    """
+    fa, fc = FleetArrays(*a), KernelConstants(*c)
+    qc, qs, qo = PolicyConstants(*pc), PolicyStates(*ps), PolicyOutputs(*out)
+    qk, qr = KnownDynamics(*known), StepRecord(*record)
+    if threaded:
+        _run_parallel(
+            fa, fc, qc, qs, qo, obs, qk, actions, rows, first, steps, hold_ended, ended, qr
+        )
+    else:
+        _run_serial(fa, fc, qc, qs, qo, obs, qk, actions, rows, first, steps, hold_ended, ended, qr)
+
+
 class ClosedLoop:
     """Compiled analytic policies acting on equal blocks of a simulator's fleets, in one call.
 
@@ -267,14 +302,14 @@ class ClosedLoop:
             raise RuntimeError(sim.divergence_message())
         S = self._rows.shape[0]
         threaded = S > 1 and S * steps >= PARALLEL_MIN_FLEETS
-        kernel = _run_parallel if threaded else _run_serial
+        fields = tuple(sim.arrays), tuple(sim.constants)
+        written = tuple(self._no_record if record is None else record)
         for p, policy in enumerate(self.policies):
             out = policy._new_outputs(S)
-            kernel(
-                sim.arrays, sim.constants, policy._constants, policy._states_for(S), out,
-                self._observations[p], self._knowledge[p], self._actions, self._rows, p * S,
-                steps, bool(hold_ended), self.ended,
-                self._no_record if record is None else record,
+            _run(
+                *fields, tuple(policy._constants), tuple(policy._states_for(S)), tuple(out),
+                self._observations[p], tuple(self._knowledge[p]), self._actions, self._rows,
+                p * S, steps, bool(hold_ended), self.ended, written, threaded,
             )  # fmt: skip
             policy.diagnostics = {name: getattr(out, name) for name in DIAGNOSTICS}
         if sim.arrays.nonfinite.any():

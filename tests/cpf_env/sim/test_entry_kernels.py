@@ -68,3 +68,13 @@ def test_arrays_and_constants_are_the_kernels_own_and_cannot_be_replaced() -> No
     eta = sim.arrays.eta
     sim.step(np.zeros((2, 5, 5)))
     assert sim.arrays.eta is eta and not np.array_equal(eta, np.zeros_like(eta))
+
+
+def test_the_thread_threshold_is_read_from_the_environment_and_checked() -> None:
+    from cpf_env.sim.fleet import DEFAULT_PARALLEL_MIN_FLEETS, parallel_min_fleets
+
+    assert parallel_min_fleets({}) == DEFAULT_PARALLEL_MIN_FLEETS
+    assert parallel_min_fleets({"CPF_PARALLEL_MIN_FLEETS": "8"}) == 8
+    for bad in ("0", "-3", "many", "2.5"):
+        with pytest.raises(ValueError, match="CPF_PARALLEL_MIN_FLEETS must be an integer >= 1"):
+            parallel_min_fleets({"CPF_PARALLEL_MIN_FLEETS": bad})
