@@ -52,10 +52,11 @@ from baselines.kernels import WORK_ROWS, _act_fleet
 from baselines.policy import DIAGNOSTICS, Policy
 from baselines.privileged import PrivilegedPolicy
 from cpf_env.sim.arrays import FleetArrays, KernelConstants
-from cpf_env.sim.fleet import PARALLEL_MIN_FLEETS, FleetSim
+from cpf_env.sim.fleet import FleetSim
 from cpf_env.sim.kernels import step_fleet
 from cpf_env.sim.privileged import fleet_ideal_observations, fleet_lumped_uncertainty
 from cpf_env.sim.recording import CHUNK, StepRecord, new_record, record_fleet
+from cpf_env.sim.threads import PARALLEL_MIN_FLEETS
 
 __all__ = ["ClosedLoop"]
 

@@ -49,7 +49,8 @@ from baselines.kernels import act_rows, cooperative_rows
 from cpf_env import scenarios
 from cpf_env.model.vessel import PARAM_SIZE
 from cpf_env.scenarios import Scenario
-from cpf_env.sim.fleet import PARALLEL_MIN_FLEETS, observation_layout
+from cpf_env.sim.fleet import observation_layout
+from cpf_env.sim.threads import PARALLEL_MIN_FLEETS
 
 __all__ = ["DIAGNOSTICS", "Policy", "resolve_scenario", "virtual_control"]
 

@@ -62,8 +62,8 @@ def _warm_policy_kernels() -> float:
     from baselines import make_policy
     from baselines.closed_loop import ClosedLoop
     from cpf_env import FleetSim, scenarios
-    from cpf_env.sim.fleet import PARALLEL_MIN_FLEETS
     from cpf_env.sim.recording import new_record
+    from cpf_env.sim.threads import PARALLEL_MIN_FLEETS
 
     start = time.perf_counter()
     task = scenarios.get("wang2014")

@@ -18,8 +18,7 @@ Example:
 
 from __future__ import annotations
 
-import os
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -32,15 +31,9 @@ from cpf_env.scenarios.reward_weights import REWARD_TERMS
 from cpf_env.sim import arrays, kernels
 from cpf_env.sim.arrays import FleetArrays, KernelConstants
 from cpf_env.sim.observation import ObsLayout
+from cpf_env.sim.threads import PARALLEL_MIN_FLEETS
 
-__all__ = [
-    "DEFAULT_PARALLEL_MIN_FLEETS",
-    "PARALLEL_MIN_FLEETS",
-    "FleetSim",
-    "as_real_actions",
-    "observation_layout",
-    "parallel_min_fleets",
-]
+__all__ = ["PARALLEL_MIN_FLEETS", "FleetSim", "as_real_actions", "observation_layout"]
 
 #: Names of the integrated state per vessel, as (array, component, what it is).
 _STATE_NAMES = (
@@ -123,45 +116,6 @@ def _constants(scenario: Scenario) -> arrays.KernelConstants:
         max_path_error=float(scenario.max_path_error),
         max_steps=int(scenario.max_steps),
     )
-
-
-#: Fleets per call from which the parallel kernels run, unless ``CPF_PARALLEL_MIN_FLEETS``
-#: says otherwise.
-DEFAULT_PARALLEL_MIN_FLEETS = 48
-
-
-def parallel_min_fleets(environ: Mapping[str, str] = os.environ) -> int:
-    """Fleets per call from which the simulator's and the policies' kernels use threads.
-
-    Below it one call runs on the calling thread: waking numba's threads, which
-    wait passively (``OMP_WAIT_POLICY=PASSIVE``, set by ``import cpf_env``),
-    costs more than they give. On the development machine (a 2-core VM) a
-    passive wake-up took about 100-150 us, and the serial and parallel step
-    broke even between 32 and 64 fleets (``docs/scaling.md``, "Threads").
-    ``CPF_PARALLEL_MIN_FLEETS`` moves it (lower on a machine of many cores or
-    with ``OMP_WAIT_POLICY=ACTIVE``).
-
-    Raises:
-        ValueError: ``CPF_PARALLEL_MIN_FLEETS`` is not an integer >= 1.
-    """
-    text = environ.get("CPF_PARALLEL_MIN_FLEETS")
-    if text is None:
-        return DEFAULT_PARALLEL_MIN_FLEETS
-    try:
-        value = int(text)
-    except ValueError:
-        value = 0
-    if value < 1:
-        raise ValueError(
-            f"CPF_PARALLEL_MIN_FLEETS must be an integer >= 1 (fleets per call from which "
-            f"the kernels use threads), got {text!r}; unset it for the default "
-            f"{DEFAULT_PARALLEL_MIN_FLEETS}."
-        )
-    return value
-
-
-#: Below this many fleets per call the serial kernels run (``parallel_min_fleets``).
-PARALLEL_MIN_FLEETS = parallel_min_fleets()
 
 
 class FleetSim:

@@ -36,7 +36,8 @@ from numba.core.registry import CPUDispatcher
 
 from cpf_env import scenarios
 from cpf_env.model.kernel_cache import KERNEL_MODULES
-from cpf_env.sim.fleet import PARALLEL_MIN_FLEETS, FleetSim
+from cpf_env.sim.fleet import FleetSim
+from cpf_env.sim.threads import PARALLEL_MIN_FLEETS
 
 __all__ = [
     "KERNEL_MODULES",

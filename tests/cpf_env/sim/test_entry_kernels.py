@@ -71,7 +71,7 @@ def test_arrays_and_constants_are_the_kernels_own_and_cannot_be_replaced() -> No
 
 
 def test_the_thread_threshold_is_read_from_the_environment_and_checked() -> None:
-    from cpf_env.sim.fleet import DEFAULT_PARALLEL_MIN_FLEETS, parallel_min_fleets
+    from cpf_env.sim.threads import DEFAULT_PARALLEL_MIN_FLEETS, parallel_min_fleets
 
     assert parallel_min_fleets({}) == DEFAULT_PARALLEL_MIN_FLEETS
     assert parallel_min_fleets({"CPF_PARALLEL_MIN_FLEETS": "8"}) == 8
