@@ -110,31 +110,6 @@ def _run_fleet(
             ended[b] = a.step[b]
 
 
-@numba.njit(cache=True)
-def _run_serial(
-    a: FleetArrays,
-    c: KernelConstants,
-    pc: PolicyConstants,
-    ps: PolicyStates,
-    out: PolicyOutputs,
-    obs: np.ndarray,
-    known: KnownDynamics,
-    actions: np.ndarray,
-    rows: np.ndarray,
-    first: int,
-    steps: int,
-    hold_ended: bool,
-    ended: np.ndarray,
-    record: StepRecord,
-) -> None:
-    """``_run_fleet`` for the S fleets ``first`` .. ``first + S - 1`` of one policy, in turn."""
-    for r in range(rows.shape[0]):
-        _run_fleet(
-            a, c, pc, ps, out, obs, known, actions, rows, first + r, r, steps, hold_ended, ended,
-            record,
-        )  # fmt: skip
-
-
 @numba.njit(cache=True, parallel=True)
 def _run_parallel(
     a: FleetArrays,
@@ -152,7 +127,10 @@ def _run_parallel(
     ended: np.ndarray,
     record: StepRecord,
 ) -> None:
-    """``_run_serial`` with the fleets spread over numba's threads (the same bits)."""
+    """``_run_fleet`` for fleets ``first`` .. ``first + S - 1`` of one policy, on numba's threads.
+
+    The same bits as one fleet after the other (``_run``).
+    """
     for r in prange(rows.shape[0]):
         _run_fleet(
             a, c, pc, ps, out, obs, known, actions, rows, first + r, r, steps, hold_ended, ended,
@@ -178,9 +156,10 @@ def _run(
     record: tuple,
     threaded: bool,
 ) -> None:
-    """``_run_serial`` (or ``_run_parallel`` if ``threaded``) given plain tuples of the fields.
+    """``_run_fleet`` for the S fleets of one policy, on numba's threads if ``threaded``.
 
-    numba's dispatcher types plain tuples of arrays on a fast path and named
+    The arguments are ``_run_parallel``'s, the named tuples as plain tuples of their
+    fields: numba's dispatcher types plain tuples of arrays on a fast path and named
     tuples field by field in Python (``baselines.kernels.act_rows``); the
     named tuples are rebuilt here, in compiled code.
     """
@@ -191,8 +170,11 @@ def _run(
         _run_parallel(
             fa, fc, qc, qs, qo, obs, qk, actions, rows, first, steps, hold_ended, ended, qr
         )
-    else:
-        _run_serial(fa, fc, qc, qs, qo, obs, qk, actions, rows, first, steps, hold_ended, ended, qr)
+        return
+    for r in range(rows.shape[0]):
+        _run_fleet(
+            fa, fc, qc, qs, qo, obs, qk, actions, rows, first + r, r, steps, hold_ended, ended, qr
+        )
 
 
 class ClosedLoop:
