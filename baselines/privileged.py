@@ -46,7 +46,7 @@ from baselines.nn_dsc import NNDSCPolicy
 from baselines.policy import Policy
 from cpf_env.sim.fleet import FleetSim
 from cpf_env.sim.observation import SLOTS
-from cpf_env.sim.privileged import ideal_link_observations, lumped_uncertainty
+from cpf_env.sim.privileged import ideal_link_observations, true_dynamics
 
 __all__ = ["BacksteppingPrivileged", "NNDSCPrivileged", "PrivilegedPolicy"]
 
@@ -121,7 +121,7 @@ class PrivilegedPolicy(Policy):
         Raises:
             ValueError: ``obs`` are not the bound fleets' current observations.
         """
-        ideal = ideal_link_observations(self._bound())[self._rows]
+        ideal = ideal_link_observations(self._bound(), self._rows)
         given = np.asarray(obs)
         if given.shape != ideal.shape or not np.array_equal(
             given[..., :SLOTS], ideal[..., :SLOTS].astype(given.dtype)
@@ -135,10 +135,7 @@ class PrivilegedPolicy(Policy):
 
     def _knowledge(self, fleets: NDArray[np.int64]) -> KnownDynamics:
         """The true lumped uncertainty and mass matrices of the acting fleets."""
-        sim = self._bound()
-        rows = self._rows[fleets]
-        lumped = lumped_uncertainty(sim)[rows]
-        return KnownDynamics(np.ascontiguousarray(lumped), sim.mass_matrices()[rows])
+        return KnownDynamics(*true_dynamics(self._bound(), self._rows[fleets]))
 
     def act_batch(self, obs: ArrayLike, fleets: ArrayLike | None = None) -> NDArray[np.float64]:
         """As the parent's, for all bound fleets at once (``fleets`` is not supported)."""

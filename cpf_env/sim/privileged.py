@@ -28,7 +28,7 @@ from typing import TYPE_CHECKING
 
 import numba
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from cpf_env.model.vessel import M11, M22, M23, M32, M33
 from cpf_env.sim.arrays import FleetArrays, KernelConstants
@@ -43,6 +43,7 @@ __all__ = [
     "fleet_lumped_uncertainty",
     "ideal_link_observations",
     "lumped_uncertainty",
+    "true_dynamics",
 ]
 
 
@@ -97,33 +98,50 @@ def fleet_ideal_observations(a: FleetArrays, c: KernelConstants, b: int, out: np
 
 
 @numba.njit(cache=True)
-def _lumped_all(a: FleetArrays, c: KernelConstants, lumped: np.ndarray, mass: np.ndarray) -> None:
-    for b in range(a.eta.shape[0]):
-        fleet_lumped_uncertainty(a, c, b, lumped[b], mass[b])
+def _lumped_rows(
+    a: FleetArrays, c: KernelConstants, fleets: np.ndarray, lumped: np.ndarray, mass: np.ndarray
+) -> None:
+    for r in range(fleets.shape[0]):
+        fleet_lumped_uncertainty(a, c, fleets[r], lumped[r], mass[r])
 
 
 @numba.njit(cache=True)
-def _ideal_all(a: FleetArrays, c: KernelConstants, out: np.ndarray) -> None:
-    for b in range(a.eta.shape[0]):
-        fleet_ideal_observations(a, c, b, out[b])
+def _ideal_rows(a: FleetArrays, c: KernelConstants, fleets: np.ndarray, out: np.ndarray) -> None:
+    for r in range(fleets.shape[0]):
+        fleet_ideal_observations(a, c, fleets[r], out[r])
 
 
-def _started(sim: FleetSim, what: str) -> None:
+def _rows(sim: FleetSim, fleets: ArrayLike | None, what: str) -> NDArray[np.int64]:
+    """The fleet indices to read (default all), once the simulator holds an episode."""
     if not sim.started:
         raise RuntimeError(f"call sim.reset() before reading its {what}.")
+    if fleets is None:
+        return np.arange(sim.num_fleets, dtype=np.int64)
+    return np.ascontiguousarray(fleets, dtype=np.int64)
 
 
-def lumped_uncertainty(sim: FleetSim) -> NDArray[np.float64]:
-    """The lumped f (B, n, 3) in N, N, N m: M nu' = tau - f at the current state, true model."""
-    _started(sim, "lumped uncertainty")
-    lumped = np.empty_like(sim.arrays.nu)
-    _lumped_all(sim.arrays, sim.constants, lumped, np.empty((*lumped.shape, 3)))
-    return lumped
+def true_dynamics(
+    sim: FleetSim, fleets: ArrayLike | None = None
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The lumped f (R, n, 3) and the true mass matrices M (R, n, 3, 3) of ``fleets`` (default all).
+
+    f in N, N, N m with M nu' = tau - f at the current state; M in kg, kg m, kg m^2.
+    """
+    rows = _rows(sim, fleets, "lumped uncertainty")
+    lumped = np.empty((rows.shape[0], sim.n, 3))
+    mass = np.empty((rows.shape[0], sim.n, 3, 3))
+    _lumped_rows(sim.arrays, sim.constants, rows, lumped, mass)
+    return lumped, mass
 
 
-def ideal_link_observations(sim: FleetSim) -> NDArray[np.float32]:
-    """The current observations (B, n, obs_dim) float32 with ideal-link neighbour slots (a copy)."""
-    _started(sim, "observations")
-    obs = np.empty_like(sim.arrays.obs)
-    _ideal_all(sim.arrays, sim.constants, obs)
+def lumped_uncertainty(sim: FleetSim, fleets: ArrayLike | None = None) -> NDArray[np.float64]:
+    """The lumped f (R, n, 3) of ``fleets`` (default all B) in N, N, N m (``true_dynamics``)."""
+    return true_dynamics(sim, fleets)[0]
+
+
+def ideal_link_observations(sim: FleetSim, fleets: ArrayLike | None = None) -> NDArray[np.float32]:
+    """Observations (R, n, obs_dim) float32 of ``fleets`` (default all) with ideal-link slots."""
+    rows = _rows(sim, fleets, "observations")
+    obs = np.empty((rows.shape[0], *sim.arrays.obs.shape[1:]), dtype=np.float32)
+    _ideal_rows(sim.arrays, sim.constants, rows, obs)
     return obs

@@ -13,7 +13,7 @@ from cpf_env import FleetSim, scenarios
 from cpf_env.envs.parallel import make_scenario
 from cpf_env.model.vessel import coriolis_matrix, damping_matrix
 from cpf_env.sim.observation import SLOT_AGE, SLOT_MSG, SLOTS
-from cpf_env.sim.privileged import ideal_link_observations, lumped_uncertainty
+from cpf_env.sim.privileged import ideal_link_observations, lumped_uncertainty, true_dynamics
 
 
 def _no_uncertainty(name: str = "wang2014"):
@@ -151,3 +151,18 @@ def test_a_group_rollout_gives_each_policy_its_own_runs_numbers_bit_for_bit():
         assert metrics.keys() == alone.keys()
         for metric, values in alone.items():
             np.testing.assert_array_equal(metrics[metric], values, err_msg=f"{name} {metric}")
+
+
+def test_the_views_of_some_fleets_are_those_rows_of_all_fleets():
+    task = scenarios.get("bench_lossy_links")
+    sim = FleetSim(task, num_fleets=4)
+    sim.reset(seeds=[0, 1, 2, 3])
+    for _ in range(5):
+        sim.step(np.zeros((4, task.n, sim.act_dim)))
+    rows = np.array([3, 1])
+    lumped, mass = true_dynamics(sim, rows)
+    np.testing.assert_array_equal(lumped, lumped_uncertainty(sim)[rows])
+    np.testing.assert_array_equal(mass, sim.mass_matrices()[rows])
+    np.testing.assert_array_equal(
+        ideal_link_observations(sim, rows), ideal_link_observations(sim)[rows]
+    )
