@@ -13,6 +13,9 @@ from __future__ import annotations
 
 import argparse
 from collections.abc import Sequence
+from pathlib import Path
+
+from cpf_env import atomic
 
 __all__ = ["export_main"]
 
@@ -44,7 +47,12 @@ def export_main(argv: Sequence[str] | None = None) -> int:
     try:
         from agents.onnx_policy import export_onnx
 
-        difference = export_onnx(args.folder, args.out, checks=args.checks)
+        # before the work: writable, not a link, room for about twice the weights
+        weights = Path(args.folder) / "policy.safetensors"
+        needed = 2 * weights.stat().st_size + 2**20 if weights.is_file() else 0
+        atomic.check_writable(args.out, needed)
+        with atomic.FolderLock(args.out, "another cpf-export"):
+            difference = export_onnx(args.folder, args.out, checks=args.checks)
     except (ImportError, ValueError, FileNotFoundError, OSError) as error:
         parser.error(str(error))
     print(

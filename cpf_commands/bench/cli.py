@@ -1,13 +1,14 @@
 """``cpf-bench``: the command around ``cpf_commands.bench.run``.
 
 It checks the output folder before anything runs (``--force``, a lock,
-writable, disk and memory for ``--seeds``), runs ``run_bench`` and prints the
-verdicts; ``cpf-bench --help`` lists the flags.
+writable, not a link, disk, and memory for policies x seeds x series), runs
+``run_bench`` and prints the verdicts; ``cpf-bench --help`` lists the flags.
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import shlex
 import time
 from collections.abc import Sequence
@@ -30,7 +31,7 @@ from cpf_commands.common.ray_runtime import add_address_argument
 from cpf_env import atomic
 from cpf_env.envs.parallel import make_scenario
 from cpf_env.scenarios.splits import SPLITS
-from cpf_env.scenarios.suite import list_suite
+from cpf_env.scenarios.suite import is_deterministic, list_suite
 
 __all__ = ["bench_main"]
 
@@ -150,20 +151,41 @@ def _command(args: argparse.Namespace) -> str:
     return shlex.join(parts)
 
 
+def _memory_needed(args: argparse.Namespace) -> int:
+    """Bytes of memory the largest batch of the run holds (a generous estimate).
+
+    A local run steps every policy on a scenario in one simulator of
+    policies x seeds fleets, each recording its series over the horizon; the
+    scenarios run one after another. With Ray each (policy, scenario) cell is a
+    task of its own, at most one per CPU at a time.
+    """
+    batches = []
+    for name in args.scenarios:
+        scenario = make_scenario(name)
+        seeds = 1 if is_deterministic(scenario) else args.seeds
+        horizon = args.steps or scenario.max_steps
+        batches.append(
+            seeds * (horizon * SERIES_BYTES_PER_STEP + scenario.n * STATE_BYTES_PER_VESSEL)
+        )
+    policies = len(args.policies)
+    if args.ray or args.address is not None:
+        return max(batches) * min(policies * len(batches), os.cpu_count() or 1)
+    return max(batches) * policies
+
+
 def _claim_output(args: argparse.Namespace) -> atomic.FolderLock:
     """Refuse a run whose flags, memory or output folder would fail it; lock --out."""
     if args.seeds < 1:
         raise ValueError(f"--seeds must be >= 1, got {args.seeds}.")
     check_margin(args.cost_margin)
-    horizons = [args.steps or make_scenario(name).max_steps for name in args.scenarios]
-    fleets = max(make_scenario(name).n for name in args.scenarios)
-    needed = args.seeds * (max(horizons) * SERIES_BYTES_PER_STEP + fleets * STATE_BYTES_PER_VESSEL)
+    needed = _memory_needed(args)
     available = _available_memory()
     if available is not None and needed > available:
         raise ValueError(
-            f"--seeds {args.seeds} needs about {needed / 2**30:.1f} GiB of memory for one "
-            f"(policy, scenario) cell ({max(horizons)} steps), but {available / 2**30:.1f} GiB "
-            "are available; lower --seeds or --steps."
+            f"{len(args.policies)} policies x --seeds {args.seeds} need about "
+            f"{needed / 2**30:.1f} GiB of memory (every policy's fleets step in one batch per "
+            f"scenario), but {available / 2**30:.1f} GiB are available; lower --seeds or "
+            "--steps, or bench fewer policies at a time."
         )
     return claim_output_folder(
         args.out,
