@@ -225,15 +225,21 @@ def train(
             # The new run is built beside the old one, which stays until the new agent is
             # written; a killed run's staging folder goes with the next lock.
             workdir = atomic.new_staging_folder(folder) if replacing else folder
-            workdir.mkdir(parents=True, exist_ok=True)
             resume_state = None
+        fresh = workdir == folder and not resume and not folder.exists()
         try:
-            write_run_record(workdir, config, schedule, getattr(evaluate, "settings", None))
-            for name, text in (run_files or {}).items():
-                atomic.write_text(workdir / name, text)
-            run = TrainingRun(
-                config, workdir, schedule, evaluate, resume_state, tensorboard_log, folder
-            )
+            try:
+                workdir.mkdir(parents=True, exist_ok=True)
+                write_run_record(workdir, config, schedule, getattr(evaluate, "settings", None))
+                for name, text in (run_files or {}).items():
+                    atomic.write_text(workdir / name, text)
+                run = TrainingRun(
+                    config, workdir, schedule, evaluate, resume_state, tensorboard_log, folder
+                )
+            except BaseException:  # refused before training (no space, say): nothing left
+                if fresh:
+                    shutil.rmtree(folder, ignore_errors=True)
+                raise
             run.learn(progress, callbacks)
         finally:
             if workdir != folder:  # swapped in by learn, or a failed run: the old one stays

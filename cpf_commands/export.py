@@ -53,7 +53,7 @@ def export_main(argv: Sequence[str] | None = None) -> int:
         atomic.check_writable(args.out, needed)
         with atomic.FolderLock(args.out, "another cpf-export"):
             difference = export_onnx(args.folder, args.out, checks=args.checks)
-    except (ImportError, ValueError, FileNotFoundError, OSError) as error:
+    except (ImportError, ValueError, OSError, atomic.FolderLockedError) as error:
         parser.error(str(error))
     print(
         f"cpf-export: wrote {args.out}; max |ONNX - torch| over {args.checks} inputs: "
