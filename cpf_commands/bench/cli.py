@@ -187,6 +187,8 @@ def _claim_output(args: argparse.Namespace) -> atomic.FolderLock:
             f"scenario), but {available / 2**30:.1f} GiB are available; lower --seeds or "
             "--steps, or bench fewer policies at a time."
         )
+    if args.marl_eval is not None:
+        atomic.check_writable(args.marl_eval)
     return claim_output_folder(
         args.out,
         OUTPUT_FILES,
