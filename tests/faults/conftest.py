@@ -119,9 +119,19 @@ class FullDisk:
             except OSError:
                 break
 
+    def empty(self) -> None:
+        """Give the space back (or the writes)."""
+        if not self.real:
+            self._monkeypatch.setattr(atomic, "write_bytes", _WRITE_BYTES)
+        for filler in self.root.glob("filler*"):
+            filler.unlink()
+
     def entries(self) -> list[str]:
         """Names in the root, the filler left out."""
         return sorted(p.name for p in self.root.iterdir() if not p.name.startswith("filler"))
+
+
+_WRITE_BYTES = atomic.write_bytes
 
 
 def _no_space(path: object, data: bytes) -> None:

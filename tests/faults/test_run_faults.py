@@ -32,7 +32,8 @@ def _results(folder: Path) -> dict[str, bytes]:
 
 
 def _write(out: Path, seed: int, force: bool = False) -> None:
-    reproduce("wang2014", "nn_dsc", seed=seed, steps=3, out=out, figures=False, force=force)
+    replace = {"force": True} if force else {}
+    reproduce("wang2014", "nn_dsc", seed=seed, steps=3, out=out, figures=False, **replace)
 
 
 def test_an_existing_output_needs_force(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -118,12 +119,14 @@ def test_two_concurrent_runs_on_one_output_one_wins(tmp_path: Path) -> None:
 
 
 def test_a_linked_metrics_file_is_not_followed(tmp_path: Path) -> None:
-    _write(tmp_path, seed=0)
     victim = tmp_path / "victim.json"
     victim.write_text("keep me")
-    (tmp_path / FOLDER / "metrics.json").unlink()
+    (tmp_path / FOLDER).mkdir()
     (tmp_path / FOLDER / "metrics.json").symlink_to(victim)
-    _write(tmp_path, seed=1, force=True)
+    with pytest.raises(ValueError, match="pass --force"):  # it holds results (a link to some)
+        _write(tmp_path, seed=0)
+    assert victim.read_text() == "keep me"
+    _write(tmp_path, seed=1, force=True)  # replaced whole: the link goes, its target stays
     assert victim.read_text() == "keep me"
     assert not (tmp_path / FOLDER / "metrics.json").is_symlink()
 
@@ -135,29 +138,36 @@ def test_an_output_that_is_a_link_is_refused_before_the_run(
     monkeypatch.setattr(reproduce_module, "run_episode", lambda *a, **k: ran.append(a))
     (tmp_path / "real").mkdir()
     (tmp_path / FOLDER).symlink_to(tmp_path / "real")
-    assert "is a symbolic link" in _refused([*QUICK, "--out", str(tmp_path), "--force"], capsys)
+    assert "is a symbolic link" in _refused([*QUICK, "--out", str(tmp_path)], capsys)
     assert ran == []
     assert sorted(p.name for p in tmp_path.iterdir()) == ["real", FOLDER]  # no .NAME.old-*
 
 
-def test_a_full_disk_while_writing_keeps_the_old_results(
+def test_a_full_disk_while_writing_is_one_line_and_keeps_the_old_results(
     full_disk, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
 ) -> None:
     out = full_disk.root
-    assert run_main([*QUICK, "--out", str(out)]) == 0
-    before = _results(out / FOLDER)
     real = reproduce_module.run_episode
+    filled = []
 
     def then_fill(*args: object, **kwargs: object) -> object:
         trajectory = real(*args, **kwargs)
-        full_disk.fill()  # after the checks, before the outputs are written
+        if filled:
+            full_disk.fill()  # after the checks, before the outputs are written
         return trajectory
 
     monkeypatch.setattr(reproduce_module, "run_episode", then_fill)
+    assert run_main([*QUICK, "--out", str(out)]) == 0
+    before = _results(out / FOLDER)
+    filled.append(True)
+    err = _refused([*QUICK, "--out", str(out / "fresh")], capsys)  # no traceback
+    assert "could not write the results" in err and "No space left" in err
+    assert list((out / "fresh").iterdir()) == [out / "fresh" / f".{FOLDER}.lock"]  # no half
+    full_disk.empty()
     err = _refused([*QUICK, "--out", str(out), "--seed", "1", "--force"], capsys)
     assert "could not write the results" in err and "No space left" in err
     assert _results(out / FOLDER) == before
-    assert full_disk.entries() == [f".{FOLDER}.lock", FOLDER]
+    assert full_disk.entries() == [f".{FOLDER}.lock", "fresh", FOLDER]
 
 
 def test_too_little_space_is_refused_before_the_run(

@@ -97,13 +97,14 @@ def test_force_keeps_the_old_agent_until_the_new_one_is_written(tmp_path: Path) 
     folder = tmp_path / "run"
     train(CONFIG, folder, progress=False)
     before = {name: (folder / name).read_bytes() for name in AGENT}
+    start = time.time()
     forced = subprocess.Popen([sys.executable, "-c", _FORCED, str(folder)])
     try:
         deadline = time.monotonic() + 120
-        while not any(p.glob("progress.csv") for p in tmp_path.glob(".run.new-*")):
+        while not any(p.stat().st_mtime > start for p in tmp_path.rglob("progress.csv")):
             assert forced.poll() is None and time.monotonic() < deadline
             time.sleep(0.1)
-        time.sleep(1.0)  # training
+        time.sleep(1.0)  # the new run trains
     finally:
         forced.kill()
         forced.wait()
