@@ -178,3 +178,32 @@ def test_too_little_space_is_refused_before_the_run(
     monkeypatch.setattr(atomic.shutil, "disk_usage", lambda path: type("U", (), {"free": 10}))
     assert "MiB free" in _refused([*QUICK, "--out", str(tmp_path)], capsys)
     assert ran == []
+
+
+_KILLED_RUN = """
+import sys
+sys.path.insert(0, sys.argv[1])
+from conftest import KillingOs
+from cpf_commands.run.cli import run_main
+from cpf_env import atomic
+atomic.os = KillingOs(int(sys.argv[2]))
+run_main(sys.argv[3:])
+"""
+
+
+def test_a_fresh_process_killed_between_the_two_renames_is_restored(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A real cpf-run process, SIGKILLed after the old folder was renamed away."""
+    assert run_main([*QUICK, "--out", str(tmp_path)]) == 0
+    before = _results(tmp_path / FOLDER)
+    # stages: metrics.json (flush, rename, flush the folder), the swap (flush, rename, rename)
+    argv = [*QUICK, "--out", str(tmp_path), "--seed", "1", "--force"]
+    here = str(Path(__file__).parent)
+    killed = subprocess.run([sys.executable, "-c", _KILLED_RUN, here, "6", *argv], check=False)
+    assert killed.returncode == -9
+    assert not (tmp_path / FOLDER).exists()
+    assert [p.name[: len(FOLDER) + 6] for p in tmp_path.glob(".*.old-*")] == [f".{FOLDER}.old-"]
+    assert "pass --force" in _refused([*QUICK, "--out", str(tmp_path), "--seed", "1"], capsys)
+    assert _results(tmp_path / FOLDER) == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == [f".{FOLDER}.lock", FOLDER]
