@@ -14,6 +14,7 @@ import time
 from collections.abc import Sequence
 
 from cpf_commands.bench import views
+from cpf_commands.bench.episodes import METRICS
 from cpf_commands.bench.marl_eval import write_marl_eval
 from cpf_commands.bench.run import (
     BASE_SEED,
@@ -23,6 +24,7 @@ from cpf_commands.bench.run import (
     reference_label,
     run_bench,
 )
+from cpf_commands.bench.stats import REPLICATES
 from cpf_commands.bench.verdict import COST_MARGIN, check_margin
 from cpf_commands.common.arguments import add_scenarios_argument
 from cpf_commands.common.outputs import claim_output_folder
@@ -35,10 +37,15 @@ from cpf_env.scenarios.suite import is_deterministic, list_suite
 
 __all__ = ["bench_main"]
 
-#: Memory per fleet and step of an episode's recorded series (15 float64 series, rounded up).
-SERIES_BYTES_PER_STEP = 16 * 8
-#: Memory per vessel of a fleet's simulator and policy state (generous).
-STATE_BYTES_PER_VESSEL = 8 * 1024
+#: Memory per fleet and step of a batch's recorded series and their reduction (measured
+#: 256 B on bench_large_fleet: 15 float64 series and the temporaries of their reduction).
+SERIES_BYTES_PER_STEP = 256
+#: Memory per vessel of a fleet's simulator, policy and step-record state (measured about
+#: 24 KiB on bench_large_fleet, rounded up).
+STATE_BYTES_PER_VESSEL = 32 * 1024
+#: Memory per metric, bootstrap replicate and seed of a cell's summary: the resampled
+#: metrics and their sorted copy for the IQM (measured 2.5 x 8 B, rounded up).
+BOOTSTRAP_BYTES = 3 * 8
 #: Disk space per episode of the outputs (a row of episodes.csv, generous).
 OUTPUT_BYTES_PER_EPISODE = 1024
 
@@ -151,15 +158,19 @@ def _command(args: argparse.Namespace) -> str:
     return shlex.join(parts)
 
 
-def _memory_needed(args: argparse.Namespace) -> int:
-    """Bytes of memory the largest batch of the run holds (a generous estimate).
+def _memory_needed(args: argparse.Namespace) -> tuple[int, int]:
+    """Bytes of memory the run's largest batch and its summary hold (generous estimates).
 
     A local run steps every policy on a scenario in one simulator of
     policies x seeds fleets, each recording its series over the horizon; the
     scenarios run one after another. With Ray each (policy, scenario) cell is a
-    task of its own, at most one per CPU at a time.
+    task of its own, at most one per CPU at a time. The summary then
+    bootstraps every metric of one cell at a time over its seeds.
+
+    Returns:
+        (largest batch, summary) in bytes; the run needs the larger of the two.
     """
-    batches = []
+    batches, episodes = [], []
     for name in args.scenarios:
         scenario = make_scenario(name)
         seeds = 1 if is_deterministic(scenario) else args.seeds
@@ -167,10 +178,13 @@ def _memory_needed(args: argparse.Namespace) -> int:
         batches.append(
             seeds * (horizon * SERIES_BYTES_PER_STEP + scenario.n * STATE_BYTES_PER_VESSEL)
         )
+        episodes.append(seeds)
     policies = len(args.policies)
     if args.ray or args.address is not None:
-        return max(batches) * min(policies * len(batches), os.cpu_count() or 1)
-    return max(batches) * policies
+        batch = max(batches) * min(policies * len(batches), os.cpu_count() or 1)
+    else:
+        batch = max(batches) * policies
+    return batch, max(episodes) * len(METRICS) * REPLICATES * BOOTSTRAP_BYTES
 
 
 def _claim_output(args: argparse.Namespace) -> atomic.FolderLock:
@@ -178,14 +192,16 @@ def _claim_output(args: argparse.Namespace) -> atomic.FolderLock:
     if args.seeds < 1:
         raise ValueError(f"--seeds must be >= 1, got {args.seeds}.")
     check_margin(args.cost_margin)
-    needed = _memory_needed(args)
+    batch, summary = _memory_needed(args)
     available = _available_memory()
-    if available is not None and needed > available:
+    if available is not None and max(batch, summary) > available:
         raise ValueError(
             f"{len(args.policies)} policies x --seeds {args.seeds} need about "
-            f"{needed / 2**30:.1f} GiB of memory (every policy's fleets step in one batch per "
-            f"scenario), but {available / 2**30:.1f} GiB are available; lower --seeds or "
-            "--steps, or bench fewer policies at a time."
+            f"{max(batch, summary) / 2**30:.1f} GiB of memory ({batch / 2**30:.1f} GiB for the "
+            f"largest batch, every policy's fleets on a scenario at once; "
+            f"{summary / 2**30:.1f} GiB for the summary's bootstrap intervals), but "
+            f"{available / 2**30:.1f} GiB are available; lower --seeds or --steps, or bench "
+            "fewer policies at a time."
         )
     if args.marl_eval is not None:
         atomic.check_writable(args.marl_eval)

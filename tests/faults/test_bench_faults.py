@@ -98,8 +98,8 @@ def test_a_lock_file_that_is_a_link_is_not_followed(
 def test_the_memory_check_counts_policies_x_seeds_x_series(
     tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    """The probe's case: 8 policies x 5000 seeds of bench_large_fleet need about 12.6 GiB,
-    not the 1.6 GiB of one policy; with 8 GiB available the run is refused before it starts."""
+    """The probe's case: 8 policies x 5000 seeds of bench_large_fleet need about 31 GiB, not
+    the 1.6 GiB once counted for one policy; with 8 GiB available it is refused at once."""
     ran: list[object] = []
     monkeypatch.setattr(cli, "run_bench", lambda *a, **k: ran.append(a) or [])
     monkeypatch.setattr(cli, "_available_memory", lambda: 8 * 2**30)
@@ -108,10 +108,10 @@ def test_the_memory_check_counts_policies_x_seeds_x_series(
     argv = ["--policies", *policies, "--scenarios", "bench_large_fleet", "--seeds", "5000",
             "--out", str(tmp_path / "out"), "--quiet"]  # fmt: skip
     message = _refused(argv, capsys)
-    # 8 x 5000 fleets x (2000 steps x 16 series x 8 B + 10 vessels x 8 KiB) = 1.35168e10 B
-    assert "8 policies x --seeds 5000 need about 12.6 GiB" in message
+    # 8 x 5000 fleets x (2000 steps x 256 B + 10 vessels x 32 KiB) = 3.35872e10 B
+    assert "8 policies x --seeds 5000 need about 31.3 GiB" in message
     assert ran == []
-    monkeypatch.setattr(cli, "_available_memory", lambda: 13 * 2**30)
+    monkeypatch.setattr(cli, "_available_memory", lambda: 32 * 2**30)
     assert bench_main(argv) == 0 and len(ran) == 1
 
 
