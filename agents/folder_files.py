@@ -6,8 +6,9 @@ worst:
 
 - only a regular file is opened (``O_NOFOLLOW | O_NONBLOCK``, then ``fstat``): a
   FIFO, a device such as ``/dev/zero``, a socket or a folder is refused by what
-  it is, without blocking or reading it; a symbolic link is followed only when
-  it stays inside the folder, else it is refused, naming its target;
+  it is, without blocking or reading it; a symbolic link in a folder is
+  followed only when it stays inside the folder, else it is refused, naming its
+  target (an exported graph named on its own may be a link to a regular file);
 - sizes are bounded before reading: ``MAX_JSON_BYTES`` (1 MiB) for each JSON
   file, ``MAX_WEIGHT_BYTES`` (256 MiB) for a weights or ONNX file;
 - JSON is nested at most ``MAX_JSON_DEPTH`` (32) levels (checked before
@@ -83,37 +84,38 @@ def read_file(path: Path, limit: int, folder: Path | None = None) -> bytes:
     Args:
         path: The file.
         limit: Largest size accepted, bytes.
-        folder: The folder ``path`` must stay in if it is a symbolic link (default: its parent).
+        folder: The folder a symbolic link at ``path`` must resolve into; None: a file
+            the user named on its own (an exported graph), whose links are followed.
 
     Raises:
-        AgentFolderError: Missing, a link leaving the folder, not a regular file
+        AgentFolderError: Missing, a link leaving ``folder``, not a regular file
             (FIFO, device, socket, folder), larger than ``limit``, or unreadable.
     """
-    home = (folder or path.parent).resolve()
+    named = path
     if path.is_symlink():
         target = path.resolve()
-        if not target.is_relative_to(home):
+        if folder is not None and not target.is_relative_to(folder.resolve()):
             raise AgentFolderError(
-                f"{path} is a link to {os.readlink(path)}, outside {home}; an agent folder "
+                f"{path} is a link to {os.readlink(path)}, outside {folder}; an agent folder "
                 "holds its files itself. Copy the file into the folder."
             )
-        path = target
+        named, path = Path(f"{path} (a link to {target})"), target
     try:
         handle = os.open(path, os.O_RDONLY | os.O_NOFOLLOW | os.O_NONBLOCK | os.O_CLOEXEC)
     except FileNotFoundError:
-        raise AgentFolderError(f"{path} is missing.") from None
+        raise AgentFolderError(f"{named} is missing.") from None
     except OSError as error:
         if error.errno == errno.ELOOP:
-            raise AgentFolderError(f"{path} is a link loop or a link; give the file.") from None
-        raise AgentFolderError(f"{path} cannot be opened: {error.strerror}.") from None
+            raise AgentFolderError(f"{named} is a link loop; give the file itself.") from None
+        raise AgentFolderError(f"{named} cannot be opened: {error.strerror}.") from None
     try:
         info = os.fstat(handle)
         if not stat.S_ISREG(info.st_mode):
             kind = _KINDS.get(stat.S_IFMT(info.st_mode), "not a regular file")
-            raise AgentFolderError(f"{path} is {kind}, not a regular file; it is not read.")
+            raise AgentFolderError(f"{named} is {kind}, not a regular file; it is not read.")
         if info.st_size > limit:
             raise AgentFolderError(
-                f"{path} has {info.st_size:,} bytes, more than the {limit:,} this loader reads."
+                f"{named} has {info.st_size:,} bytes, more than the {limit:,} this loader reads."
             )
         chunks, size = [], 0
         while size <= limit:
@@ -123,11 +125,11 @@ def read_file(path: Path, limit: int, folder: Path | None = None) -> bytes:
             chunks.append(chunk)
             size += len(chunk)
     except OSError as error:
-        raise AgentFolderError(f"{path} cannot be read: {error.strerror}.") from None
+        raise AgentFolderError(f"{named} cannot be read: {error.strerror}.") from None
     finally:
         os.close(handle)
     if size > limit:
-        raise AgentFolderError(f"{path} grew past the {limit:,} bytes this loader reads.")
+        raise AgentFolderError(f"{named} grew past the {limit:,} bytes this loader reads.")
     return b"".join(chunks)
 
 
@@ -174,7 +176,7 @@ def field(data: Any, key: str, source: Path | str, where: str = "") -> Any:
         name = where.rstrip(".") or "the top level"
         raise AgentFolderError(f"{source}: {name} must be a JSON object, got {_kind(data)}.")
     if key not in data:
-        raise AgentFolderError(f"{source} lacks the field {where}{key!r}.")
+        raise AgentFolderError(f"{source} lacks the field '{where}{key}'.")
     return data[key]
 
 
@@ -239,12 +241,12 @@ def check_fields(
     for key, annotation in types.items():
         if key not in data:
             if required:
-                raise AgentFolderError(f"{source} lacks the field {where}{key!r}.")
+                raise AgentFolderError(f"{source} lacks the field '{where}{key}'.")
             continue
         description, check = _CHECKS[annotation]
         if not check(data[key]):
             raise AgentFolderError(
-                f"{source}: field {where}{key!r} must be {description}, got {_kind(data[key])}."
+                f"{source}: field '{where}{key}' must be {description}, got {_kind(data[key])}."
             )
 
 

@@ -58,7 +58,7 @@ from cpf_env import atomic
 from cpf_env.envs.parallel import make_scenario
 from cpf_env.scenarios import Scenario
 
-__all__ = ["OnnxActor", "export_onnx", "load_onnx_policy", "residual_range"]
+__all__ = ["OnnxActor", "export_onnx", "load_onnx_policy", "residual_range", "seal_onnx"]
 
 _INSTALL = 'this needs the optional ONNX extra: pip install -e ".[onnx]" (onnx and onnxruntime)'
 #: Metadata keys of an exported graph: the training record, and the file's own SHA-256.
@@ -168,7 +168,7 @@ def export_onnx(folder: str | Path, out: str | Path, checks: int = 1000) -> floa
         entry = model.metadata_props.add()
         entry.key, entry.value = key, value
     onnx.checker.check_model(model)
-    atomic.write_bytes(target, _sealed(model.SerializeToString()))
+    atomic.write_bytes(target, seal_onnx(model.SerializeToString()))
     rows = _check_inputs(network.input_size, normalization, checks)
     with torch.no_grad():
         expected = network(torch.from_numpy(_normalized(rows, normalization))).numpy()
@@ -191,8 +191,15 @@ def _check_inputs(size: int, normalization: Normalization | None, count: int) ->
     return (normalization.mean + spread * noise).astype(np.float32)
 
 
-def _sealed(data: bytes) -> bytes:
-    """The serialized graph with its SHA-256 (taken with the digits as zeros) in place."""
+def seal_onnx(data: bytes) -> bytes:
+    """A serialized graph with its SHA-256 in place of its ``cpf_sha256`` metadata's zeros.
+
+    Args:
+        data: The serialized ``ModelProto``, whose metadata holds ``cpf_sha256`` = 64 zeros.
+
+    Returns:
+        The same bytes with the zeros replaced by the SHA-256 of ``data``.
+    """
     if len(_SEAL.findall(data)) != 1 or data.count(_UNSEALED) != 1:
         raise RuntimeError("the exported graph holds the hash placeholder more than once.")
     return data.replace(_UNSEALED, sha256(data).encode())
