@@ -270,9 +270,7 @@ def test_marl_fields_are_typed_strictly(tmp_path: Path, path: str, value: Any, f
     _refused(folder, "config.json", field)
 
 
-@pytest.mark.parametrize(
-    ("key", "text"), [("epsilon", "Infinity"), ("clip", "1e400")]
-)
+@pytest.mark.parametrize(("key", "text"), [("epsilon", "Infinity"), ("clip", "1e400")])
 def test_infinite_statistics_are_refused(tmp_path: Path, key: str, text: str) -> None:
     folder = _copy(AGENT, tmp_path)
     data = json.loads((folder / "normalization.json").read_text())
