@@ -239,11 +239,11 @@ def check_fields(
         name = where.rstrip(".") or "the top level"
         raise AgentFolderError(f"{source}: {name} must be a JSON object, got {_kind(data)}.")
     for key, annotation in types.items():
+        description, check = _CHECKS[annotation]  # a KeyError here: teach _CHECKS the type
         if key not in data:
             if required:
                 raise AgentFolderError(f"{source} lacks the field '{where}{key}'.")
             continue
-        description, check = _CHECKS[annotation]
         if not check(data[key]):
             raise AgentFolderError(
                 f"{source}: field '{where}{key}' must be {description}, got {_kind(data[key])}."
