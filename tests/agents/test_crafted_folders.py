@@ -51,12 +51,23 @@ def _data_segment() -> int:
     raise RuntimeError("no VmData in /proc/self/status")
 
 
+def allow(seconds: float) -> Callable[[Callable[..., None]], Callable[..., None]]:
+    """Give a test ``seconds`` instead of DEADLINE (one that compiles the simulator's kernels)."""
+
+    def mark(test: Callable[..., None]) -> Callable[..., None]:
+        test.deadline = seconds  # type: ignore[attr-defined]
+        return test
+
+    return mark
+
+
 @pytest.fixture(autouse=True)
-def guard() -> Iterator[None]:
-    """Fail, rather than hang or exhaust memory: SIGALRM after DEADLINE, RLIMIT_DATA capped."""
+def guard(request: pytest.FixtureRequest) -> Iterator[None]:
+    """Fail, rather than hang or exhaust memory: SIGALRM after the deadline, RLIMIT_DATA capped."""
+    seconds = getattr(request.function, "deadline", DEADLINE)
 
     def expire(signum: int, frame: FrameType | None) -> None:
-        raise TimeoutError(f"the loader was still running after {DEADLINE} s (blocked)")
+        raise TimeoutError(f"the loader was still running after {seconds} s (blocked)")
 
     previous = signal.signal(signal.SIGALRM, expire)
     soft, hard = resource.getrlimit(resource.RLIMIT_DATA)
@@ -64,7 +75,7 @@ def guard() -> Iterator[None]:
     resource.setrlimit(
         resource.RLIMIT_DATA, (cap if hard == resource.RLIM_INFINITY else min(cap, hard), hard)
     )
-    signal.setitimer(signal.ITIMER_REAL, DEADLINE)
+    signal.setitimer(signal.ITIMER_REAL, seconds)
     try:
         yield
     finally:
@@ -346,6 +357,7 @@ def test_cpf_run_refuses_an_empty_folder_with_one_line(
     assert "empty" in error and "manifest.json" in error
 
 
+@allow(600)  # a cold numba cache compiles the simulator's kernels first
 def test_cpf_run_runs_the_marl_folders_cpf_bench_runs(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
