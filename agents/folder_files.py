@@ -93,7 +93,12 @@ def read_file(path: Path, limit: int, folder: Path | None = None) -> bytes:
     """
     named = path
     if path.is_symlink():
-        target = path.resolve()
+        try:
+            target = path.resolve(strict=True)
+        except FileNotFoundError:
+            raise AgentFolderError(f"{path} is a link to a missing {os.readlink(path)}.") from None
+        except (OSError, RuntimeError):  # ELOOP; RuntimeError on Python 3.11
+            raise AgentFolderError(f"{path} is a link loop; give the file itself.") from None
         if folder is not None and not target.is_relative_to(folder.resolve()):
             raise AgentFolderError(
                 f"{path} is a link to {os.readlink(path)}, outside {folder}; an agent folder "
@@ -111,7 +116,7 @@ def read_file(path: Path, limit: int, folder: Path | None = None) -> bytes:
     try:
         info = os.fstat(handle)
         if not stat.S_ISREG(info.st_mode):
-            kind = _KINDS.get(stat.S_IFMT(info.st_mode), "not a regular file")
+            kind = _KINDS.get(stat.S_IFMT(info.st_mode), "a special file")
             raise AgentFolderError(f"{named} is {kind}, not a regular file; it is not read.")
         if info.st_size > limit:
             raise AgentFolderError(

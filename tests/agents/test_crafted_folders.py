@@ -173,6 +173,14 @@ def test_a_link_to_dev_zero_is_reported_as_what_it_is(tmp_path: Path, name: str)
     assert "missing" not in message
 
 
+@pytest.mark.parametrize(("target", "says"), [("manifest.json", "loop"), ("gone", "missing")])
+def test_a_link_loop_or_dangling_link_is_named(tmp_path: Path, target: str, says: str) -> None:
+    folder = _copy(AGENT, tmp_path)
+    (folder / "manifest.json").unlink()
+    (folder / "manifest.json").symlink_to(target)
+    _refused(folder, "manifest.json", says)
+
+
 def test_a_link_leaving_the_folder_is_refused_even_to_the_right_bytes(tmp_path: Path) -> None:
     folder = _copy(AGENT, tmp_path)
     outside = tmp_path / "elsewhere.safetensors"
