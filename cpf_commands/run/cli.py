@@ -9,7 +9,6 @@ run's own metrics), and write figures and metrics.
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 from collections.abc import Sequence
@@ -121,22 +120,25 @@ def _default_scenario(policy: str) -> str:
     """The paper's scenario, or the training scenario of an agent folder (its first, if several).
 
     Raises:
-        ValueError: An agent folder whose config.json is unreadable.
+        ValueError: A folder that is not an agent folder, or whose configuration is unreadable
+            (``agents.loading.read_config``'s message, naming the file and field).
     """
-    record = Path(policy) / "config.json"
-    if not record.is_file():
+    if not Path(policy).is_dir():
         return DEFAULT_SCENARIO
     try:
-        scenario = json.loads(record.read_text())["config"]["scenario"]
-    except (OSError, json.JSONDecodeError, KeyError, TypeError) as error:
-        raise ValueError(f"{record} is not a readable training record: {error}") from None
-    if isinstance(scenario, str):
-        return scenario
-    print(
-        f"cpf-run: the agent was trained on {len(scenario)} scenarios; running its first, "
-        f"{scenario[0]} (choose another with --scenario)."
-    )
-    return str(scenario[0])
+        from agents.loading import read_config
+    except ImportError as error:
+        raise ValueError(
+            f"{policy!r} is a folder, but loading trained agents needs the learning extra: "
+            "pip install 'cpf_env[rl]'."
+        ) from error
+    names = read_config(policy).scenarios
+    if len(names) > 1:
+        print(
+            f"cpf-run: the agent was trained on {len(names)} scenarios; running its first, "
+            f"{names[0]} (choose another with --scenario)."
+        )
+    return names[0]
 
 
 def _video_recorder(args: argparse.Namespace) -> VideoRecorder:

@@ -13,7 +13,8 @@ from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.vec_env import VecMonitor
 
 from agents import TrainConfig, load_policy, train
-from agents.training import ALGORITHMS, build_model, make_env
+from agents.algorithms import ALGORITHMS, build_model, make_env
+from agents.folder_files import AgentFolderError
 from baselines import make_policy
 from cpf_commands.train import train_main
 from cpf_env import FleetSim, scenarios
@@ -97,7 +98,7 @@ def test_loaded_policy_runs_under_evaluate_policy_and_on_another_scenario(tmp_pa
 
 
 def test_load_policy_says_what_a_folder_lacks(tmp_path: Path) -> None:
-    with pytest.raises(FileNotFoundError, match="not a cpf-train output folder"):
+    with pytest.raises(AgentFolderError, match="not a cpf-train output folder"):
         load_policy(tmp_path)
 
 

@@ -285,14 +285,32 @@ def test_wang2014_reports_claim_2_not_met_honestly(tmp_path, capsys):
 
 
 def test_an_agent_of_several_scenarios_runs_its_first_and_says_so(tmp_path, capsys):
+    import hashlib
+    import shutil
+
     from cpf_commands.run.cli import _default_scenario
 
-    (tmp_path / "config.json").write_text(
-        json.dumps({"config": {"scenario": ["bench_mild", "bench_switching"]}})
+    folder = tmp_path / "agent"
+    shutil.copytree(
+        ROOT / "results/residual_rl/agents/residual_ppo_bench_lossy_links_5m_s0", folder
     )
-    assert _default_scenario(str(tmp_path)) == "bench_mild"
+
+    def train_on(scenario):  # config.json edited, the manifest forged to match
+        record = json.loads((folder / "config.json").read_text())
+        record["config"]["scenario"] = scenario
+        data = json.dumps(record).encode()
+        (folder / "config.json").write_bytes(data)
+        manifest = json.loads((folder / "manifest.json").read_text())
+        manifest["files"]["config.json"] = {
+            "sha256": hashlib.sha256(data).hexdigest(),
+            "bytes": len(data),
+        }
+        (folder / "manifest.json").write_text(json.dumps(manifest))
+
+    train_on(["bench_mild", "bench_switching"])
+    assert _default_scenario(str(folder)) == "bench_mild"
     said = capsys.readouterr().out
     assert "trained on 2 scenarios" in said and "--scenario" in said
-    (tmp_path / "config.json").write_text(json.dumps({"config": {"scenario": "bench_mild"}}))
-    assert _default_scenario(str(tmp_path)) == "bench_mild"
+    train_on("bench_mild")
+    assert _default_scenario(str(folder)) == "bench_mild"
     assert capsys.readouterr().out == ""
