@@ -1,8 +1,11 @@
 """``cpf-bench``: the command around ``cpf_commands.bench.run``.
 
 It checks the output folder before anything runs (``--force``, a lock,
-writable, disk and memory for ``--seeds``), runs ``run_bench`` and prints the
-verdicts; ``cpf-bench --help`` lists the flags.
+writable, disk and memory for ``--seeds``), runs ``run_bench`` and prints its
+answer (``cpf_commands.bench.ranking``: per scenario and over the suite, the
+policies ranked by mean cost with their ratio to the reference, normalized
+score and verdict, and the best deployable policy named); ``cpf-bench
+--help`` lists the flags.
 """
 
 from __future__ import annotations
@@ -12,8 +15,9 @@ import shlex
 import time
 from collections.abc import Sequence
 
-from cpf_commands.bench import views
+from cpf_commands.bench import ranking
 from cpf_commands.bench.marl_eval import write_marl_eval
+from cpf_commands.bench.report import summarize
 from cpf_commands.bench.run import (
     BASE_SEED,
     OUTPUT_FILES,
@@ -224,11 +228,12 @@ def bench_main(argv: Sequence[str] | None = None) -> int:
     finally:
         lock.release()
     elapsed = time.perf_counter() - start
-    table = views.terminal_table(
-        cells, reference_label(args.reference, labelled_policies(args.policies)), args.cost_margin
+    reference = reference_label(args.reference, labelled_policies(args.policies))
+    answer = ranking.terminal_report(
+        summarize(cells, reference), cells, reference, args.cost_margin
     )
-    if table:
-        print(table)
+    if answer:
+        print(answer)
     requested = len(args.policies) * len(args.scenarios)
     if len(cells) < requested:
         print(
@@ -237,6 +242,7 @@ def bench_main(argv: Sequence[str] | None = None) -> int:
         )
     print(
         f"cpf-bench: {len(args.policies)} policies x {len(args.scenarios)} scenarios in "
-        f"{elapsed:.0f} s; results in {args.out}/ (summary.md, summary.csv, episodes.csv)"
+        f"{elapsed:.0f} s; results in {args.out}/ (report.html, summary.md, summary.csv, "
+        "episodes.csv)"
     )
     return 0

@@ -30,7 +30,7 @@ __all__ = [
     "gap_table",
     "markdown",
     "markdown_table",
-    "terminal_table",
+    "regression_lines",
     "verdict_rows",
 ]
 
@@ -67,25 +67,11 @@ def verdict_rows(found: Sequence[Verdict]) -> list[list[str]]:
     return rows
 
 
-def terminal_table(cells: Sequence[CellResult], reference: str, margin: float = COST_MARGIN) -> str:
-    """The verdicts as a plain-text table for the terminal ('' without the reference)."""
-    body = verdict_rows(verdicts(cells, reference, margin))
-    if not body:
-        return ""
-    table = [list(VERDICT_HEADER), *body]
-    widths = [max(len(row[k]) for row in table) for k in range(len(VERDICT_HEADER))]
-    lines = ["  ".join(cell.ljust(w) for cell, w in zip(row, widths, strict=True)) for row in table]
-    return (
-        f"against {reference}: (equivalent: cost interval within +-{margin:.1%} of its mean)\n"
-        + "\n".join([line.rstrip() for line in lines] + _regressions(cells, reference, margin))
-    )
-
-
 #: Units of the guarded metrics' short labels, as printed.
 _UNITS = {"cross-track": " m", "heading": " rad", "formation": " m"}
 
 
-def _regressions(cells: Sequence[CellResult], reference: str, margin: float) -> list[str]:
+def regression_lines(cells: Sequence[CellResult], reference: str, margin: float) -> list[str]:
     """One line per verdict with a regressed guarded metric: the means, policy vs reference.
 
     Final-window means in SI units (m, rad; progress as a fraction of v0 T,
