@@ -60,9 +60,11 @@ def _parser() -> argparse.ArgumentParser:
         default=default_policies(),
         type=policy_argument,
         metavar="POLICY",
-        help="baseline names or cpf-train --out folders (default: every deployable baseline "
-        "and the headroom reference nn_dsc_privileged, which is told the true model error "
-        "and disturbances and has ideal links: not deployable)",
+        help="baseline names, policies installed packages register, package.module:NAME of "
+        "your own policy class or factory (docs/extending.md), cpf-train --out folders or "
+        "cpf-export .onnx files, each once (default: every deployable baseline and the "
+        "headroom reference nn_dsc_privileged, which is told the true model error and "
+        "disturbances and has ideal links: not deployable)",
     )
     add_scenarios_argument(
         parser,
@@ -158,6 +160,7 @@ def _claim_output(args: argparse.Namespace) -> atomic.FolderLock:
     """Refuse a run whose flags, memory or output folder would fail it; lock --out."""
     if args.seeds < 1:
         raise ValueError(f"--seeds must be >= 1, got {args.seeds}.")
+    labelled_policies(args.policies)  # a policy listed twice
     check_margin(args.cost_margin)
     horizons = [args.steps or make_scenario(name).max_steps for name in args.scenarios]
     fleets = max(make_scenario(name).n for name in args.scenarios)

@@ -38,8 +38,8 @@ from cpf_commands.common.policies import (
     BenchPolicy,
     PolicySpec,
     TrustedAgentFolder,
-    baseline_names,
     policy_label,
+    refers_to_file,
     resolve_policy,
 )
 from cpf_commands.common.ray_runtime import start_ray
@@ -95,16 +95,21 @@ def default_policies() -> list[str]:
 def labelled_policies(
     policies: Sequence[PolicySpec] | Mapping[str, PolicySpec],
 ) -> dict[str, PolicySpec]:
-    """Label -> specification, refusing two policies with the same label."""
+    """Label -> specification, refusing a policy listed twice or two with the same label."""
     if isinstance(policies, Mapping):
         return dict(policies)
     labelled: dict[str, PolicySpec] = {}
     for spec in policies:
         label = policy_label(spec)
+        if label in labelled and isinstance(spec, str | Path):
+            raise ValueError(
+                f"policy {label!r} is listed twice; duplicates are not allowed (every policy "
+                "runs on the same seeds, so a second run would repeat the first)."
+            )
         if label in labelled:
             raise ValueError(
-                f"two policies are labelled {label!r}; pass a mapping label -> policy to "
-                "tell them apart."
+                f"two policies are labelled {label!r}; give them distinct name attributes "
+                "or pass a mapping label -> policy."
             )
         labelled[label] = spec
     return labelled
@@ -254,8 +259,8 @@ def _absolute(spec: PolicySpec) -> PolicySpec:
     """An agent folder given by a relative path made absolute (Ray workers run elsewhere)."""
     if isinstance(spec, TrustedAgentFolder):
         return spec  # already absolute; keeps the user's trust
-    if isinstance(spec, Path) or (isinstance(spec, str) and spec not in baseline_names()):
-        return Path(spec).resolve()
+    if refers_to_file(spec):
+        return Path(spec).resolve()  # type: ignore[arg-type]
     return spec
 
 

@@ -55,8 +55,9 @@ def _run_parser(prog: str = "cpf-run") -> argparse.ArgumentParser:
         default="nn_dsc",
         type=policy_argument,
         help=f"a baseline ({', '.join(sorted(POLICIES))}), a privileged reference "
-        f"({', '.join(sorted(PRIVILEGED))}, not deployable), a cpf-train --out folder or a "
-        "cpf-export .onnx file",
+        f"({', '.join(sorted(PRIVILEGED))}, not deployable), a policy an installed package "
+        "registers, package.module:NAME of your own policy class or factory "
+        "(docs/extending.md), a cpf-train --out folder or a cpf-export .onnx file",
     )
     parser.add_argument(
         "--trust-pickle",
