@@ -153,10 +153,11 @@ def user_policy(spec: str) -> Callable[..., Any]:
     if spec in points and not _is_module_spec(spec):
         try:
             target = points[spec].load()
-        except (ImportError, AttributeError) as error:
+        except Exception as error:  # the package's own code failed: say whose and why
             raise ValueError(
                 f"policy {spec!r} is registered by an installed package as "
-                f"{points[spec].value!r}, which cannot be loaded: {error}"
+                f"{points[spec].value!r}, which cannot be loaded: "
+                f"{type(error).__name__}: {error}"
             ) from error
     else:
         module_name, _, name = spec.partition(":")
@@ -166,6 +167,11 @@ def user_policy(spec: str) -> Callable[..., Any]:
             raise ValueError(
                 f"policy {spec!r}: cannot import module {module_name!r} ({error}); install "
                 "its package or put its folder on PYTHONPATH."
+            ) from error
+        except Exception as error:  # the user's module failed while importing
+            raise ValueError(
+                f"policy {spec!r}: importing module {module_name!r} failed: "
+                f"{type(error).__name__}: {error}"
             ) from error
         if not hasattr(module, name):
             raise ValueError(f"policy {spec!r}: module {module_name!r} has no {name!r}.")
