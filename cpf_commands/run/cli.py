@@ -195,6 +195,8 @@ def run_main(argv: Sequence[str] | None = None, prog: str = "cpf-run") -> int:
         )
         for claim in claims:
             verdict = "holds" if claim.holds else "NOT MET"
+            if claim.holds is None:
+                verdict = f"not judged: {metrics['claims_not_judged']}"
             print(
                 f"  {claim.number}. [{claim.figure}] {claim.statement}\n"
                 f"     measured: {claim.measured} -> {verdict}"
