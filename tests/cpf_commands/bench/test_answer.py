@@ -137,3 +137,16 @@ def test_cpf_bench_prints_its_answer_and_writes_one_html_report(tmp_path, capsys
 def test_terminal_report_is_empty_without_the_reference():
     cells = [c for c in _cells() if c.policy != "nn_dsc"]
     assert terminal_report(summarize(cells, "nn_dsc"), cells, "nn_dsc") == ""
+
+
+def test_a_ratio_below_the_axis_floor_is_marked_clipped():
+    from cpf_commands.bench.views import figure
+
+    cells = [_cell("nn_dsc", "bench_mild", 100.0), _cell("tiny", "bench_mild", 0.0)]
+    cells[1].metrics["cost"][:] = 0.05  # 0.0005 x the reference: below the 0.001 floor
+    cells.append(_cell("fine", "bench_mild", 90.0))
+    ax = figure(summarize(cells, "nn_dsc"), cells, "cost", "cost").axes[0]
+    assert [text.get_text() for text in ax.texts] == ["< 0.001: clipped"]
+    assert ax.get_xlim()[0] == pytest.approx(1e-3)
+    markers = [line.get_marker() for line in ax.lines if line.get_marker() not in (None, "None")]
+    assert "<" in markers and "o" in markers  # the clipped mean and the one drawn where it is
