@@ -27,7 +27,7 @@ from cpf_commands.bench.run import (
     run_bench,
 )
 from cpf_commands.bench.verdict import COST_MARGIN, check_margin
-from cpf_commands.common.arguments import add_scenarios_argument
+from cpf_commands.common.arguments import add_scenarios_argument, non_negative_int
 from cpf_commands.common.outputs import claim_output_folder
 from cpf_commands.common.policies import policy_argument, trusting_pickles
 from cpf_commands.common.ray_runtime import add_address_argument
@@ -76,7 +76,7 @@ def _parser() -> argparse.ArgumentParser:
     )
     parser.add_argument(
         "--base-seed",
-        type=int,
+        type=non_negative_int,
         default=BASE_SEED,
         help=f"seed of episode 0; episode k uses base + k (default: {BASE_SEED})",
     )

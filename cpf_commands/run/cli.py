@@ -16,7 +16,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from cpf_commands.common.arguments import positive_int
+from cpf_commands.common.arguments import non_negative_int, positive_int
 from cpf_commands.common.policies import policy_argument, trusting_pickles
 from cpf_env import scenarios
 
@@ -72,7 +72,12 @@ def _run_parser(prog: str = "cpf-run") -> argparse.ArgumentParser:
         help="reading of the NN weight law of nn_dsc and its ablations (default: plain on the "
         "0.01 s scenarios *_fine, gamma_scaled elsewhere); see docs/reproduction.md",
     )
-    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument(
+        "--seed",
+        type=non_negative_int,
+        default=0,
+        help="seed of the environment and the policy, an integer >= 0 (default: 0)",
+    )
     parser.add_argument(
         "--steps",
         type=positive_int,
