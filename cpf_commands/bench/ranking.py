@@ -160,11 +160,14 @@ def _header(reference: str) -> tuple[str, ...]:
 def _best_sentence(
     policy: str, reference: str, ratio: tuple[float, float, float], verdict: str, single: bool
 ) -> str:
-    """'best deployable: X, cost 0.93 x reference's [0.9, 0.95]; verdict: beats'."""
+    """'best deployable: X, mean cost 0.930 [0.900, 0.950] x ref's (the lowest); verdict: beats'."""
     if policy == reference:
         return f"best deployable: {reference} (the reference): no policy has a lower mean cost"
     how = _interval(*ratio, single=single, digits=0)
-    return f"best deployable: {policy}, mean cost {how} x {reference}'s; verdict: {verdict}"
+    return (
+        f"best deployable: {policy}, mean cost {how} x {reference}'s (the lowest); "
+        f"verdict: {verdict}"
+    )
 
 
 def _suite_table(

@@ -368,7 +368,7 @@ def figure(
     ax.xaxis.set_major_formatter(FuncFormatter(lambda x, _: f"x{x:g}"))
     ax.xaxis.set_minor_formatter(FuncFormatter(lambda x, _: f"{x:g}" if x in _MINOR else ""))
     ax.tick_params(axis="x", which="both", labelsize=7)
-    if others:  # the reference alone has no marker to label
+    if ax.get_legend_handles_labels()[0]:  # none when no ratio was drawn
         fig.legend(fontsize=7, loc="outside lower center", ncols=min(3, len(others)))
     fig.suptitle(f"{title}\nrelative to {reference}, paired 95 % bootstrap interval", fontsize=10)
     return fig

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 
@@ -89,7 +91,10 @@ def test_terminal_prints_the_verdict_against_any_reference(tmp_path, capsys):
     argv += ["--steps", "20", "--reference", "backstepping", "--out", str(tmp_path), "--quiet"]
     assert bench_main([*argv, "--no-figures"]) == 0
     out = capsys.readouterr().out
-    assert "against backstepping:" in out and "dsc" in out and "P(beats)" in out
+    assert "verdict: against backstepping" in out.replace("\n", " ")
+    assert "/ backstepping [95 %]" in out
+    ranked = re.findall(r"^  \d  (\S+)", out, flags=re.MULTILINE)
+    assert sorted(ranked) == ["backstepping", "dsc"]
     summary = (tmp_path / "summary.md").read_text()
     assert "## Verdict against backstepping" in summary
     assert "--reference backstepping" in summary
