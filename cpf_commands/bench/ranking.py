@@ -58,14 +58,16 @@ class RankedTable:
 
 
 def _deployable(policy: str) -> bool:
-    """Whether a policy may be named best: not a privileged reference."""
-    return policy not in PRIVILEGED
+    """Whether a policy may be named best: neither a privileged nor the headroom reference."""
+    return policy not in PRIVILEGED and policy != HEADROOM_REFERENCE
 
 
 def _name(policy: str, reference: str) -> str:
     if policy == reference:
         return f"{policy} (reference)"
-    return policy if _deployable(policy) else f"{policy} (privileged)"
+    if policy in PRIVILEGED:
+        return f"{policy} (privileged)"
+    return policy if _deployable(policy) else f"{policy} (not deployable)"
 
 
 def _triple(row: Mapping[str, object], keys: tuple[str, str, str]) -> tuple[float, float, float]:
