@@ -90,16 +90,31 @@ def _interval(value: float, low: float, high: float, single: bool, digits: int =
     return f"{_number(value, digits)} [{_number(low, digits)}, {_number(high, digits)}]"
 
 
-def _score(row: Mapping[str, object], policy: str, reference: str, headroom_ran: bool) -> str:
-    if policy == reference:
-        return "0"
-    if policy == HEADROOM_REFERENCE or not headroom_ran:
-        return "1" if policy == HEADROOM_REFERENCE else "n/a"
-    found = normalized_score(row)
-    if found is None:
-        return "no gap"
-    score, low, high = found
-    return _interval(score, low, high, single=row["n_episodes"] == 1, digits=0)
+def _scores(
+    found: Sequence[tuple[str, Mapping[str, object]]], reference: str, headroom_ran: bool
+) -> list[str]:
+    """The score column of a table's rows (``found``: policy, summary row).
+
+    The reference 0; the headroom reference 1 where it is better than the
+    reference (some row has a score), else "no gap"; every other policy its
+    score, or "no gap"; "n/a" everywhere but the reference's row if the
+    headroom reference did not run.
+    """
+    scores = [normalized_score(row) for _, row in found]
+    gap = any(score is not None for score in scores)
+    texts = []
+    for (policy, row), score in zip(found, scores, strict=True):
+        if policy == reference:
+            texts.append("0")
+        elif not headroom_ran:
+            texts.append("n/a")
+        elif policy == HEADROOM_REFERENCE:
+            texts.append("1" if gap else "no gap")
+        elif score is None:
+            texts.append("no gap")
+        else:
+            texts.append(_interval(*score, single=row["n_episodes"] == 1, digits=0))
+    return texts
 
 
 def _ratio(row: Mapping[str, object], base: Mapping[str, object]) -> tuple[float, float, float]:
@@ -128,7 +143,7 @@ def _scenario_table(
         return None
     found = [(p, index[(p, name, METRIC)]) for p in policies if (p, name, METRIC) in index]
     found.sort(key=lambda item: float(item[1]["mean"]))  # type: ignore[arg-type]
-    headroom_ran = (HEADROOM_REFERENCE, name, METRIC) in index
+    scores = _scores(found, reference, (HEADROOM_REFERENCE, name, METRIC) in index)
     rows, best = [], ""
     for rank, (policy, row) in enumerate(found, start=1):
         single = row["n_episodes"] == 1
@@ -144,7 +159,7 @@ def _scenario_table(
                 _name(policy, reference),
                 mean,
                 _interval(*ratio, single=single or policy == reference, digits=0),
-                _score(row, policy, reference, headroom_ran),
+                scores[rank - 1],
                 verdict,
             ]
         )
@@ -190,7 +205,7 @@ def _suite_table(
         return None
     found.sort(key=lambda item: float(item[1]["mean"]))  # type: ignore[arg-type]
     by_key = {(cell.policy, cell.scenario): cell for cell in cells}
-    headroom_ran = all((HEADROOM_REFERENCE, name) in by_key for name in names)
+    scores = _scores(found, reference, all((HEADROOM_REFERENCE, name) in by_key for name in names))
     rows, best = [], ""
     for rank, (policy, row) in enumerate(found, start=1):
         episodes = [by_key[(policy, name)].metrics[METRIC] for name in names]
@@ -208,7 +223,7 @@ def _suite_table(
                 _name(policy, reference),
                 f"{total / count:.4g}",
                 _interval(*ratio, single=policy == reference, digits=0),
-                _score(row, policy, reference, headroom_ran),
+                scores[rank - 1],
                 verdict,
             ]
         )
