@@ -77,10 +77,16 @@ def _triple(row: Mapping[str, object], keys: tuple[str, str, str]) -> tuple[floa
 
 
 def _number(value: float, digits: int) -> str:
-    """``digits`` significant digits, or 3 decimals for a ratio or score near 1 (``digits=0``)."""
-    if digits == 0:
-        return f"{value:.3f}" if 1e-2 <= abs(value) < 1e2 else f"{value:.3g}"
-    return f"{value:.{digits}g}"
+    """``digits`` significant digits, or (``digits=0``, ratios and scores) 3 decimals.
+
+    With 3 decimals, a value that rounds to zero is "0.000" whatever its sign,
+    and one of 1000 or more keeps 4 significant digits.
+    """
+    if digits:
+        return f"{value:.{digits}g}"
+    if abs(value) >= 1e3:
+        return f"{value:.4g}"
+    return f"{value:.3f}" if round(value, 3) else "0.000"
 
 
 def _interval(value: float, low: float, high: float, single: bool, digits: int = 4) -> str:
