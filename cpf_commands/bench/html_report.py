@@ -46,7 +46,7 @@ def html_report(
     """The page: command, legend, ranked tables (the suite-wide one first), notes, figures.
 
     Args:
-        tables: The ranked tables (``ranking.ranked_tables``), suite-wide last.
+        tables: The ranked tables (``ranking.ranked_tables``).
         legend: How to read the columns.
         command: The command line that regenerates the run.
         notes: Lines naming regressed guarded metrics.
@@ -55,9 +55,7 @@ def html_report(
     Returns:
         The HTML text.
     """
-    ordered = (
-        [*tables[-1:], *tables[:-1]] if tables and tables[-1].title.startswith("all") else tables
-    )
+    ordered = [t for t in tables if t.suite] + [t for t in tables if not t.suite]
     lines = [
         "<!DOCTYPE html>",
         '<html lang="en"><head><meta charset="utf-8"><title>cpf-bench report</title>',

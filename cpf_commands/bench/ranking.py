@@ -49,12 +49,14 @@ class RankedTable:
         header: Column headings.
         rows: Cell texts, one list per policy, best first.
         best: A sentence naming the best deployable policy ('' if none ran).
+        suite: Whether the table covers every scenario.
     """
 
     title: str
     header: tuple[str, ...]
     rows: list[list[str]]
     best: str
+    suite: bool = False
 
 
 def _deployable(policy: str) -> bool:
@@ -238,7 +240,7 @@ def _suite_table(
     header = list(_header(reference))
     header[2] = "mean cost (all episodes)"
     header[-1] = f"verdicts on {len(names)} scenarios"
-    return RankedTable(f"all {len(names)} scenarios", tuple(header), rows, best)
+    return RankedTable(f"all {len(names)} scenarios", tuple(header), rows, best, suite=True)
 
 
 def ranked_tables(

@@ -53,6 +53,7 @@ def test_tables_rank_by_mean_cost_with_ratio_score_and_verdict_and_name_the_best
         "all 2 scenarios",
     ]
     mild, lossy, suite = tables
+    assert [t.suite for t in tables] == [False, False, True]
     assert _column(mild, "policy") == [
         f"{HEADROOM_REFERENCE} (privileged)",
         "better",
@@ -129,6 +130,7 @@ def test_cpf_bench_prints_its_answer_and_writes_one_html_report(tmp_path, capsys
     assert printed.count("best deployable: ") == 3
     page = (out / "report.html").read_text()
     assert page.startswith("<!DOCTYPE html>") and page.count("<table>") == 3
+    assert page.index("all 2 scenarios") < page.index("bench_mild (2 episodes)")  # suite first
     assert page.count("data:image/png;base64,") == len(list(out.glob("*.png")))
     assert "best deployable: " in page and str(tmp_path) not in page
     assert bench_main([*argv[:-1], str(tmp_path / "quiet"), "--no-figures"]) == 0
