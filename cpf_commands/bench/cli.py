@@ -50,9 +50,12 @@ def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="cpf-bench",
         allow_abbrev=False,
-        description="Run policies x scenarios x paired seeds in batched simulators and write "
-        "episodes.csv, summary.csv, summary.md and figures: means and interquartile means "
-        "with 95 % bootstrap intervals, failures counted, scores relative to nn_dsc.",
+        description="Run policies x scenarios x paired seeds in batched simulators; print, per "
+        "scenario and over the suite, the policies ranked by mean cost with their ratio to "
+        "the reference, normalized score and verdict, and the best deployable policy; write "
+        "episodes.csv, summary.csv, summary.md, report.html and figures: means and "
+        "interquartile means with 95 % bootstrap intervals, failures counted, scores relative "
+        "to nn_dsc.",
     )
     parser.add_argument(
         "--policies",
