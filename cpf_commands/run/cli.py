@@ -15,7 +15,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from cpf_commands.common.arguments import positive_int
+from cpf_commands.common.arguments import non_negative_int, positive_int
 from cpf_commands.common.policies import policy_argument, trusting_pickles
 from cpf_env import scenarios
 
@@ -54,8 +54,9 @@ def _run_parser(prog: str = "cpf-run") -> argparse.ArgumentParser:
         default="nn_dsc",
         type=policy_argument,
         help=f"a baseline ({', '.join(sorted(POLICIES))}), a privileged reference "
-        f"({', '.join(sorted(PRIVILEGED))}, not deployable), a cpf-train --out folder or a "
-        "cpf-export .onnx file",
+        f"({', '.join(sorted(PRIVILEGED))}, not deployable), a policy an installed package "
+        "registers, package.module:NAME of your own policy class or factory "
+        "(docs/extending.md), a cpf-train --out folder or a cpf-export .onnx file",
     )
     parser.add_argument(
         "--trust-pickle",
@@ -70,7 +71,12 @@ def _run_parser(prog: str = "cpf-run") -> argparse.ArgumentParser:
         help="reading of the NN weight law of nn_dsc and its ablations (default: plain on the "
         "0.01 s scenarios *_fine, gamma_scaled elsewhere); see docs/reproduction.md",
     )
-    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument(
+        "--seed",
+        type=non_negative_int,
+        default=0,
+        help="seed of the environment and the policy, an integer >= 0 (default: 0)",
+    )
     parser.add_argument(
         "--steps",
         type=positive_int,
@@ -196,6 +202,8 @@ def run_main(argv: Sequence[str] | None = None, prog: str = "cpf-run") -> int:
         )
         for claim in claims:
             verdict = "holds" if claim.holds else "NOT MET"
+            if claim.holds is None:
+                verdict = f"not judged: {metrics['claims_not_judged']}"
             print(
                 f"  {claim.number}. [{claim.figure}] {claim.statement}\n"
                 f"     measured: {claim.measured} -> {verdict}"
