@@ -1,0 +1,292 @@
+"""Every ```python block of README.md and docs/*.md runs as written.
+
+How the blocks run:
+
+- Page by page, each page in a fresh interpreter, its blocks top to bottom in
+  one namespace: a block may use what an earlier block of the same page
+  defined, as a reader going down the page would.
+- The working directory is a fresh temporary folder with links to the
+  repository's committed ``results/`` and ``examples/``, so paths written as
+  from the repository root resolve, and whatever a block writes (``runs/``,
+  ``outputs/``) lands in the temporary folder.
+- A block is compiled under its page's path with its own line numbers, so a
+  traceback points at the page and the line in it (``docs/agents.md, line 61``).
+- Each block is one test, ``test_block[docs/agents.md:58]`` (the line of its
+  opening fence); a block after a failed one of the same page is not run and
+  says which one failed.
+
+Markers, as HTML comments (invisible on the rendered page) on the lines just
+before a block's opening fence, one or more, e.g.::
+
+    <!-- docs-test: needs torchrl -->
+    <!-- docs-test: slow -->
+
+- ``needs EXTRA``: the block needs an optional extra (``torchrl``, ``ray``,
+  ``rllib``, ``benchmarl``, ``onnx``); it is skipped, naming the extra, unless
+  the extra's modules import. Later blocks that use its names need the marker too.
+- ``slow``: the block takes long (a real training budget); it runs only under
+  ``pytest -m slow``. Give the reader a short variant in a block next to it,
+  which runs by default.
+
+Bash blocks are not run (their budgets are real ones); the commands they
+name are covered by the commands' own tests.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import importlib.util
+import json
+import os
+import re
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import pytest
+from conftest import ROOT
+
+#: Extra -> the modules it brings (all must import for its blocks to run).
+EXTRAS = {
+    "torchrl": ("torchrl", "tensordict"),
+    "ray": ("ray",),
+    "rllib": ("ray.rllib",),
+    "benchmarl": ("benchmarl",),
+    "onnx": ("onnx", "onnxruntime"),
+}
+
+#: Extra -> how to install it (BenchMARL's lines are in docs/marl.md: it is no pip extra).
+INSTALL = {
+    "torchrl": 'pip install -e ".[torchrl]"',
+    "ray": 'pip install -e ".[rl,ray]"',
+    "rllib": 'pip install -e ".[rl,rllib]"',
+    "benchmarl": "docs/marl.md, Install",
+    "onnx": 'pip install -e ".[onnx]"',
+}
+
+#: Committed folders a block may read by their repository-relative path.
+LINKED = ("results", "examples")
+
+#: Seconds a page may take before its interpreter is stopped.
+PAGE_TIMEOUT = 900
+
+_FENCE = re.compile(r"^```(\w*)\s*$")
+_MARKER = re.compile(r"^<!--\s*docs-test:\s*(.*?)\s*-->\s*$")
+
+
+@dataclasses.dataclass(frozen=True)
+class Block:
+    """One ```python block: where it is, its code and its markers."""
+
+    page: str  # path relative to the repository root
+    line: int  # line of the opening fence, from 1
+    code: str
+    slow: bool
+    needs: tuple[str, ...]
+
+    @property
+    def id(self) -> str:
+        return f"{self.page}:{self.line}"
+
+
+def parse_blocks(page: str, text: str) -> list[Block]:
+    """The page's ```python blocks with their markers.
+
+    Raises:
+        ValueError: An unclosed fence, or a marker this module does not understand
+            (a typo would otherwise silently run or skip a block).
+    """
+    blocks: list[Block] = []
+    lines = text.splitlines()
+    index = 0
+    while index < len(lines):
+        fence = _FENCE.match(lines[index])
+        if not fence:
+            index += 1
+            continue
+        start = index
+        end = next((k for k in range(start + 1, len(lines)) if lines[k].startswith("```")), None)
+        if end is None:
+            raise ValueError(f"{page}:{start + 1}: code block never closed")
+        if fence.group(1) == "python":
+            slow, needs = False, []
+            above = start - 1
+            while above >= 0 and (marker := _MARKER.match(lines[above])):
+                for word in marker.group(1).split(";"):
+                    key, _, value = word.strip().partition(" ")
+                    if key == "slow" and not value:
+                        slow = True
+                    elif key == "needs" and value.strip() in EXTRAS:
+                        needs.append(value.strip())
+                    else:
+                        raise ValueError(
+                            f"{page}:{above + 1}: unknown docs-test marker {word.strip()!r}; "
+                            f"use 'slow' or 'needs EXTRA' with EXTRA one of {sorted(EXTRAS)}"
+                        )
+                above -= 1
+            code = "\n".join(lines[start + 1 : end]) + "\n"
+            blocks.append(Block(page, start + 1, code, slow, tuple(needs)))
+        index = end + 1
+    return blocks
+
+
+def _pages() -> list[str]:
+    return ["README.md", *(f"docs/{p.name}" for p in sorted((ROOT / "docs").glob("*.md")))]
+
+
+def _all_blocks() -> list[Block]:
+    return [b for page in _pages() for b in parse_blocks(page, (ROOT / page).read_text())]
+
+
+def _missing_extras(block: Block) -> list[str]:
+    def installed(module: str) -> bool:
+        try:
+            return importlib.util.find_spec(module) is not None
+        except ModuleNotFoundError:  # a parent package is missing
+            return False
+
+    return [e for e in block.needs if not all(installed(m) for m in EXTRAS[e])]
+
+
+#: Runs in the page's interpreter: argv[1] is a JSON list of [page, line, code] to run in
+#: order; prints one JSON line per block, "ok" or the traceback, and stops at the first error.
+_RUNNER = textwrap.dedent(
+    """
+    import json, sys, traceback
+    namespace = {"__name__": "__main__"}
+    for page, line, code in json.loads(sys.argv[1]):
+        source = "\\n" * line + code  # the code's first line is the page's line + 1
+        try:
+            exec(compile(source, page, "exec"), namespace)
+        except BaseException:
+            print(json.dumps([line, traceback.format_exc()]), flush=True)
+            break
+        print(json.dumps([line, "ok"]), flush=True)
+    """
+)
+
+
+def _run_page(page: str, blocks: list[Block], workdir: Path) -> dict[int, str]:
+    """Run ``blocks`` of ``page`` in order in one fresh interpreter; fence line -> outcome."""
+    for name in LINKED:
+        (workdir / name).symlink_to(ROOT / name, target_is_directory=True)
+    payload = json.dumps([[b.page, b.line, b.code] for b in blocks])
+    env = {
+        **os.environ,
+        "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]),
+    }
+    env.setdefault("NUMBA_NUM_THREADS", "1")
+    env["MPLBACKEND"] = "Agg"
+    try:
+        result = subprocess.run(
+            [sys.executable, "-c", _RUNNER, payload],
+            cwd=workdir,
+            env=env,
+            capture_output=True,
+            text=True,
+            timeout=PAGE_TIMEOUT,
+            check=False,
+        )
+    except subprocess.TimeoutExpired:
+        return {blocks[0].line: f"{page}: the page's blocks took over {PAGE_TIMEOUT} s"}
+    outcomes: dict[int, str] = {}
+    for row in result.stdout.splitlines():
+        if row.startswith("[") and row.endswith("]"):
+            try:
+                line, outcome = json.loads(row)
+            except ValueError:  # a block printed something that looks like a list
+                continue
+            outcomes[int(line)] = outcome
+    if result.returncode != 0 and not any(o != "ok" for o in outcomes.values()):
+        first_missing = next((b.line for b in blocks if b.line not in outcomes), blocks[-1].line)
+        outcomes[first_missing] = (
+            f"interpreter exited {result.returncode}:\n{result.stderr[-3000:]}"
+        )
+    return outcomes
+
+
+_BLOCKS = _all_blocks()
+_CACHE: dict[tuple[str, bool], dict[int, str]] = {}
+
+
+def _page_outcomes(block: Block, with_slow: bool, tmp_factory: pytest.TempPathFactory) -> dict:
+    """The page's outcomes, run once per session (with its slow blocks for a slow block)."""
+    key = (block.page, with_slow)
+    if key not in _CACHE:
+        runnable = [
+            b
+            for b in _BLOCKS
+            if b.page == block.page and (with_slow or not b.slow) and not _missing_extras(b)
+        ]
+        workdir = tmp_factory.mktemp(re.sub(r"\W", "_", block.page))
+        _CACHE[key] = _run_page(block.page, runnable, workdir)
+    return _CACHE[key]
+
+
+def _params() -> list:
+    return [pytest.param(b, id=b.id, marks=[pytest.mark.slow] if b.slow else []) for b in _BLOCKS]
+
+
+@pytest.mark.parametrize("block", _params())
+def test_block(block: Block, request: pytest.FixtureRequest) -> None:
+    """The block runs after the blocks above it on its page."""
+    missing = _missing_extras(block)
+    if missing:
+        hints = "; ".join(f"{extra}: {INSTALL[extra]}" for extra in missing)
+        pytest.skip(f"{block.id} needs the {', '.join(missing)} extra ({hints})")
+    outcomes = _page_outcomes(block, block.slow, request.getfixturevalue("tmp_path_factory"))
+    outcome = outcomes.get(block.line)
+    if outcome is None:
+        failed = [line for line, o in outcomes.items() if o != "ok"]
+        where = f"{block.page}:{failed[0]}" if failed else "an earlier block"
+        pytest.fail(f"{block.id} not run: the block at {where} failed first")
+    assert outcome == "ok", f"{block.id}: the ```python block starting here failed:\n{outcome}"
+
+
+def test_pages_have_blocks_and_markers_parse() -> None:
+    """The collection itself: the README has blocks, every marker is understood."""
+    assert any(b.page == "README.md" for b in _BLOCKS)
+    assert len(_BLOCKS) >= 10
+
+
+@pytest.mark.parametrize(
+    ("text", "expected"),
+    [
+        ("```python\nx = 1\n```\n", [(1, False, ())]),
+        ("<!-- docs-test: slow -->\n```python\nx = 1\n```\n", [(2, True, ())]),
+        (
+            "<!-- docs-test: needs torchrl -->\n<!-- docs-test: slow -->\n```python\n```\n",
+            [(3, True, ("torchrl",))],
+        ),
+        ("```bash\nls\n```\n\n```python\ny = 2\n```\n", [(5, False, ())]),
+    ],
+    ids=["plain", "slow", "two-markers", "bash-not-collected"],
+)
+def test_parse_blocks(text: str, expected: list) -> None:
+    got = [(b.line, b.slow, b.needs) for b in parse_blocks("page.md", text)]
+    assert got == expected
+
+
+@pytest.mark.parametrize(
+    ("text", "error"),
+    [
+        ("<!-- docs-test: sloow -->\n```python\n```\n", "unknown docs-test marker 'sloow'"),
+        ("<!-- docs-test: needs gpu -->\n```python\n```\n", "unknown docs-test marker"),
+        ("```python\nx = 1\n", "never closed"),
+    ],
+    ids=["typo", "unknown-extra", "unclosed"],
+)
+def test_parse_blocks_refuses(text: str, error: str) -> None:
+    with pytest.raises(ValueError, match=error):
+        parse_blocks("page.md", text)
+
+
+def test_a_failing_block_is_reported_at_its_page_line(tmp_path: Path) -> None:
+    """A traceback names the page and the line of the failing statement in it."""
+    text = "intro\n\n```python\nx = 1\n```\n\n```python\ny = x + 1\nundefined_name\n```\n"
+    blocks = parse_blocks("docs/example.md", text)
+    outcomes = _run_page("docs/example.md", blocks, tmp_path)
+    assert outcomes[3] == "ok"
+    assert 'File "docs/example.md", line 9' in outcomes[7]
+    assert "NameError" in outcomes[7]
