@@ -27,9 +27,13 @@ before a block's opening fence, one or more, e.g.::
 - ``slow``: the block takes long (a real training budget); it runs only under
   ``pytest -m slow``. Give the reader a short variant in a block next to it,
   which runs by default.
+- ``run``: a ```bash block that runs too (``bash -euo pipefail``, in the same
+  working directory, with this interpreter's console scripts on ``PATH``), as
+  the README's tour does; other bash blocks are not run (their commands are
+  covered by the commands' own tests, and their budgets are real ones).
 
-Bash blocks are not run (their budgets are real ones); the commands they
-name are covered by the commands' own tests.
+Markers above a block that does not run are an error, as is an unknown
+marker. Relative links of the pages must point at files that exist.
 """
 
 from __future__ import annotations
@@ -56,12 +60,12 @@ EXTRAS = {
     "onnx": ("onnx", "onnxruntime"),
 }
 
-#: Extra -> how to install it (BenchMARL's lines are in docs/marl.md: it is no pip extra).
+#: Extra -> how to install it (pyproject.toml's extras; BenchMARL itself without its pins).
 INSTALL = {
     "torchrl": 'pip install -e ".[torchrl]"',
     "ray": 'pip install -e ".[rl,ray]"',
     "rllib": 'pip install -e ".[rl,rllib]"',
-    "benchmarl": "docs/marl.md, Install",
+    "benchmarl": 'pip install -e ".[benchmarl]" && pip install --no-deps benchmarl==1.5.2',
     "onnx": 'pip install -e ".[onnx]"',
 }
 
@@ -77,10 +81,11 @@ _MARKER = re.compile(r"^<!--\s*docs-test:\s*(.*?)\s*-->\s*$")
 
 @dataclasses.dataclass(frozen=True)
 class Block:
-    """One ```python block: where it is, its code and its markers."""
+    """One block to run: where it is, its language, its code and its markers."""
 
     page: str  # path relative to the repository root
     line: int  # line of the opening fence, from 1
+    language: str  # "python", or "bash" for a block marked ``run``
     code: str
     slow: bool
     needs: tuple[str, ...]
@@ -90,12 +95,33 @@ class Block:
         return f"{self.page}:{self.line}"
 
 
+def _markers(page: str, lines: list[str], start: int) -> tuple[bool, bool, list[str]]:
+    """(run, slow, needs) from the marker comments just above line index ``start``."""
+    run, slow, needs = False, False, []
+    above = start - 1
+    while above >= 0 and (marker := _MARKER.match(lines[above])):
+        for word in marker.group(1).split(";"):
+            key, _, value = word.strip().partition(" ")
+            if key in ("slow", "run") and not value:
+                run, slow = run or key == "run", slow or key == "slow"
+            elif key == "needs" and value.strip() in EXTRAS:
+                needs.append(value.strip())
+            else:
+                raise ValueError(
+                    f"{page}:{above + 1}: unknown docs-test marker {word.strip()!r}; use "
+                    f"'slow', 'run' or 'needs EXTRA' with EXTRA one of {sorted(EXTRAS)}"
+                )
+        above -= 1
+    return run, slow, needs
+
+
 def parse_blocks(page: str, text: str) -> list[Block]:
-    """The page's ```python blocks with their markers.
+    """The page's ```python blocks, and its ```bash blocks marked ``run``, with their markers.
 
     Raises:
-        ValueError: An unclosed fence, or a marker this module does not understand
-            (a typo would otherwise silently run or skip a block).
+        ValueError: An unclosed fence, a marker this module does not understand (a
+            typo would otherwise silently run or skip a block), or markers above a
+            block that is not run.
     """
     blocks: list[Block] = []
     lines = text.splitlines()
@@ -109,24 +135,17 @@ def parse_blocks(page: str, text: str) -> list[Block]:
         end = next((k for k in range(start + 1, len(lines)) if lines[k].startswith("```")), None)
         if end is None:
             raise ValueError(f"{page}:{start + 1}: code block never closed")
-        if fence.group(1) == "python":
-            slow, needs = False, []
-            above = start - 1
-            while above >= 0 and (marker := _MARKER.match(lines[above])):
-                for word in marker.group(1).split(";"):
-                    key, _, value = word.strip().partition(" ")
-                    if key == "slow" and not value:
-                        slow = True
-                    elif key == "needs" and value.strip() in EXTRAS:
-                        needs.append(value.strip())
-                    else:
-                        raise ValueError(
-                            f"{page}:{above + 1}: unknown docs-test marker {word.strip()!r}; "
-                            f"use 'slow' or 'needs EXTRA' with EXTRA one of {sorted(EXTRAS)}"
-                        )
-                above -= 1
+        language = fence.group(1)
+        run, slow, needs = _markers(page, lines, start)
+        runs = language == "python" or (language == "bash" and run)
+        if (run and language != "bash") or (not runs and (slow or needs)):
+            raise ValueError(
+                f"{page}:{start + 1}: docs-test markers on a ```{language} block; 'run' is "
+                "for ```bash blocks, 'slow' and 'needs' for blocks that run"
+            )
+        if runs:
             code = "\n".join(lines[start + 1 : end]) + "\n"
-            blocks.append(Block(page, start + 1, code, slow, tuple(needs)))
+            blocks.append(Block(page, start + 1, language, code, slow, tuple(needs)))
         index = end + 1
     return blocks
 
@@ -149,20 +168,31 @@ def _missing_extras(block: Block) -> list[str]:
     return [e for e in block.needs if not all(installed(m) for m in EXTRAS[e])]
 
 
-#: Runs in the page's interpreter: argv[1] is a JSON list of [page, line, code] to run in
-#: order; prints one JSON line per block, "ok" or the traceback, and stops at the first error.
+#: Runs in the page's interpreter: argv[1] is a JSON list of [page, line, language, code]
+#: to run in order; prints one JSON line per block, "ok" or the error, and stops at the
+#: first error. Python blocks share one namespace; bash blocks run in ``bash -e``.
 _RUNNER = textwrap.dedent(
     """
-    import json, sys, traceback
+    import json, subprocess, sys, traceback
     namespace = {"__name__": "__main__"}
-    for page, line, code in json.loads(sys.argv[1]):
-        source = "\\n" * line + code  # the code's first line is the page's line + 1
-        try:
-            exec(compile(source, page, "exec"), namespace)
-        except BaseException:
-            print(json.dumps([line, traceback.format_exc()]), flush=True)
+    for page, line, language, code in json.loads(sys.argv[1]):
+        if language == "bash":
+            done = subprocess.run(
+                ["bash", "-euo", "pipefail", "-c", code], capture_output=True, text=True
+            )
+            outcome = "ok" if done.returncode == 0 else (
+                f"bash exited {done.returncode}:\\n{done.stdout[-2000:]}{done.stderr[-3000:]}"
+            )
+        else:
+            source = "\\n" * line + code  # the code's first line is the page's line + 1
+            try:
+                exec(compile(source, page, "exec"), namespace)
+                outcome = "ok"
+            except BaseException:
+                outcome = traceback.format_exc()
+        print(json.dumps([line, outcome]), flush=True)
+        if outcome != "ok":
             break
-        print(json.dumps([line, "ok"]), flush=True)
     """
 )
 
@@ -171,12 +201,14 @@ def _run_page(page: str, blocks: list[Block], workdir: Path) -> dict[int, str]:
     """Run ``blocks`` of ``page`` in order in one fresh interpreter; fence line -> outcome."""
     for name in LINKED:
         (workdir / name).symlink_to(ROOT / name, target_is_directory=True)
-    payload = json.dumps([[b.page, b.line, b.code] for b in blocks])
+    payload = json.dumps([[b.page, b.line, b.language, b.code] for b in blocks])
     env = {
         **os.environ,
         "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]),
     }
     env.setdefault("NUMBA_NUM_THREADS", "1")
+    # the console scripts of this interpreter (cpf-train, cpf-bench) for bash blocks
+    env["PATH"] = os.pathsep.join([str(Path(sys.executable).parent), env.get("PATH", "")])
     env["MPLBACKEND"] = "Agg"
     try:
         result = subprocess.run(
@@ -253,18 +285,19 @@ def test_pages_have_blocks_and_markers_parse() -> None:
 @pytest.mark.parametrize(
     ("text", "expected"),
     [
-        ("```python\nx = 1\n```\n", [(1, False, ())]),
-        ("<!-- docs-test: slow -->\n```python\nx = 1\n```\n", [(2, True, ())]),
+        ("```python\nx = 1\n```\n", [(1, "python", False, ())]),
+        ("<!-- docs-test: slow -->\n```python\nx = 1\n```\n", [(2, "python", True, ())]),
         (
             "<!-- docs-test: needs torchrl -->\n<!-- docs-test: slow -->\n```python\n```\n",
-            [(3, True, ("torchrl",))],
+            [(3, "python", True, ("torchrl",))],
         ),
-        ("```bash\nls\n```\n\n```python\ny = 2\n```\n", [(5, False, ())]),
+        ("```bash\nls\n```\n\n```python\ny = 2\n```\n", [(5, "python", False, ())]),
+        ("<!-- docs-test: run; slow -->\n```bash\nls\n```\n", [(2, "bash", True, ())]),
     ],
-    ids=["plain", "slow", "two-markers", "bash-not-collected"],
+    ids=["plain", "slow", "two-markers", "bash-not-run", "bash-run"],
 )
 def test_parse_blocks(text: str, expected: list) -> None:
-    got = [(b.line, b.slow, b.needs) for b in parse_blocks("page.md", text)]
+    got = [(b.line, b.language, b.slow, b.needs) for b in parse_blocks("page.md", text)]
     assert got == expected
 
 
@@ -273,9 +306,11 @@ def test_parse_blocks(text: str, expected: list) -> None:
     [
         ("<!-- docs-test: sloow -->\n```python\n```\n", "unknown docs-test marker 'sloow'"),
         ("<!-- docs-test: needs gpu -->\n```python\n```\n", "unknown docs-test marker"),
+        ("<!-- docs-test: run -->\n```python\n```\n", "markers on a ```python block"),
+        ("<!-- docs-test: slow -->\n```bash\nls\n```\n", "markers on a ```bash block"),
         ("```python\nx = 1\n", "never closed"),
     ],
-    ids=["typo", "unknown-extra", "unclosed"],
+    ids=["typo", "unknown-extra", "run-on-python", "slow-on-bash-not-run", "unclosed"],
 )
 def test_parse_blocks_refuses(text: str, error: str) -> None:
     with pytest.raises(ValueError, match=error):
@@ -290,3 +325,32 @@ def test_a_failing_block_is_reported_at_its_page_line(tmp_path: Path) -> None:
     assert outcomes[3] == "ok"
     assert 'File "docs/example.md", line 9' in outcomes[7]
     assert "NameError" in outcomes[7]
+
+
+def test_a_failing_bash_block_stops_the_page(tmp_path: Path) -> None:
+    text = (
+        "<!-- docs-test: run -->\n```bash\necho hello > note.txt\nfalse\n```\n\n"
+        "```python\nx = 1\n```\n"
+    )
+    blocks = parse_blocks("docs/example.md", text)
+    outcomes = _run_page("docs/example.md", blocks, tmp_path)
+    assert outcomes[2].startswith("bash exited 1")
+    assert 7 not in outcomes  # not run after the failure
+    assert (tmp_path / "note.txt").read_text() == "hello\n"
+
+
+_LINK = re.compile(r"\]\(([^)\s]+)\)")
+
+
+@pytest.mark.parametrize("page", [*_pages(), "CONTRIBUTING.md"])
+def test_relative_links_resolve(page: str) -> None:
+    """Every relative link (and image) of the page points at a file or folder that exists."""
+    text = re.sub(r"```.*?```", "", (ROOT / page).read_text(), flags=re.DOTALL)
+    broken = []
+    for target in _LINK.findall(text):
+        path = target.split("#")[0]
+        if not path or re.match(r"[a-z]+:", path):
+            continue  # an anchor on the page, or a URL
+        if not ((ROOT / page).parent / path).exists():
+            broken.append(target)
+    assert not broken, f"{page}: links to missing files: {broken}"
