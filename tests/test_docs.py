@@ -354,3 +354,17 @@ def test_relative_links_resolve(page: str) -> None:
         if not ((ROOT / page).parent / path).exists():
             broken.append(target)
     assert not broken, f"{page}: links to missing files: {broken}"
+
+
+#: The README's two set-up commands, verbatim: new users paste them, and CI runs the second.
+SETUP_COMMANDS = (
+    "python3 -m venv .venv && . .venv/bin/activate && pip install -e . && cpf-run",
+    "python3 -m venv .venv && . .venv/bin/activate && pip install torch==2.13.0 && "
+    'pip install -e ".[rl,dev]" && python -m pytest',
+)
+
+
+def test_readme_keeps_the_setup_commands() -> None:
+    lines = (ROOT / "README.md").read_text().splitlines()
+    for command in SETUP_COMMANDS:
+        assert command in lines, f"README.md: the set-up line {command!r} changed"
