@@ -1,4 +1,4 @@
-"""Every ```python block of README.md and docs/*.md runs as written.
+"""Every ```python block of README.md and docs/*.md runs as written (and marked bash blocks).
 
 How the blocks run:
 
@@ -273,7 +273,8 @@ def test_block(block: Block, request: pytest.FixtureRequest) -> None:
         failed = [line for line, o in outcomes.items() if o != "ok"]
         where = f"{block.page}:{failed[0]}" if failed else "an earlier block"
         pytest.fail(f"{block.id} not run: the block at {where} failed first")
-    assert outcome == "ok", f"{block.id}: the ```python block starting here failed:\n{outcome}"
+    what = f"the ```{block.language} block starting here failed"
+    assert outcome == "ok", f"{block.id}: {what}:\n{outcome}"
 
 
 def test_pages_have_blocks_and_markers_parse() -> None:
@@ -342,18 +343,29 @@ def test_a_failing_bash_block_stops_the_page(tmp_path: Path) -> None:
 _LINK = re.compile(r"\]\(([^)\s]+)\)")
 
 
+def _anchors(markdown: Path) -> set[str]:
+    """GitHub's anchors of a page's headings: lower case, punctuation dropped, spaces to '-'."""
+    text = re.sub(r"```.*?```", "", markdown.read_text(), flags=re.DOTALL)
+    headings = re.findall(r"^#+ +(.+?) *$", text, flags=re.MULTILINE)
+    return {re.sub(r"[^\w\- ]", "", h.lower()).replace(" ", "-") for h in headings}
+
+
 @pytest.mark.parametrize("page", [*_pages(), "CONTRIBUTING.md"])
 def test_relative_links_resolve(page: str) -> None:
-    """Every relative link (and image) of the page points at a file or folder that exists."""
+    """Every relative link (and image) of the page points at a file that exists, and a
+    link to a heading (``page.md#anchor``, ``#anchor``) at a heading that exists."""
     text = re.sub(r"```.*?```", "", (ROOT / page).read_text(), flags=re.DOTALL)
     broken = []
     for target in _LINK.findall(text):
-        path = target.split("#")[0]
-        if not path or re.match(r"[a-z]+:", path):
-            continue  # an anchor on the page, or a URL
-        if not ((ROOT / page).parent / path).exists():
+        path, _, anchor = target.partition("#")
+        if re.match(r"[a-z]+:", path):
+            continue  # a URL
+        file = (ROOT / page).parent / path if path else ROOT / page
+        if not file.exists():
             broken.append(target)
-    assert not broken, f"{page}: links to missing files: {broken}"
+        elif anchor and file.suffix == ".md" and anchor not in _anchors(file):
+            broken.append(target)
+    assert not broken, f"{page}: links to missing files or headings: {broken}"
 
 
 #: The README's two set-up commands, verbatim: new users paste them, and CI runs the second.
@@ -368,3 +380,9 @@ def test_readme_keeps_the_setup_commands() -> None:
     lines = (ROOT / "README.md").read_text().splitlines()
     for command in SETUP_COMMANDS:
         assert command in lines, f"README.md: the set-up line {command!r} changed"
+
+
+def test_anchors_follow_github(tmp_path: Path) -> None:
+    page = tmp_path / "page.md"
+    page.write_text("# Title\n\n## 10. The paper's scenario (n = 5)\n\n```bash\n# code\n```\n")
+    assert _anchors(page) == {"title", "10-the-papers-scenario-n--5"}
