@@ -170,7 +170,10 @@ def run_main(argv: Sequence[str] | None = None, prog: str = "cpf-run") -> int:
     except ValueError as error:
         parser.error(str(error))
     if not args.quiet:
-        print("Loading the simulator kernels (numba compiles them on the first run: 10-30 s)...")
+        print(
+            "Loading the simulator kernels (numba compiles them on the first run: "
+            "about a minute of CPU, docs/speed.md)..."
+        )
         sys.stdout.flush()
     start = time.perf_counter()
     try:

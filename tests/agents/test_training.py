@@ -129,7 +129,7 @@ def test_cpf_train_command(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -
 
 
 def test_the_committed_agent_loads_and_corrects_the_base() -> None:
-    """The agent in results/ (README's benchmark row) loads with today's code and acts."""
+    """The agent in results/ (docs/results.md's benchmark row) loads with today's code and acts."""
     folder = ROOT / "results/residual_rl/agents"
     policy = load_policy(folder / "residual_ppo_bench_lossy_links_5m_s0")
     assert policy.scenario.name == "bench_lossy_links"

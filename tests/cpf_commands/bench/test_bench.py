@@ -220,7 +220,7 @@ def test_failures_are_counted_not_dropped(tmp_path):
     assert "| 1/1 |" in (tmp_path / "summary.md").read_text()
 
 
-def test_summary_has_the_issue_columns_and_reference_scores():
+def test_summary_has_the_required_columns_and_reference_scores():
     cells = run_bench(["nn_dsc", "dsc"], ["bench_mild", "bench_switching"], seeds=4, steps=30)
     rows = bench_report.summarize(cells)
     assert set(bench_report.SUMMARY_COLUMNS) >= {
