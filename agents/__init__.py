@@ -9,18 +9,44 @@
   policies' interface (``reset``, ``act``, ``act_batch``, ``predict``), so trained
   and analytic controllers are evaluated by the same code.
 
+Each name is imported from its module on first use, so reading an agent folder
+(``from agents import load_policy``) imports no learning algorithm: neither
+Stable-Baselines3 nor the training envs.
+
 See ``docs/residual_rl.md``.
 """
 
 from __future__ import annotations
 
+import importlib
+from typing import TYPE_CHECKING, Any
+
 # cpf_env first: it sets OMP_WAIT_POLICY=PASSIVE (unless set) before Stable-Baselines3 loads
 # torch, whose OpenMP runtime reads the variable once, when it loads. With torch's idle
 # threads spinning, the simulator's threads waited for a core (docs/scaling.md, "Threads").
 import cpf_env  # noqa: F401
-from agents.loading import TrainedPolicy, load_policy
-from agents.mixture_env import MixtureVecEnv
-from agents.training import TrainConfig, train
-from agents.vec_env import FleetVecEnv
+
+if TYPE_CHECKING:
+    from agents.loading import TrainedPolicy, load_policy
+    from agents.mixture_env import MixtureVecEnv
+    from agents.training import TrainConfig, train
+    from agents.vec_env import FleetVecEnv
 
 __all__ = ["FleetVecEnv", "MixtureVecEnv", "TrainConfig", "TrainedPolicy", "load_policy", "train"]
+
+#: The module of each exported name, imported on first use.
+_HOMES = {
+    "FleetVecEnv": "agents.vec_env",
+    "MixtureVecEnv": "agents.mixture_env",
+    "TrainConfig": "agents.training",
+    "TrainedPolicy": "agents.loading",
+    "load_policy": "agents.loading",
+    "train": "agents.training",
+}
+
+
+def __getattr__(name: str) -> Any:
+    """The exported ``name``, imported from its module (PEP 562)."""
+    if name not in _HOMES:
+        raise AttributeError(f"module 'agents' has no attribute {name!r}")
+    return getattr(importlib.import_module(_HOMES[name]), name)

@@ -11,6 +11,13 @@ A folder that ``cpf-train`` writes, and the only thing evaluation reads:
 - ``manifest.json``: the format name and version, the package version that
   wrote it, and the SHA-256 and size of each of the three files above.
 
+Reading trusts nothing in the folder (``agents.folder_files``): only regular
+files inside it are opened, with size and JSON depth limits; every field is
+typed strictly; the weights must be float32 (float16, bfloat16, float64 or
+integer tensors are refused, not converted) and finite, and their shapes must
+match the configuration before any network is allocated. Each failure is one
+line (``AgentFolderError``) naming the file and the field.
+
 safetensors holds tensors and a JSON header only, so opening a folder runs no
 code, unlike SB3's ``model.zip`` (cloudpickled entries) and ``VecNormalize``'s
 pickle. ``read_agent`` checks every hash, so a file edited, truncated or left
@@ -26,17 +33,29 @@ does (SAC), in float32, so it has the bits of SB3's ``predict``.
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import itertools
 import json
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import torch
 from safetensors.torch import load as load_tensors
 from safetensors.torch import save as save_tensors
 
+from agents.folder_files import (
+    MAX_JSON_BYTES,
+    MAX_WEIGHT_BYTES,
+    AgentFolderError,
+    check_fields,
+    field,
+    parse_json,
+    read_manifest,
+    read_verified,
+    statistics_arrays,
+)
+from agents.train_config import TrainConfig
 from cpf_env import atomic
 from cpf_env.envs.input_statistics import InputStatistics
 
@@ -44,14 +63,17 @@ __all__ = [
     "FORMAT",
     "FORMAT_VERSION",
     "MANIFEST",
-    "AgentFolderError",
     "Normalization",
     "PolicyNetwork",
     "actor_tensors",
     "agent_files",
+    "network_from_layers",
     "network_from_tensors",
+    "normalization_from_json",
     "read_agent",
-    "read_verified",
+    "read_json",
+    "read_weights",
+    "training_config",
     "write_agent",
     "write_with_manifest",
 ]
@@ -65,10 +87,6 @@ CONFIG = "config.json"
 
 #: Hidden-layer activation and output transform of each algorithm's actor.
 ACTORS = {"ppo": ("tanh", "clip"), "sac": ("relu", "tanh")}
-
-
-class AgentFolderError(ValueError):
-    """An agent folder that is incomplete, inconsistent or not of this format."""
 
 
 #: Observation statistics applied as SB3's ``VecNormalize`` does at evaluation: the env
@@ -191,39 +209,94 @@ def write_agent(
     write_with_manifest(folder, agent_files(tensors, normalization, record), FORMAT, FORMAT_VERSION)
 
 
-def read_verified(folder: Path, name: str, manifest: dict[str, Any]) -> bytes:
-    """A file's bytes, checked against the manifest's hash."""
-    path = folder / name
-    entry = manifest["files"].get(name)
-    if not isinstance(entry, dict) or "sha256" not in entry:
-        raise AgentFolderError(f"{folder / MANIFEST} does not list {name}; the folder is damaged.")
-    if not path.is_file():
-        raise AgentFolderError(f"{path} is missing; the manifest lists it. Copy the whole folder.")
-    data = path.read_bytes()
-    if _sha256(data) != entry["sha256"]:
-        raise AgentFolderError(
-            f"{path} does not match its SHA-256 in {MANIFEST}: it was edited, truncated or "
-            "comes from another run. Use the folder as cpf-train wrote it."
-        )
-    return data
+def read_json(folder: Path, name: str, manifest: dict[str, Any]) -> Any:
+    """A JSON file of the folder, bounded, checked against the manifest and parsed."""
+    data = read_verified(folder, name, manifest, MAX_JSON_BYTES, MANIFEST)
+    return parse_json(data, folder / name)
 
 
-def _read_manifest(folder: Path) -> dict[str, Any]:
-    path = folder / MANIFEST
+def read_weights(folder: Path, manifest: dict[str, Any]) -> dict[str, torch.Tensor]:
+    """The tensors of ``policy.safetensors``, bounded and checked against the manifest."""
+    data = read_verified(folder, WEIGHTS, manifest, MAX_WEIGHT_BYTES, MANIFEST)
     try:
-        manifest = json.loads(path.read_text())
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as error:
-        raise AgentFolderError(f"{path} is not readable JSON: {error}") from error
-    if not isinstance(manifest, dict) or manifest.get("format") != FORMAT:
-        raise AgentFolderError(f"{path} is not a {FORMAT} manifest.")
-    if manifest.get("format_version") != FORMAT_VERSION or not isinstance(
-        manifest.get("files"), dict
-    ):
+        return load_tensors(data)
+    except Exception as error:  # safetensors raises its own error type
+        message = str(error).splitlines()[0] if str(error) else type(error).__name__
+        raise AgentFolderError(f"{folder / WEIGHTS} is not a safetensors file: {message}") from None
+
+
+def training_config(data: Any, source: Path | str) -> TrainConfig:
+    """A ``TrainConfig`` from its JSON object, every field's JSON type checked first.
+
+    Raises:
+        AgentFolderError: A field of the wrong type (``scale: true``, ``net_arch: ["64"]``),
+            an unknown field, or a value ``TrainConfig`` refuses; naming ``source``.
+    """
+    types = {f.name: str(f.type) for f in dataclasses.fields(TrainConfig)}
+    check_fields(data, types, source, "config.")
+    try:
+        config = TrainConfig.from_json(data)
+    except (TypeError, ValueError) as error:
+        raise AgentFolderError(f"{source}: field 'config' is not a TrainConfig: {error}") from None
+    _check_declared_size(list(config.net_arch), source)
+    return config
+
+
+def _check_declared_size(sizes: list[int], source: Path | str) -> None:
+    """Refuse layer sizes whose weights exceed ``MAX_WEIGHT_BYTES``, before reading any."""
+    parameters = sum(a * b + b for a, b in itertools.pairwise(sizes))
+    if 4 * parameters > MAX_WEIGHT_BYTES:
         raise AgentFolderError(
-            f"{path} has format version {manifest.get('format_version')!r}; this cpf_env "
-            f"reads version {FORMAT_VERSION}. Upgrade cpf_env or convert the folder."
+            f"{source}: layer sizes {sizes} declare {4 * parameters:,} bytes of float32 "
+            f"weights, more than the {MAX_WEIGHT_BYTES:,} this loader reads."
         )
-    return manifest
+
+
+def network_from_layers(
+    tensors: dict[str, torch.Tensor], sizes: list[int], actor: tuple[str, str], source: Path
+) -> PolicyNetwork:
+    """The actor of layer ``sizes`` (input first), its tensors checked before any allocation.
+
+    Args:
+        tensors: The weights by ``PolicyNetwork`` name.
+        sizes: Layer widths, input first and action size last.
+        actor: (hidden activation, output transform), as ``PolicyNetwork`` takes them.
+        source: The weights file, for messages.
+
+    Raises:
+        AgentFolderError: Other tensor names, a shape that is not the layer's, a dtype
+            other than float32, or a non-finite weight or bias (each naming the tensor).
+    """
+    _check_declared_size(sizes, source)
+    depth = len(sizes) - 2
+    shapes: dict[str, tuple[int, ...]] = {}
+    for i, (a, b) in enumerate(itertools.pairwise(sizes)):
+        name = f"hidden.{i}" if i < depth else "output"
+        shapes[f"{name}.weight"], shapes[f"{name}.bias"] = (b, a), (b,)
+    if set(tensors) != set(shapes):
+        raise AgentFolderError(
+            f"{source} holds tensors {sorted(tensors)}, not the actor of layer sizes {sizes} "
+            f"({sorted(shapes)})."
+        )
+    for name, shape in shapes.items():
+        tensor = tensors[name]
+        if tuple(tensor.shape) != shape:
+            raise AgentFolderError(
+                f"{source}: tensor {name} has shape {tuple(tensor.shape)}, not {shape} "
+                f"(layer sizes {sizes})."
+            )
+        if tensor.dtype != torch.float32:
+            raise AgentFolderError(
+                f"{source}: tensor {name} is {str(tensor.dtype).removeprefix('torch.')}; the "
+                "format holds float32 weights. Convert them (tensor.float()) and write the "
+                "folder again."
+            )
+        if not bool(torch.isfinite(tensor).all()):
+            raise AgentFolderError(f"{source}: tensor {name} holds a NaN or infinite value.")
+    with torch.device("meta"):  # no memory until the checked tensors are assigned
+        network = PolicyNetwork(sizes, *actor)
+    network.load_state_dict({k: v.contiguous() for k, v in tensors.items()}, assign=True)
+    return network.eval()
 
 
 def network_from_tensors(
@@ -232,29 +305,22 @@ def network_from_tensors(
     """Rebuild the actor from its tensors, checking them against the configuration.
 
     Raises:
-        AgentFolderError: Names, shapes or layer sizes that do not fit ``net_arch``.
+        AgentFolderError: Names, shapes, dtypes or values that do not fit ``net_arch``
+            (``network_from_layers``).
     """
-    depth = len(net_arch)
-    expected = {f"hidden.{i}.{kind}" for i in range(depth) for kind in ("weight", "bias")}
-    expected |= {"output.weight", "output.bias"}
-    if set(tensors) != expected or tensors["output.weight"].ndim != 2:
+    ends = [tensors.get("hidden.0.weight"), tensors.get("output.weight")]
+    if any(tensor is None or tensor.ndim != 2 for tensor in ends):
         raise AgentFolderError(
-            f"{source} holds tensors {sorted(tensors)}, not the actor of the net_arch "
-            f"{list(net_arch)} config.json gives."
+            f"{source} holds tensors {sorted(tensors)} ({', '.join(_shapes(tensors))}), not "
+            f"the actor of the net_arch {list(net_arch)} config.json gives: hidden.0.weight "
+            "and output.weight must be matrices."
         )
-    sizes = [
-        int(tensors["hidden.0.weight"].shape[1]),
-        *net_arch,
-        int(tensors["output.weight"].shape[0]),
-    ]
-    network = PolicyNetwork(sizes, *ACTORS[algo])
-    try:
-        network.load_state_dict({k: v.to(torch.float32) for k, v in tensors.items()})
-    except RuntimeError as error:
-        raise AgentFolderError(
-            f"{source} does not fit net_arch {list(net_arch)}: {error}"
-        ) from None
-    return network.eval()
+    sizes = [int(ends[0].shape[1]), *net_arch, int(ends[1].shape[0])]  # type: ignore[union-attr]
+    return network_from_layers(tensors, sizes, ACTORS[algo], source)
+
+
+def _shapes(tensors: dict[str, torch.Tensor]) -> list[str]:
+    return [f"{name} {tuple(tensor.shape)}" for name, tensor in sorted(tensors.items())[:4]]
 
 
 def read_agent(folder: Path) -> tuple[dict[str, Any], PolicyNetwork, Normalization | None]:
@@ -266,50 +332,37 @@ def read_agent(folder: Path) -> tuple[dict[str, Any], PolicyNetwork, Normalizati
     Raises:
         AgentFolderError: A missing, unreadable, altered or inconsistent file (named).
     """
-    from agents.training import TrainConfig
-
-    manifest = _read_manifest(folder)
-    try:
-        record = json.loads(read_verified(folder, CONFIG, manifest))
-        config = TrainConfig.from_json(record["config"])
-    except (json.JSONDecodeError, KeyError, TypeError, ValueError) as error:
-        raise AgentFolderError(
-            f"{folder / CONFIG} is not a valid training record: {error}"
-        ) from None
-    try:
-        tensors = load_tensors(read_verified(folder, WEIGHTS, manifest))
-    except AgentFolderError:
-        raise
-    except Exception as error:  # safetensors raises its own error type
-        raise AgentFolderError(f"{folder / WEIGHTS} is not a safetensors file: {error}") from None
-    network = network_from_tensors(tensors, config.algo, config.net_arch, folder / WEIGHTS)
-    statistics = json.loads(read_verified(folder, NORMALIZATION, manifest))
+    manifest = read_manifest(folder / MANIFEST, FORMAT, FORMAT_VERSION)
+    record = read_json(folder, CONFIG, manifest)
+    config = training_config(field(record, "config", folder / CONFIG), folder / CONFIG)
+    network = network_from_tensors(
+        read_weights(folder, manifest), config.algo, config.net_arch, folder / WEIGHTS
+    )
+    statistics = read_json(folder, NORMALIZATION, manifest)
     normalization = (
-        None if statistics is None else _normalization(statistics, folder / NORMALIZATION)
+        None
+        if statistics is None
+        else normalization_from_json(statistics, folder / NORMALIZATION, network.input_size)
     )
     if (normalization is not None) != config.normalize_observations:
         raise AgentFolderError(
             f"{folder / NORMALIZATION} {'holds' if normalization else 'lacks'} statistics but "
             f"config.json says normalize_observations={config.normalize_observations}."
         )
-    if normalization is not None and normalization.mean.shape != (network.input_size,):
-        raise AgentFolderError(
-            f"{folder / NORMALIZATION} has statistics for {normalization.mean.shape[0]} inputs "
-            f"but the network in {WEIGHTS} takes {network.input_size}."
-        )
     return record, network, normalization
 
 
-def _normalization(data: Any, source: Path) -> Normalization:
-    """Parse and check ``normalization.json``."""
-    try:
-        mean = np.asarray(data["mean"], dtype=np.float64)
-        var = np.asarray(data["var"], dtype=np.float64)
-        epsilon, clip = float(data["epsilon"]), float(data["clip"])
-    except (KeyError, TypeError, ValueError) as error:
-        raise AgentFolderError(f"{source} lacks or mangles a field: {error}") from None
-    if mean.ndim != 1 or var.shape != mean.shape:
-        raise AgentFolderError(f"{source}: mean and var must be lists of the same length.")
-    if not (np.all(np.isfinite(mean)) and np.all(var >= 0) and epsilon > 0 and clip > 0):
-        raise AgentFolderError(f"{source}: statistics must be finite, var >= 0, epsilon, clip > 0.")
+def normalization_from_json(data: Any, source: Path, inputs: int) -> Normalization:
+    """``normalization.json``'s statistics for a network of ``inputs`` inputs, strictly checked.
+
+    Raises:
+        AgentFolderError: A field missing or mistyped, a non-finite value, or statistics
+            for another number of inputs (naming ``source`` and the field).
+    """
+    mean, var, epsilon, clip = statistics_arrays(data, source)
+    if mean.shape != (inputs,):
+        raise AgentFolderError(
+            f"{source} has statistics for {mean.shape[0]} inputs but the network in {WEIGHTS} "
+            f"takes {inputs}."
+        )
     return Normalization(mean, var, epsilon, clip)

@@ -11,20 +11,20 @@ format that holds data only.
 
 from __future__ import annotations
 
-import json
 import pickle
 import warnings
 from pathlib import Path
 from typing import Any, cast
 
 from agents.agent_folder import (
-    AgentFolderError,
     Normalization,
     PolicyNetwork,
     actor_tensors,
     network_from_tensors,
+    training_config,
     write_agent,
 )
+from agents.folder_files import MAX_JSON_BYTES, AgentFolderError, field, parse_json, read_file
 from cpf_env import atomic
 
 __all__ = ["PICKLE_WARNING", "convert_sb3_folder", "is_sb3_folder", "read_sb3_folder"]
@@ -53,16 +53,12 @@ def read_sb3_folder(
         AgentFolderError: A missing statistics file the config asks for, or an
             unreadable file (named).
     """
-    from agents.training import ALGORITHMS, TrainConfig
+    from agents.algorithms import ALGORITHMS
 
     warnings.warn(PICKLE_WARNING.format(folder=folder), UserWarning, stacklevel=3)
-    try:
-        record = json.loads((folder / "config.json").read_text())
-        config = TrainConfig.from_json(record["config"])
-    except (OSError, json.JSONDecodeError, KeyError, TypeError, ValueError) as error:
-        raise AgentFolderError(
-            f"{folder / 'config.json'} is not a valid training record: {error}"
-        ) from None
+    source = folder / "config.json"
+    record = parse_json(read_file(source, MAX_JSON_BYTES, folder), source)
+    config = training_config(field(record, "config", source), source)
     try:
         model = ALGORITHMS[config.algo].load(folder / "model.zip", device="cpu")
     except Exception as error:  # SB3 raises assorted errors on a damaged zip

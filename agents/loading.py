@@ -24,23 +24,40 @@ import torch
 from numpy.typing import ArrayLike, NDArray
 
 from agents.agent_folder import (
+    CONFIG,
+    FORMAT,
+    FORMAT_VERSION,
     MANIFEST,
-    AgentFolderError,
     Normalization,
     PolicyNetwork,
     read_agent,
+    read_json,
+    training_config,
+)
+from agents.folder_files import (
+    MAX_JSON_BYTES,
+    AgentFolderError,
+    field,
+    parse_json,
+    read_file,
+    read_manifest,
 )
 from agents.legacy import is_sb3_folder, read_sb3_folder
-from agents.marl.policy_folder import is_marl_folder, load_marl_policy
-from agents.training import TrainConfig
-from agents.vec_env import resolve_base_policy
+from agents.marl.policy_folder import (
+    MARL_FORMAT,
+    MARL_FORMAT_VERSION,
+    marl_config,
+    read_marl_agent,
+)
+from agents.train_config import TrainConfig
+from baselines import make_policy
 from baselines.interface import PolicyInterface
 from cpf_env.envs.parallel import make_scenario
 from cpf_env.envs.residual import ResidualConfig, ResidualController
 from cpf_env.scenarios import Scenario
 from cpf_env.sim.fleet import observation_layout
 
-__all__ = ["Actor", "TorchActor", "TrainedPolicy", "load_policy"]
+__all__ = ["Actor", "TorchActor", "TrainedPolicy", "load_policy", "read_config"]
 
 Array = NDArray[np.float64]
 
@@ -48,12 +65,14 @@ Array = NDArray[np.float64]
 def load_policy(
     path: str | Path, scenario: str | Scenario | None = None, trust_pickle: bool = False
 ) -> TrainedPolicy:
-    """Load a trained agent from the folder ``cpf-train --out`` wrote.
+    """Load a trained agent from the folder ``cpf-train --out`` (or ``save_marl_policy``) wrote.
 
-    Reads the data-only format (``agents.agent_folder``: safetensors and JSON,
-    every file checked against the manifest); nothing in the folder can run
-    code. An old SB3 folder (``model.zip`` and ``vecnormalize.pkl``, both
-    pickles) is read only with ``trust_pickle=True``, with a warning.
+    Reads the data-only formats (``agents.agent_folder``, and a BenchMARL actor's
+    ``agents.marl.policy_folder``: safetensors and JSON, every file checked
+    against the manifest, read with ``agents.folder_files``' limits); nothing in
+    the folder can run code. An old SB3 folder (``model.zip`` and
+    ``vecnormalize.pkl``, both pickles) is read only with ``trust_pickle=True``,
+    with a warning.
 
     Args:
         path: The folder.
@@ -64,36 +83,82 @@ def load_policy(
             its author put in the files: only for folders you made or trust.
 
     Raises:
-        FileNotFoundError: ``path`` is not a ``cpf-train`` output folder.
-        AgentFolderError: (a ValueError) a file missing, altered or inconsistent
-            with the others (named), or an SB3 folder without ``trust_pickle``.
+        AgentFolderError: (a ValueError) ``path`` is not an agent folder, a file is
+            missing, altered or inconsistent with the others (named), or an SB3
+            folder without ``trust_pickle``.
         ValueError: The scenario's observations do not fit the network.
     """
     folder = Path(path)
-    if is_marl_folder(folder):  # a BenchMARL actor (agents.marl.policy_folder)
-        return load_marl_policy(folder, scenario)
-    if (folder / MANIFEST).is_file():
+    kind = _format(folder)
+    if kind == MARL_FORMAT:  # a BenchMARL actor (agents.marl.policy_folder)
+        config, network, normalization = read_marl_agent(folder)
+    elif kind == FORMAT:
         record, network, normalization = read_agent(folder)
-    elif is_sb3_folder(folder):
-        if not trust_pickle:
-            raise AgentFolderError(
-                f"{folder} is an old SB3 agent folder (model.zip, vecnormalize.pkl): loading "
-                "it unpickles them, which runs any code their author put in them. If you "
-                "trust it, pass --trust-pickle (load_policy(..., trust_pickle=True)), or "
-                "convert it once: python examples/convert_sb3_agents.py FOLDER."
-            )
-        record, network, normalization = read_sb3_folder(folder)
-    else:
-        raise FileNotFoundError(
-            f"{folder} is not a cpf-train output folder: no {MANIFEST}. "
-            "Train one with `cpf-train --out DIR`, or give a baseline name."
+        config = training_config(record["config"], folder / CONFIG)
+    elif not trust_pickle:
+        raise AgentFolderError(
+            f"{folder} is an old SB3 agent folder (model.zip, vecnormalize.pkl): loading "
+            "it unpickles them, which runs any code their author put in them. If you "
+            "trust it, pass --trust-pickle (load_policy(..., trust_pickle=True)), or "
+            "convert it once: python examples/convert_sb3_agents.py FOLDER."
         )
-    config = TrainConfig.from_json(record["config"])
+    else:
+        record, network, normalization = read_sb3_folder(folder)
+        config = training_config(record["config"], folder / CONFIG)
     if scenario is None:
         resolved = make_scenario(config.home_scenario, **config.scenario_overrides())
     else:
         resolved = make_scenario(scenario)
     return TrainedPolicy(folder.name, config, TorchActor(network, normalization), resolved)
+
+
+def read_config(path: str | Path) -> TrainConfig:
+    """The training configuration of an agent folder ``load_policy`` reads, without its weights.
+
+    An old SB3 folder's ``config.json`` is JSON (read without unpickling anything).
+
+    Raises:
+        AgentFolderError: Not an agent folder, or an unreadable or invalid configuration.
+    """
+    folder = Path(path)
+    kind = _format(folder)
+    if kind == MARL_FORMAT:
+        manifest = read_manifest(folder / MANIFEST, MARL_FORMAT, MARL_FORMAT_VERSION)
+        return marl_config(read_json(folder, CONFIG, manifest), folder / CONFIG)[0]
+    if kind == FORMAT:
+        record = read_json(folder, CONFIG, read_manifest(folder / MANIFEST, FORMAT, FORMAT_VERSION))
+    else:
+        record = parse_json(read_file(folder / CONFIG, MAX_JSON_BYTES, folder), folder / CONFIG)
+    return training_config(field(record, "config", folder / CONFIG), folder / CONFIG)
+
+
+def _format(folder: Path) -> str | None:
+    """The format a folder's manifest names (None: an old SB3 folder, without manifest).
+
+    Raises:
+        AgentFolderError: ``folder`` is missing, a file, holds neither a manifest nor an
+            SB3 agent, or its manifest is unreadable or names another format.
+    """
+    if not folder.is_dir():
+        what = "is a file" if folder.exists() else "does not exist"
+        raise AgentFolderError(
+            f"{folder} {what}: give a cpf-train --out folder (or a baseline name)."
+        )
+    path = folder / MANIFEST
+    if not (path.exists() or path.is_symlink()):
+        if is_sb3_folder(folder):
+            return None
+        raise AgentFolderError(
+            f"{folder} is not a cpf-train output folder: no {MANIFEST}. Train one with "
+            "`cpf-train --out DIR`, or give a baseline name."
+        )
+    name = field(parse_json(read_file(path, MAX_JSON_BYTES, folder), path), "format", path)
+    if name not in (FORMAT, MARL_FORMAT):
+        raise AgentFolderError(
+            f"{path}: field 'format' is {name!r}; this cpf_env reads {FORMAT!r} and "
+            f"{MARL_FORMAT!r} folders."
+        )
+    return str(name)
 
 
 class Actor(Protocol):
@@ -164,7 +229,7 @@ class TrainedPolicy(PolicyInterface):
         self.agents = [f"vessel_{i}" for i in range(self.n)]
         self.diagnostics: dict[str, Array] = {}
         base = None if config.base == "none" else config.base
-        self._base = resolve_base_policy(base, scenario)
+        self._base = None if base is None else make_policy(base, scenario)
         self._residual = (
             ResidualConfig(mode="force_and_rate", scale=1.0)
             if base is None

@@ -15,11 +15,18 @@ learner's raw inputs and its correction:
   ``scale`` x theta_dot_max (1/s)), which the base's command is added to.
 
 The training configuration (``config.json``) is stored in the graph's
-metadata (key ``cpf_config``), so a ``.onnx`` file is a policy on its own:
-``load_onnx_policy(path, scenario)`` rebuilds the base policy and runs the
-graph with onnxruntime, and ``cpf-bench --policies nn_dsc agent.onnx`` takes
-it. Deploying needs onnxruntime and the base controller, not torch. ONNX
-holds data only (protobuf), so loading one runs no code.
+metadata (key ``cpf_config``), and the file's own SHA-256 in key ``cpf_sha256``
+(computed with those 64 digits written as zeros), so a ``.onnx`` file is a
+policy on its own, sealed as an agent folder's manifest seals its files: a
+graph swapped or edited after export is refused on load, before onnxruntime
+parses it. The loader reads the file as it reads an agent folder
+(``agents.folder_files``: a regular file of at most 256 MiB, strict JSON), and
+checks the graph's interface (one rank-3 float input ``inputs`` (B, n, k), a
+rank-3 output ``action``) before running it. ``load_onnx_policy(path,
+scenario)`` rebuilds the base policy and runs the graph with onnxruntime, and
+``cpf-bench --policies nn_dsc agent.onnx`` takes it. Deploying needs
+onnxruntime and the base controller, not torch. ONNX holds data only
+(protobuf), so loading one runs no code.
 
 Needs the optional extra: ``pip install -e ".[onnx]"``.
 """
@@ -27,6 +34,7 @@ Needs the optional extra: ``pip install -e ".[onnx]"``.
 from __future__ import annotations
 
 import json
+import re
 import tempfile
 import warnings
 from pathlib import Path
@@ -36,16 +44,30 @@ import numpy as np
 import torch
 from numpy.typing import NDArray
 
-from agents.agent_folder import AgentFolderError, Normalization, PolicyNetwork, read_agent
+from agents.agent_folder import Normalization, PolicyNetwork, read_agent, training_config
+from agents.folder_files import (
+    MAX_WEIGHT_BYTES,
+    AgentFolderError,
+    field,
+    parse_json,
+    read_file,
+    sha256,
+)
 from agents.loading import TrainedPolicy
-from agents.training import TrainConfig
+from agents.train_config import TrainConfig
 from cpf_env import atomic
 from cpf_env.envs.parallel import make_scenario
 from cpf_env.scenarios import Scenario
 
-__all__ = ["OnnxActor", "export_onnx", "load_onnx_policy", "residual_range"]
+__all__ = ["OnnxActor", "export_onnx", "load_onnx_policy", "residual_range", "seal_onnx"]
 
 _INSTALL = 'this needs the optional ONNX extra: pip install -e ".[onnx]" (onnx and onnxruntime)'
+#: Metadata keys of an exported graph: the training record, and the file's own SHA-256.
+CONFIG_KEY, HASH_KEY = "cpf_config", "cpf_sha256"
+#: The SHA-256's place while the file is hashed.
+_UNSEALED = b"0" * 64
+#: The serialized metadata entry of the hash (protobuf: key field 1, value field 2, 64 bytes).
+_SEAL = re.compile(rb"\x0a\x0a" + HASH_KEY.encode() + rb"\x12\x40([0-9a-f]{64})")
 
 
 def residual_range(config: TrainConfig, scenario: Scenario) -> NDArray[np.float32]:
@@ -121,7 +143,7 @@ def export_onnx(folder: str | Path, out: str | Path, checks: int = 1000) -> floa
         raise ImportError(_INSTALL) from error
     source = Path(folder)
     record, network, normalization = read_agent(source)
-    config = TrainConfig.from_json(record["config"])
+    config = training_config(record["config"], source / "config.json")
     scenario = make_scenario(config.home_scenario, **config.scenario_overrides())
     graph = _Graph(network, normalization, residual_range(config, scenario)).eval()
     example = torch.zeros(1, scenario.n, network.input_size, dtype=torch.float32)
@@ -141,10 +163,11 @@ def export_onnx(folder: str | Path, out: str | Path, checks: int = 1000) -> floa
                 dynamo=False,
             )
         model = onnx.load(str(exported))
-    entry = model.metadata_props.add()
-    entry.key, entry.value = "cpf_config", json.dumps(record)
+    for key, value in ((CONFIG_KEY, json.dumps(record)), (HASH_KEY, _UNSEALED.decode())):
+        entry = model.metadata_props.add()
+        entry.key, entry.value = key, value
     onnx.checker.check_model(model)
-    atomic.write_bytes(target, model.SerializeToString())
+    atomic.write_bytes(target, seal_onnx(model.SerializeToString()))
     rows = _check_inputs(network.input_size, normalization, checks)
     with torch.no_grad():
         expected = network(torch.from_numpy(_normalized(rows, normalization))).numpy()
@@ -167,14 +190,50 @@ def _check_inputs(size: int, normalization: Normalization | None, count: int) ->
     return (normalization.mean + spread * noise).astype(np.float32)
 
 
+def seal_onnx(data: bytes) -> bytes:
+    """A serialized graph with its SHA-256 in place of its ``cpf_sha256`` metadata's zeros.
+
+    Args:
+        data: The serialized ``ModelProto``, whose metadata holds ``cpf_sha256`` = 64 zeros.
+
+    Returns:
+        The same bytes with the zeros replaced by the SHA-256 of ``data``.
+    """
+    if len(_SEAL.findall(data)) != 1 or data.count(_UNSEALED) != 1:
+        raise RuntimeError("the exported graph holds the hash placeholder more than once.")
+    return data.replace(_UNSEALED, sha256(data).encode())
+
+
+def _check_seal(data: bytes, path: Path) -> None:
+    """Refuse a file whose embedded SHA-256 is missing or not its own."""
+    found = _SEAL.findall(data)
+    if len(found) != 1:
+        raise AgentFolderError(
+            f"{path} holds no {HASH_KEY} metadata (or several): it was not sealed by "
+            "cpf-export. Export the agent folder again (cpf-export FOLDER OUT.onnx)."
+        )
+    digest = found[0]
+    if data.count(digest) != 1 or sha256(data.replace(digest, _UNSEALED)) != digest.decode():
+        raise AgentFolderError(
+            f"{path} does not match the SHA-256 in its {HASH_KEY} metadata: the graph or its "
+            "metadata was changed after cpf-export wrote it. Export the agent folder again."
+        )
+
+
 class OnnxActor:
     """The ``action`` output of an exported graph, run by onnxruntime on one thread.
 
     Rows are grouped by fleet, n at a time (n: the graph's fleet size), as
-    ``TrainedPolicy`` orders them.
+    ``TrainedPolicy`` orders them. The file is read once (bounded, a regular
+    file), its seal checked, and onnxruntime given those same bytes.
 
     Args:
         path: The ``.onnx`` file.
+
+    Raises:
+        ImportError: onnxruntime is missing.
+        AgentFolderError: Not a file cpf-export sealed, altered since, metadata without
+            a valid ``config``, or a graph without the exported interface.
     """
 
     def __init__(self, path: str | Path) -> None:
@@ -182,26 +241,57 @@ class OnnxActor:
             import onnxruntime
         except ImportError as error:
             raise ImportError(_INSTALL) from error
+        source = Path(path)
+        data = read_file(source, MAX_WEIGHT_BYTES)
+        _check_seal(data, source)
         options = onnxruntime.SessionOptions()
         options.intra_op_num_threads = options.inter_op_num_threads = 1
         try:
             self.session = onnxruntime.InferenceSession(
-                str(path), options, providers=["CPUExecutionProvider"]
+                data, options, providers=["CPUExecutionProvider"]
             )
         except Exception as error:  # onnxruntime raises its own error types
-            raise AgentFolderError(f"{path} is not a loadable ONNX model: {error}") from None
+            message = str(error).splitlines()[0] if str(error) else type(error).__name__
+            raise AgentFolderError(f"{source} is not a loadable ONNX model: {message}") from None
         metadata = self.session.get_modelmeta().custom_metadata_map
-        if "cpf_config" not in metadata:
-            raise AgentFolderError(f"{path} was not written by cpf-export (no cpf_config).")
-        self.record: dict[str, Any] = json.loads(metadata["cpf_config"])
-        _, self.n, self.input_size = self.session.get_inputs()[0].shape
-        self.action_size = int(self.session.get_outputs()[0].shape[2])
+        where = f"{source} (metadata {CONFIG_KEY})"
+        if CONFIG_KEY not in metadata:
+            raise AgentFolderError(f"{source} was not written by cpf-export (no {CONFIG_KEY}).")
+        self.record: dict[str, Any] = parse_json(metadata[CONFIG_KEY].encode(), where)
+        self.config = training_config(field(self.record, "config", where), where)
+        self.n, self.input_size, self.action_size = _interface(self.session, source)
 
     def __call__(self, rows: NDArray[np.float32]) -> NDArray[np.float32]:
         """(R, k) float32 raw inputs, R a multiple of n -> (R, a) float32 actions in [-1, 1]."""
         fleets = np.ascontiguousarray(rows, dtype=np.float32).reshape(-1, self.n, self.input_size)
         (action,) = self.session.run(["action"], {"inputs": fleets})
         return np.asarray(action, dtype=np.float32).reshape(-1, self.action_size)
+
+
+def _interface(session: Any, source: Path) -> tuple[int, int, int]:
+    """(n, k, a) of the exported interface: input ``inputs`` (B, n, k), output ``action``.
+
+    Raises:
+        AgentFolderError: Another input or output, another rank, or a symbolic n, k or a.
+    """
+    inputs = session.get_inputs()
+    actions = [output for output in session.get_outputs() if output.name == "action"]
+    if len(inputs) != 1 or inputs[0].name != "inputs" or not actions:
+        raise AgentFolderError(
+            f"{source} is not a cpf-export graph: it must take one input 'inputs' and give "
+            f"'action'; it takes {[i.name for i in inputs]}."
+        )
+    for node in (inputs[0], actions[0]):
+        shape = list(node.shape)
+        sizes_known = len(shape) == 3 and all(isinstance(d, int) and d >= 1 for d in shape[1:])
+        if node.type != "tensor(float)" or not sizes_known:
+            raise AgentFolderError(
+                f"{source}: graph {'input' if node is inputs[0] else 'output'} {node.name!r} is "
+                f"{node.type} of shape {shape}; cpf-export's is float (B, n, size), n and "
+                "size fixed."
+            )
+    _, n, k = inputs[0].shape
+    return int(n), int(k), int(actions[0].shape[2])
 
 
 def load_onnx_policy(path: str | Path, scenario: str | Scenario | None = None) -> TrainedPolicy:
@@ -217,7 +307,7 @@ def load_onnx_policy(path: str | Path, scenario: str | Scenario | None = None) -
         ValueError: The scenario's observations do not fit the network.
     """
     actor = OnnxActor(path)
-    config = TrainConfig.from_json(actor.record["config"])
+    config = actor.config
     if scenario is None:
         resolved = make_scenario(config.home_scenario, **config.scenario_overrides())
     else:

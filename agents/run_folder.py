@@ -49,14 +49,15 @@ from stable_baselines3.common.running_mean_std import RunningMeanStd
 from stable_baselines3.common.vec_env import VecEnv, VecMonitor, VecNormalize
 
 from agents.agent_folder import (
-    AgentFolderError,
     Normalization,
     actor_tensors,
     network_from_tensors,
     read_agent,
     write_agent,
 )
+from agents.algorithms import build_model, make_env, planned_timesteps
 from agents.checkpoint import checkpoint_timesteps, load_checkpoint
+from agents.folder_files import AgentFolderError
 from agents.mixture_env import BalancedRewards, MixtureVecEnv
 from agents.schedule import (
     BEST,
@@ -73,7 +74,7 @@ from agents.schedule import (
     evaluations_csv,
 )
 from agents.slot_statistics import SlotSharedVecNormalize
-from agents.training import TrainConfig, build_model, make_env, planned_timesteps
+from agents.train_config import TrainConfig
 from cpf_env import atomic
 
 __all__ = ["RUN_RECORD", "TrainingRun", "prepare_resume", "read_run_record", "write_run_record"]

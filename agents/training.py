@@ -36,119 +36,19 @@ minibatches (8,192) and few epochs (4).
 from __future__ import annotations
 
 import shutil
-import warnings
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import cast
 
-import torch
-from stable_baselines3 import PPO, SAC
-from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.callbacks import BaseCallback
-from stable_baselines3.common.vec_env import VecEnv
 
-from agents.mixture_env import MixtureVecEnv
+from agents.run_folder import TrainingRun, prepare_resume, write_run_record
 from agents.schedule import Evaluator, RunSchedule
 from agents.train_config import TrainConfig
-from agents.vec_env import FleetVecEnv
 from cpf_env import atomic
 from cpf_env.scenarios.splits import check_training
 
 # TrainConfig lives in agents.train_config; it is exported here too, where callers found it.
-__all__ = ["ALGORITHMS", "TrainConfig", "build_model", "make_env", "train"]
-
-#: SB3 algorithms by name.
-ALGORITHMS: dict[str, type[BaseAlgorithm]] = {"ppo": PPO, "sac": SAC}
-
-
-def make_env(config: TrainConfig, num_fleets: int | None = None) -> FleetVecEnv | MixtureVecEnv:
-    """The vector env of a run (``num_fleets`` overrides ``config.fleets``).
-
-    A ``FleetVecEnv`` for one scenario, a ``MixtureVecEnv`` for several.
-    """
-    base = None if config.base == "none" else config.base
-    fleets = config.fleets if num_fleets is None else num_fleets
-    residual = config.residual_config()
-    if len(config.scenarios) > 1:
-        return MixtureVecEnv(
-            config.scenarios,
-            num_fleets=fleets,
-            base_policy=base,
-            residual=residual,
-            scenario_overrides=[config.scenario_overrides(name) for name in config.scenarios],
-        )
-    return FleetVecEnv(
-        config.home_scenario,
-        num_fleets=fleets,
-        base_policy=base,
-        residual=residual,
-        **config.scenario_overrides(),
-    )
-
-
-def build_model(config: TrainConfig, env: VecEnv) -> BaseAlgorithm:
-    """The untrained PPO or SAC model ``train`` uses, on ``env``; the mean action starts at zero.
-
-    Args:
-        config: The run (algorithm, network, learning settings, seed).
-        env: The (monitored, maybe normalized) ``FleetVecEnv`` from ``make_env``.
-    """
-    arch = list(config.net_arch)
-    if config.algo == "ppo":
-        rollout = config.n_steps * env.num_envs
-        if config.batch_size > rollout:
-            warnings.warn(
-                f"batch_size {config.batch_size} is larger than one rollout (n_steps x vessel "
-                f"slots = {config.n_steps} x {env.num_envs} = {rollout}); PPO uses minibatches "
-                f"of {rollout}. Lower --batch-size or raise --n-steps or --fleets.",
-                stacklevel=2,
-            )
-        model: BaseAlgorithm = PPO(
-            "MlpPolicy",
-            env,
-            learning_rate=config.learning_rate,
-            n_steps=config.n_steps,
-            batch_size=min(config.batch_size, rollout),  # <= one rollout
-            n_epochs=config.n_epochs,
-            gamma=config.gamma,
-            seed=config.seed,
-            device="cpu",
-            policy_kwargs={"net_arch": arch, "log_std_init": config.log_std_init},
-        )
-        layer = cast(torch.nn.Linear, model.policy.action_net)
-    else:
-        model = SAC(
-            "MlpPolicy",
-            env,
-            learning_rate=config.learning_rate,
-            buffer_size=config.buffer_size,
-            batch_size=config.batch_size,
-            gradient_steps=config.gradient_steps,
-            learning_starts=0,
-            gamma=config.gamma,
-            seed=config.seed,
-            device="cpu",
-            policy_kwargs={"net_arch": arch, "log_std_init": config.log_std_init},
-        )
-        layer = cast(torch.nn.Linear, model.actor.mu)
-        log_std = cast(torch.nn.Linear, model.actor.log_std)
-        with torch.no_grad():  # state-independent initial noise exp(log_std_init)
-            log_std.weight.zero_()
-            log_std.bias.fill_(config.log_std_init)
-    with torch.no_grad():
-        layer.weight.zero_()
-        layer.bias.zero_()
-    return model
-
-
-def planned_timesteps(config: TrainConfig, num_envs: int) -> int:
-    """Vessel-steps a run of ``config.timesteps`` really trains: SB3 completes whole rollouts.
-
-    PPO collects ``n_steps x num_envs`` vessel-steps per rollout, SAC ``num_envs``
-    per vector-env step, so the budget is rounded up to a multiple of that.
-    """
-    per_call = config.n_steps * num_envs if config.algo == "ppo" else num_envs
-    return -(-config.timesteps // per_call) * per_call
+__all__ = ["TrainConfig", "train"]
 
 
 def train(
@@ -195,8 +95,6 @@ def train(
         TrainingInterrupted: Ctrl-C; the checkpoint and the agent so far are written.
         cpf_env.atomic.FolderLockedError: Another run is writing ``out``.
     """
-    from agents.run_folder import TrainingRun, prepare_resume, write_run_record
-
     for name in config.scenarios:
         check_training(name, range(config.seed, config.seed + config.fleets))
     folder = _output_folder(out)

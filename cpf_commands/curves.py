@@ -14,7 +14,8 @@ writes to ``--out``:
 
 and prints the time to beat the base: the first vessel-step count (and
 wall-clock second) at which the IQM is below the base's cost, and at which
-the whole interval is.
+the whole interval is. One run has no interval: it prints and draws its cost
+alone (``curves.csv`` then has ci_low = ci_high = iqm = the run's cost).
 
 Vessel-steps axis: the evaluation points every run has (runs with one
 schedule evaluate at the same counts). Wall-clock axis: every time at which
@@ -205,11 +206,12 @@ def figure(curves: Sequence[Curve], base_cost: float, names: Sequence[str]) -> F
         for r in range(curve.values.shape[1]):
             axes.plot(curve.x, curve.values[:, r], color="tab:blue", alpha=0.25, lw=0.8,
                       drawstyle=style)  # fmt: skip
-        axes.plot(curve.x, curve.iqm, color="tab:blue", lw=2, drawstyle=style,
-                  label=f"IQM over {len(names)} training seeds")  # fmt: skip
-        axes.fill_between(curve.x, curve.low, curve.high, color="tab:blue", alpha=0.2,
-                          step="post" if style == "steps-post" else None,
-                          label="95 % bootstrap interval")  # fmt: skip
+        label = f"IQM over {len(names)} training seeds" if len(names) > 1 else "one run"
+        axes.plot(curve.x, curve.iqm, color="tab:blue", lw=2, drawstyle=style, label=label)
+        if len(names) > 1:  # one run has no interval to draw
+            axes.fill_between(curve.x, curve.low, curve.high, color="tab:blue", alpha=0.2,
+                              step="post" if style == "steps-post" else None,
+                              label="95 % bootstrap interval")  # fmt: skip
         axes.axhline(base_cost, color="k", ls="--", lw=1.2, label="base policy")
         axes.set_xlabel(labels[curve.axis])
         axes.xaxis.set_major_formatter(FuncFormatter(_tick))
@@ -290,12 +292,20 @@ def curves_main(argv: Sequence[str] | None = None) -> int:
         f"cpf-curves: {len(runs)} run{'s' if len(runs) != 1 else ''}; "
         f"base policy cost {base_cost:.6g}"
     )
+    single = len(runs) == 1  # one training seed: a cost, no IQM and no interval
     for curve, unit in ((steps, "vessel-steps"), (seconds, "s")):
         below, surely = first_below(curve, base_cost)
-        print(
-            f"  IQM below the base from {_when(below, unit)}; whole 95 % interval below from "
-            f"{_when(surely, unit)}"
-        )
-    print(f"  final IQM {steps.iqm[-1]:.6g} [{steps.low[-1]:.6g}, {steps.high[-1]:.6g}] at "
-          f"{steps.x[-1]:,.0f} vessel-steps; wrote {args.out}/curves.csv, curves.png")  # fmt: skip
+        if single:
+            print(f"  cost below the base from {_when(below, unit)}")
+        else:
+            print(
+                f"  IQM below the base from {_when(below, unit)}; whole 95 % interval below "
+                f"from {_when(surely, unit)}"
+            )
+    final = (
+        f"  final cost {steps.iqm[-1]:.6g} (one run: no interval; train several seeds for one)"
+        if single
+        else f"  final IQM {steps.iqm[-1]:.6g} [{steps.low[-1]:.6g}, {steps.high[-1]:.6g}]"
+    )
+    print(f"{final} at {steps.x[-1]:,.0f} vessel-steps; wrote {args.out}/curves.csv, curves.png")
     return 0

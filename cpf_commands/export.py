@@ -12,6 +12,7 @@ Example::
 from __future__ import annotations
 
 import argparse
+import shlex
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -36,6 +37,26 @@ def _parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _check_paths(folder: Path, out: Path) -> None:
+    """Raise ValueError if the agent folder or the output's folder is missing, before loading."""
+    from agents.agent_folder import MANIFEST
+
+    if not folder.exists():
+        raise ValueError(
+            f"the agent folder {str(folder)!r} does not exist; give a cpf-train --out folder."
+        )
+    if not folder.is_dir() or not (folder / MANIFEST).is_file():
+        raise ValueError(
+            f"{str(folder)!r} is not an agent folder (no {MANIFEST}); give a cpf-train --out "
+            "folder (an old SB3 folder: convert it with examples/convert_sb3_agents.py)."
+        )
+    if not out.parent.is_dir():
+        raise ValueError(
+            f"the folder of the output, {str(out.parent)!r}, does not exist; create it first "
+            f"(mkdir -p {shlex.quote(str(out.parent))})."
+        )
+
+
 def export_main(argv: Sequence[str] | None = None) -> int:
     """``cpf-export``: see ``cpf-export --help``."""
     parser = _parser()
@@ -45,6 +66,7 @@ def export_main(argv: Sequence[str] | None = None) -> int:
     if args.checks < 1:
         parser.error(f"--checks must be >= 1, got {args.checks}.")
     try:
+        _check_paths(Path(args.folder), Path(args.out))
         from agents.onnx_policy import export_onnx
 
         # before the work: writable, not a link, room for about twice the weights

@@ -107,7 +107,7 @@ def _parser() -> argparse.ArgumentParser:
         choices=[*training_scenarios(), "suite"],
         metavar="SCENARIO",
         help="training scenario; several (or 'suite', the benchmark suite) train one agent on "
-        "their mixture (the README's suite agent: --config "
+        "their mixture (the suite agent of docs/results.md: --config "
         "examples/suite_agent/hyperparameters.toml). Choices: "
         + ", ".join([*training_scenarios(), "suite"]),
     )

@@ -18,8 +18,7 @@ Both are timed in the same run, in alternating blocks (the best block of each,
 as ``timeit`` reports, since the machine may be shared): ``FleetSim.step``
 with a fixed action (zero by default), and ``numpy_rk4_period`` on the same
 B x n vessels, time and load held as in one control period. Prints
-vessel-steps/s of both and their ratio (issue 19's target: at least 8 at
-B = 1,024). Usage::
+vessel-steps/s of both and their ratio. Usage::
 
     python examples/numpy_plant_baseline.py                       # B = 1,024, wang2014
     python examples/numpy_plant_baseline.py --fleets 16 1024 --seconds 4 --scenario bench_mild

@@ -1,4 +1,4 @@
-"""Regenerate the README's two reproduction tables (markdown on stdout).
+"""Regenerate the two reproduction tables of docs/reproduction.md (markdown on stdout).
 
 ``claims``: the paper's five claims under both readings of the NN weight law,
 side by side: ``wang2014`` (0.05 s, ``leakage="gamma_scaled"``, the RL

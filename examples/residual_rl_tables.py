@@ -1,4 +1,4 @@
-"""Print the README's two residual-RL tables from the committed evaluation files.
+"""Print docs/results.md's two residual-RL tables from the committed evaluation files.
 
 Reads ``results/residual_rl/<scenario>_training_reward/episodes.csv`` (1.5 M
 steps) and ``results/residual_rl_5m/...`` (5 M steps): 20 evaluation episodes

@@ -15,8 +15,8 @@ Routes:
    reported with its error);
 2. ``cpf_env.envs.torchrl_env.TorchRLFleetEnv`` at several batch sizes B.
 
-Prints vessel-steps per second and the ratio native / wrapper at B = 256
-(the issue's target is >= 20). Needs the ``torchrl`` extra. Usage::
+Prints vessel-steps per second and the ratio native / wrapper at B = 256.
+Needs the ``torchrl`` extra. Usage::
 
     python examples/torchrl_throughput.py --seconds 4 --fleets 1 16 256 1024
 """

@@ -4,8 +4,9 @@ Each layer may import only itself and the layers listed for it below; an
 upward import (the simulator importing an env, ``baselines`` importing a
 learning library, one command family importing another it does not build on)
 fails here. Every import counts, also one inside a function: a lazy import
-still ties the layers together. Module-scope imports between the project's
-own modules must also form no cycle.
+still ties the layers together. The imports between the project's own
+modules must also form no cycle, at any scope: a function-level (or
+``TYPE_CHECKING``) import defers a cycle, it does not remove it.
 """
 
 from __future__ import annotations
@@ -83,21 +84,26 @@ def _layer(module: str) -> str:
     return max(matches, key=len)
 
 
-def _resolve(module: str, node: ast.ImportFrom) -> str:
+def _resolve(module: str, node: ast.ImportFrom, modules: dict[str, Path]) -> str:
     """The absolute module a ``from`` import names."""
     if node.level == 0:
         return node.module or ""
     base = module.split(".")
-    is_package = MODULES[module].name == "__init__.py"
+    is_package = modules[module].name == "__init__.py"
     base = base if is_package else base[:-1]
     base = base[: len(base) - (node.level - 1)]
     return ".".join([*base, node.module] if node.module else base)
 
 
-def _imports(module: str, source: str | None = None) -> list[tuple[str, int, bool]]:
-    """(imported module, line, at module scope) for every import in ``module``."""
-    text = MODULES[module].read_text() if source is None else source
-    tree = ast.parse(text, filename=str(MODULES[module]))
+def _imports(
+    module: str, source: str | None = None, modules: dict[str, Path] = MODULES
+) -> list[tuple[str, int, bool]]:
+    """(imported module, line, at module scope) for every import in ``module``.
+
+    ``modules`` (default: the project's) resolves relative imports and submodules.
+    """
+    text = modules[module].read_text() if source is None else source
+    tree = ast.parse(text, filename=str(modules[module]))
     top_level = {id(node) for node in tree.body}
     found = []
     for node in ast.walk(tree):
@@ -105,10 +111,10 @@ def _imports(module: str, source: str | None = None) -> list[tuple[str, int, boo
             for alias in node.names:
                 found.append((alias.name, node.lineno, id(node) in top_level))
         elif isinstance(node, ast.ImportFrom):
-            target = _resolve(module, node)
+            target = _resolve(module, node, modules)
             for alias in node.names:
                 submodule = f"{target}.{alias.name}"
-                name = submodule if submodule in MODULES else target
+                name = submodule if submodule in modules else target
                 found.append((name, node.lineno, id(node) in top_level))
     return found
 
@@ -138,34 +144,92 @@ def test_imports_only_the_layers_below(module: str) -> None:
     assert _violations(module) == []
 
 
-def test_no_import_cycle_at_module_scope() -> None:
-    graph = {
-        module: sorted(
-            {name for name, _, top in _imports(module) if top and name in MODULES} - {module}
-        )
-        for module in MODULES
+def _graph(modules: dict[str, Path], sources: dict[str, str] | None = None) -> dict[str, set[str]]:
+    """Module -> the project's modules it imports, at any scope (functions, TYPE_CHECKING too).
+
+    A package's ``__init__`` importing its own submodules is how packages work and
+    counts as an edge like any other; a cycle through it is a cycle.
+    """
+    sources = sources or {}
+    return {
+        module: {name for name, _, _ in _imports(module, sources.get(module), modules)}
+        & set(modules) - {module}
+        for module in modules
     }
-    done: set[str] = set()
 
-    def visit(module: str, stack: list[str]) -> None:
-        if module in stack:
-            cycle = [*stack[stack.index(module) :], module]
-            raise AssertionError("import cycle: " + " -> ".join(cycle))
-        if module in done:
-            return
-        for name in graph[module]:
-            # A package's __init__ importing its own submodules is how packages work;
-            # a submodule importing its package's __init__ back is the cycle to catch.
-            if MODULES[module].name == "__init__.py" and name.startswith(module + "."):
-                visit(name, [*stack, module])
-            elif not (MODULES[name].name == "__init__.py" and module.startswith(name + ".")):
-                visit(name, [*stack, module])
-            else:
-                raise AssertionError(f"{module} imports its own package {name} at module scope")
-        done.add(module)
 
-    for module in MODULES:
-        visit(module, [])
+def import_cycles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """The strongly connected groups of more than one module (Tarjan), each sorted."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on_stack: set[str] = set()
+    cycles: list[list[str]] = []
+
+    def visit(module: str) -> None:
+        index[module] = low[module] = len(index)
+        stack.append(module)
+        on_stack.add(module)
+        for name in sorted(graph.get(module, ())):
+            if name not in index:
+                visit(name)
+                low[module] = min(low[module], low[name])
+            elif name in on_stack:
+                low[module] = min(low[module], index[name])
+        if low[module] == index[module]:
+            group = []
+            while True:
+                name = stack.pop()
+                on_stack.discard(name)
+                group.append(name)
+                if name == module:
+                    break
+            if len(group) > 1:
+                cycles.append(sorted(group))
+
+    for module in sorted(graph):
+        if module not in index:
+            visit(module)
+    return cycles
+
+
+def _own_package_imports(graph: dict[str, set[str]], modules: dict[str, Path]) -> list[str]:
+    """Submodules that import their own package's ``__init__`` (run before them on import)."""
+    return [
+        f"{module} imports its own package {name}"
+        for module, names in sorted(graph.items())
+        for name in sorted(names)
+        if modules[name].name == "__init__.py" and module.startswith(name + ".")
+    ]
+
+
+def test_no_import_cycle_at_any_scope() -> None:
+    graph = _graph(MODULES)
+    assert import_cycles(graph) == []
+    assert _own_package_imports(graph, MODULES) == []
+
+
+@pytest.mark.parametrize(
+    "sources",
+    [
+        {"pkg.a": "from pkg.b import x\n", "pkg.b": "from pkg.a import y\n"},
+        {
+            "pkg.a": "def f():\n    from pkg.b import x\n",
+            "pkg.b": "import pkg.c\n",
+            "pkg.c": "class C:\n    def g(self):\n        from . import a\n",
+        },
+        {
+            "pkg.a": "import typing\nif typing.TYPE_CHECKING:\n    from pkg.b import B\n",
+            "pkg.b": "def f():\n    import pkg.a\n",
+        },
+    ],
+)
+def test_the_checker_sees_an_import_cycle_at_any_scope(sources: dict[str, str]) -> None:
+    modules = {name: Path(*name.split(".")).with_suffix(".py") for name in sources}
+    cycles = import_cycles(_graph(modules, sources))
+    assert len(cycles) == 1 and len(cycles[0]) >= 2
+    acyclic = dict(sources, **{name: "" for name in list(sources)[-1:]})
+    assert import_cycles(_graph(modules, acyclic)) == []
 
 
 @pytest.mark.parametrize(

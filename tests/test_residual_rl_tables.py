@@ -1,4 +1,4 @@
-"""examples/residual_rl_tables.py: hand-computed cells, and the README shows its output."""
+"""examples/residual_rl_tables.py: hand-computed cells, and docs/results.md shows its output."""
 
 from __future__ import annotations
 
@@ -52,10 +52,12 @@ def test_unpaired_seeds_are_refused(tmp_path: Path) -> None:
         tables.row(tables.read_episodes(path), "backstepping", "bench_mild")
 
 
-def test_readme_shows_the_tables_the_command_prints(capsys: pytest.CaptureFixture[str]) -> None:
+def test_results_page_shows_the_tables_the_command_prints(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
     text = tables.main([])
-    readme = (ROOT / "README.md").read_text()
+    page = (ROOT / "docs" / "results.md").read_text()
     for block in text.split("\n\n"):
-        assert block in readme, block
-    assert "python examples/residual_rl_tables.py" in readme
+        assert block in page, block
+    assert "python examples/residual_rl_tables.py" in page
     capsys.readouterr()

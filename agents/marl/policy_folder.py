@@ -15,56 +15,65 @@ each vessel's local input):
 - ``manifest.json``: format ``cpf-marl-agent``, and the SHA-256 and size of each
   file (the manifest of ``agents.agent_folder``, with its own format name).
 
-``load_marl_policy`` reads it back (every hash checked; no pickle anywhere) as
-an ``agents.TrainedPolicy``: the named base policy underneath, the same
-residual composition and statistics, local observations only. ``load_policy``
-(and so ``cpf-bench --policy FOLDER``) dispatches here on the format name.
-Nothing here imports BenchMARL: a saved folder loads with the ``rl`` extra.
+``read_marl_agent`` reads it back (every hash checked, every field typed
+strictly, the weights' shapes, dtype and values checked before any network is
+allocated: ``agents.agent_folder``'s discipline; no pickle anywhere) as a
+``TrainConfig``, the actor and its statistics; ``agents.load_policy`` (and so
+``cpf-bench --policies FOLDER`` and ``cpf-run --policy FOLDER``) dispatches
+here on the format name and runs it as an ``agents.TrainedPolicy``: the named
+base policy underneath, the same residual composition and statistics, local
+observations only. Nothing here imports BenchMARL: a saved folder loads with
+the ``rl`` extra.
 """
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import torch
-from safetensors.torch import load as load_tensors
 
 from agents.agent_folder import (
     CONFIG,
     MANIFEST,
     NORMALIZATION,
     WEIGHTS,
-    AgentFolderError,
     PolicyNetwork,
     agent_files,
-    read_verified,
+    network_from_layers,
+    normalization_from_json,
+    read_json,
+    read_weights,
     write_with_manifest,
 )
+from agents.folder_files import AgentFolderError, check_fields, field, read_manifest
+from agents.train_config import TrainConfig
 from cpf_env import atomic
 from cpf_env.envs.input_statistics import InputStatistics
-from cpf_env.envs.parallel import make_scenario
-from cpf_env.scenarios import Scenario
 
-if TYPE_CHECKING:
-    from agents.loading import TrainedPolicy
-
-__all__ = ["MARL_FORMAT", "is_marl_folder", "load_marl_policy", "save_marl_policy"]
+__all__ = ["MARL_FORMAT", "marl_config", "read_marl_agent", "save_marl_policy"]
 
 MARL_FORMAT = "cpf-marl-agent"
 MARL_FORMAT_VERSION = 1
 #: BenchMARL algorithms whose actor this format holds (a Gaussian over [-1, 1], tanh-squashed).
 ALGORITHMS = ("mappo", "ippo")
-
-
-def is_marl_folder(folder: Path) -> bool:
-    """Whether ``folder`` holds a manifest of this format (nothing else is read)."""
-    try:
-        manifest = json.loads((folder / MANIFEST).read_text())
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError):
-        return False
-    return isinstance(manifest, dict) and manifest.get("format") == MARL_FORMAT
+#: The actor's hidden activation and output transform (``PolicyNetwork``'s arguments).
+ACTOR = ("tanh", "tanh")
+#: JSON types of the record's fields, and of its task's fields that the policy uses.
+RECORD_FIELDS = {
+    "algorithm": "str",
+    "sizes": "tuple[int, ...]",
+    "activation": "str",
+    "output": "str",
+}
+TASK_FIELDS = {
+    "scenario": "str",
+    "base": "str",
+    "mode": "str",
+    "scale": "float",
+    "extras": "tuple[str, ...]",
+    "normalize": "bool",
+}
 
 
 def _actor_layers(experiment: Any, group: str) -> list[tuple[torch.Tensor, torch.Tensor]]:
@@ -149,59 +158,67 @@ def save_marl_policy(
     return target
 
 
-def load_marl_policy(folder: str | Path, scenario: str | Scenario | None = None) -> TrainedPolicy:
-    """A saved MARL actor as a policy with the analytic policies' interface.
-
-    Args:
-        folder: A folder ``save_marl_policy`` wrote.
-        scenario: Evaluation scenario; default: the task's scenario (its own
-            ``max_steps``, not the training episodes').
+def marl_config(record: Any, source: Path) -> tuple[TrainConfig, list[int]]:
+    """The ``TrainConfig`` and layer sizes of a MARL ``config.json`` record, strictly checked.
 
     Raises:
-        AgentFolderError: A missing, altered or inconsistent file (named).
+        AgentFolderError: A missing or mistyped field (``scale: "10"``, ``normalize:
+            "false"``), layer sizes that are not >= 1, another algorithm or actor form.
     """
-    from agents.loading import TorchActor, TrainedPolicy
-    from agents.training import TrainConfig
-
-    path = Path(folder)
-    manifest = json.loads((path / MANIFEST).read_text())
-    if manifest.get("format_version") != MARL_FORMAT_VERSION:
+    check_fields(record, RECORD_FIELDS, source, required=True)
+    check_fields(field(record, "task", source), TASK_FIELDS, source, "task.", required=True)
+    if record["algorithm"] not in ALGORITHMS:
         raise AgentFolderError(
-            f"{path / MANIFEST} has format version {manifest.get('format_version')!r}; this "
-            f"cpf_env reads version {MARL_FORMAT_VERSION}."
+            f"{source}: field 'algorithm' must be one of {ALGORITHMS}, got {record['algorithm']!r}."
         )
+    if (record["activation"], record["output"]) != ACTOR:
+        raise AgentFolderError(
+            f"{source}: fields 'activation' and 'output' must be {ACTOR}, got "
+            f"{(record['activation'], record['output'])}."
+        )
+    sizes = record["sizes"]
+    if len(sizes) < 3 or min(sizes) < 1:
+        raise AgentFolderError(
+            f"{source}: field 'sizes' must list the input, hidden and output layer sizes, "
+            f"each >= 1, got {sizes}."
+        )
+    task = record["task"]
     try:
-        record = json.loads(read_verified(path, CONFIG, manifest))
-        task, sizes = record["task"], [int(x) for x in record["sizes"]]
         config = TrainConfig(
             algo="ppo",
             scenario=task["scenario"],
             base=task["base"],
             mode=task["mode"],
-            scale=float(task["scale"]),
+            scale=task["scale"],
             extras=tuple(task["extras"]),
-            normalize_observations=bool(task["normalize"]),
+            normalize_observations=task["normalize"],
             net_arch=tuple(sizes[1:-1]),
         )
-        statistics = json.loads(read_verified(path, NORMALIZATION, manifest))
-        normalization = None
-        if statistics is not None:
-            normalization = InputStatistics.from_json(statistics)
-    except (json.JSONDecodeError, KeyError, TypeError, ValueError) as error:
-        if isinstance(error, AgentFolderError):
-            raise
-        raise AgentFolderError(f"{path} holds an invalid MARL policy record: {error}") from None
-    try:
-        tensors = load_tensors(read_verified(path, WEIGHTS, manifest))
-    except AgentFolderError:
-        raise
-    except Exception as error:  # safetensors raises its own error type
-        raise AgentFolderError(f"{path / WEIGHTS} is not a safetensors file: {error}") from None
-    network = PolicyNetwork(sizes, "tanh", "tanh")
-    try:
-        network.load_state_dict(tensors)
-    except RuntimeError as error:
-        raise AgentFolderError(f"{path / WEIGHTS} does not fit sizes {sizes}: {error}") from None
-    resolved = make_scenario(config.home_scenario if scenario is None else scenario)
-    actor = TorchActor(network.eval(), normalization)
-    return TrainedPolicy(path.name, config, actor, resolved)
+    except ValueError as error:
+        raise AgentFolderError(f"{source}: field 'task' is not a valid task: {error}") from None
+    return config, sizes
+
+
+def read_marl_agent(folder: Path) -> tuple[TrainConfig, PolicyNetwork, InputStatistics | None]:
+    """Read a folder ``save_marl_policy`` wrote, verifying every file against the manifest.
+
+    Returns:
+        The task as a ``TrainConfig`` (PPO, the task's base, residual and statistics
+        settings), the actor, and the statistics (or None).
+
+    Raises:
+        AgentFolderError: A missing, unreadable, altered or inconsistent file (named).
+    """
+    manifest = read_manifest(folder / MANIFEST, MARL_FORMAT, MARL_FORMAT_VERSION)
+    config, sizes = marl_config(read_json(folder, CONFIG, manifest), folder / CONFIG)
+    statistics = read_json(folder, NORMALIZATION, manifest)
+    normalization = None
+    if statistics is not None:
+        normalization = normalization_from_json(statistics, folder / NORMALIZATION, sizes[0])
+    if (normalization is not None) != config.normalize_observations:
+        raise AgentFolderError(
+            f"{folder / NORMALIZATION} {'holds' if normalization else 'lacks'} statistics but "
+            f"config.json says task.normalize={config.normalize_observations}."
+        )
+    network = network_from_layers(read_weights(folder, manifest), sizes, ACTOR, folder / WEIGHTS)
+    return config, network, normalization

@@ -2,7 +2,10 @@
 
 It checks the output folder before anything runs (``--force``, a lock,
 writable, not a link, disk, and memory for policies x seeds x series), runs
-``run_bench`` and prints the verdicts; ``cpf-bench --help`` lists the flags.
+``run_bench`` and prints its answer (``cpf_commands.bench.ranking``: per
+scenario and over the suite, the policies ranked by mean cost with their ratio
+to the reference, normalized score and verdict, and the best deployable policy
+named); ``cpf-bench --help`` lists the flags.
 """
 
 from __future__ import annotations
@@ -13,9 +16,10 @@ import shlex
 import time
 from collections.abc import Sequence
 
-from cpf_commands.bench import views
+from cpf_commands.bench import ranking
 from cpf_commands.bench.episodes import METRICS
 from cpf_commands.bench.marl_eval import write_marl_eval
+from cpf_commands.bench.report import summarize
 from cpf_commands.bench.run import (
     BASE_SEED,
     OUTPUT_FILES,
@@ -26,7 +30,7 @@ from cpf_commands.bench.run import (
 )
 from cpf_commands.bench.stats import REPLICATES
 from cpf_commands.bench.verdict import COST_MARGIN, check_margin
-from cpf_commands.common.arguments import add_scenarios_argument
+from cpf_commands.common.arguments import add_scenarios_argument, non_negative_int
 from cpf_commands.common.outputs import claim_output_folder
 from cpf_commands.common.policies import policy_argument, trusting_pickles
 from cpf_commands.common.ray_runtime import add_address_argument
@@ -54,9 +58,12 @@ def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="cpf-bench",
         allow_abbrev=False,
-        description="Run policies x scenarios x paired seeds in batched simulators and write "
-        "episodes.csv, summary.csv, summary.md and figures: means and interquartile means "
-        "with 95 % bootstrap intervals, failures counted, scores relative to nn_dsc.",
+        description="Run policies x scenarios x paired seeds in batched simulators; print, per "
+        "scenario and over the suite, the policies ranked by mean cost with their ratio to "
+        "the reference, normalized score and verdict, and the best deployable policy; write "
+        "episodes.csv, summary.csv, summary.md, report.html and figures: means and "
+        "interquartile means with 95 % bootstrap intervals, failures counted, scores relative "
+        "to nn_dsc.",
     )
     parser.add_argument(
         "--policies",
@@ -64,9 +71,11 @@ def _parser() -> argparse.ArgumentParser:
         default=default_policies(),
         type=policy_argument,
         metavar="POLICY",
-        help="baseline names or cpf-train --out folders (default: every deployable baseline "
-        "and the headroom reference nn_dsc_privileged, which is told the true model error "
-        "and disturbances and has ideal links: not deployable)",
+        help="baseline names, policies installed packages register, package.module:NAME of "
+        "your own policy class or factory (docs/extending.md), cpf-train --out folders or "
+        "cpf-export .onnx files, each once (default: every deployable baseline and the "
+        "headroom reference nn_dsc_privileged, which is told the true model error and "
+        "disturbances and has ideal links: not deployable)",
     )
     add_scenarios_argument(
         parser,
@@ -78,7 +87,7 @@ def _parser() -> argparse.ArgumentParser:
     )
     parser.add_argument(
         "--base-seed",
-        type=int,
+        type=non_negative_int,
         default=BASE_SEED,
         help=f"seed of episode 0; episode k uses base + k (default: {BASE_SEED})",
     )
@@ -191,6 +200,7 @@ def _claim_output(args: argparse.Namespace) -> atomic.FolderLock:
     """Refuse a run whose flags, memory or output folder would fail it; lock --out."""
     if args.seeds < 1:
         raise ValueError(f"--seeds must be >= 1, got {args.seeds}.")
+    labelled_policies(args.policies)  # a policy listed twice
     check_margin(args.cost_margin)
     batch, summary = _memory_needed(args)
     available = _available_memory()
@@ -264,11 +274,12 @@ def bench_main(argv: Sequence[str] | None = None) -> int:
     finally:
         lock.release()
     elapsed = time.perf_counter() - start
-    table = views.terminal_table(
-        cells, reference_label(args.reference, labelled_policies(args.policies)), args.cost_margin
+    reference = reference_label(args.reference, labelled_policies(args.policies))
+    answer = ranking.terminal_report(
+        summarize(cells, reference), cells, reference, args.cost_margin
     )
-    if table:
-        print(table)
+    if answer:
+        print(answer)
     requested = len(args.policies) * len(args.scenarios)
     if len(cells) < requested:
         print(
@@ -277,6 +288,7 @@ def bench_main(argv: Sequence[str] | None = None) -> int:
         )
     print(
         f"cpf-bench: {len(args.policies)} policies x {len(args.scenarios)} scenarios in "
-        f"{elapsed:.0f} s; results in {args.out}/ (summary.md, summary.csv, episodes.csv)"
+        f"{elapsed:.0f} s; results in {args.out}/ (report.html, summary.md, summary.csv, "
+        "episodes.csv)"
     )
     return 0

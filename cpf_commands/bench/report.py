@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import csv
 import io
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -34,6 +34,7 @@ __all__ = [
     "SUMMARY_COLUMNS",
     "CellResult",
     "episodes_csv",
+    "normalized_score",
     "summarize",
     "summary_csv",
 ]
@@ -181,14 +182,29 @@ def _wins(values: NDArray, reference: NDArray, metric: str) -> NDArray[np.float6
     return (x < y) + 0.5 * (x == y)
 
 
+def _scaled(group: Sequence[CellResult], metric: str, means: Sequence[float]) -> NDArray:
+    """One policy's episodes on every scenario, each divided by the reference's mean there."""
+    return np.concatenate([c.metrics[metric] / m for c, m in zip(group, means, strict=True)])
+
+
 def _suite_rows(
-    cells: Sequence[CellResult], reference: str, by_key: dict[tuple[str, str], CellResult]
+    cells: Sequence[CellResult],
+    reference: str,
+    headroom: str,
+    by_key: dict[tuple[str, str], CellResult],
 ) -> list[dict[str, object]]:
-    """Rows over all scenarios: episodes normalized by the reference's mean on their scenario."""
+    """Rows over all scenarios: episodes normalized by the reference's mean on their scenario.
+
+    The gap columns of a ``GAP_METRICS`` row hold the suite-wide normalized
+    score: ``stats.gap_closed`` of the normalized episodes of the reference,
+    the policy and the ``headroom`` reference, i.e. (1 - r) / (1 - r_headroom)
+    with r the policy's suite-wide mean ratio to the reference.
+    """
     names = list(dict.fromkeys(cell.scenario for cell in cells))
     if any((reference, name) not in by_key for name in names):
         return []
     references = [by_key[(reference, name)] for name in names]
+    tops = [by_key[(headroom, name)] for name in names if (headroom, name) in by_key]
     rows = []
     for policy in dict.fromkeys(cell.policy for cell in cells):
         if any((policy, name) not in by_key for name in names):
@@ -211,6 +227,15 @@ def _suite_rows(
                 low, high = stats.wilson_interval(float(pooled.sum()), int(pooled.size))
                 p = float(pooled.mean())
                 row.update(p_beats_reference=p, p_ci_low=low, p_ci_high=high)
+            scored = policy not in (reference, headroom) and len(tops) == len(names)
+            if metric in GAP_METRICS and scored:
+                found = stats.gap_closed(
+                    _scaled(references, metric, means),
+                    _scaled(own, metric, means),
+                    _scaled(tops, metric, means),
+                )
+                if found is not None:
+                    row.update(zip(("gap_closed", "gap_ci_low", "gap_ci_high"), found, strict=True))
             rows.append(row)
     return rows
 
@@ -223,8 +248,10 @@ def summarize(
     Metrics a policy does not have (NaN in every episode, e.g. a speed-estimate
     error without an estimator) get no row. The suite-wide rows need the
     reference on every scenario. The gap columns (``GAP_METRICS``) need the
-    reference and the ``headroom`` reference on the scenario, and stay empty
-    where the headroom reference is not better than the reference.
+    reference and the ``headroom`` reference on the scenario (on every
+    scenario for the suite-wide rows), and stay empty where the headroom
+    reference is not better than the reference. They are the normalized score
+    (``normalized_score``).
     """
     by_key = {(cell.policy, cell.scenario): cell for cell in cells}
     rows: list[dict[str, object]] = []
@@ -263,7 +290,28 @@ def summarize(
                             zip(("gap_closed", "gap_ci_low", "gap_ci_high"), found, strict=True)
                         )
             rows.append(row)
-    return rows + _suite_rows(cells, reference, by_key)
+    return rows + _suite_rows(cells, reference, headroom, by_key)
+
+
+def normalized_score(row: Mapping[str, object]) -> tuple[float, float, float] | None:
+    """The normalized score of a summary row, with its 95 % interval: (score, low, high).
+
+    score = (J_reference - J) / (J_reference - J_headroom) of the mean costs,
+    computed by ``summarize`` against the headroom reference it is given by
+    name (``stats.gap_closed``): 0 = the reference's level, 1 = the headroom
+    reference's, below 0 worse than the reference. On a suite-wide row the
+    costs are each scenario's divided by the reference's mean there.
+
+    Returns:
+        None where the row has no score: the headroom reference did not run
+        (on every scenario, for a suite-wide row), is not better than the
+        reference, or the row is the reference's or the headroom reference's.
+    """
+    if row.get("gap_closed") is None:
+        return None
+    keys = ("gap_closed", "gap_ci_low", "gap_ci_high")
+    score, low, high = (float(row[key]) for key in keys)  # type: ignore[arg-type]
+    return score, low, high
 
 
 def _cell(value: object) -> str:

@@ -9,8 +9,9 @@ batch per scenario, the same numbers as a batch per cell); a Ray run sends
 one (policy, scenario) cell per task (``cpf_commands.bench.episodes``). A
 scenario in which nothing is random (``cpf_env.scenarios.suite.is_deterministic``)
 runs one episode: its seeds would all give the same one. ``write_outputs``
-fills the output folder with ``episodes.csv``, ``summary.csv``, ``summary.md``
-and the figures; ``cpf_commands.bench.cli`` is the command around it.
+fills the output folder with ``episodes.csv``, ``summary.csv``, ``summary.md``,
+the figures and ``report.html`` (the ranked tables and the figures in one
+page); ``cpf_commands.bench.cli`` is the command around it.
 
 Example:
     >>> from cpf_commands.bench.run import run_bench
@@ -21,13 +22,15 @@ Example:
 
 from __future__ import annotations
 
+import io
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 from tqdm.auto import tqdm
 
-from cpf_commands.bench import profiles, views
+from cpf_commands.bench import profiles, ranking, views
 from cpf_commands.bench.episodes import run_episodes
+from cpf_commands.bench.html_report import html_report
 from cpf_commands.bench.report import HEADLINE, CellResult, episodes_csv, summarize, summary_csv
 from cpf_commands.bench.verdict import COST_MARGIN, check_margin
 from cpf_commands.common.outputs import foreign_files
@@ -35,8 +38,8 @@ from cpf_commands.common.policies import (
     BenchPolicy,
     PolicySpec,
     TrustedAgentFolder,
-    baseline_names,
     policy_label,
+    refers_to_file,
     resolve_policy,
 )
 from cpf_commands.common.ray_runtime import start_ray
@@ -67,6 +70,7 @@ OUTPUT_FILES = frozenset(
         "episodes.csv",
         "summary.csv",
         "summary.md",
+        "report.html",
         *(f"{metric}.png" for metric, _ in HEADLINE),
         *PROFILE_FIGURES,
     )
@@ -91,16 +95,21 @@ def default_policies() -> list[str]:
 def labelled_policies(
     policies: Sequence[PolicySpec] | Mapping[str, PolicySpec],
 ) -> dict[str, PolicySpec]:
-    """Label -> specification, refusing two policies with the same label."""
+    """Label -> specification, refusing a policy listed twice or two with the same label."""
     if isinstance(policies, Mapping):
         return dict(policies)
     labelled: dict[str, PolicySpec] = {}
     for spec in policies:
         label = policy_label(spec)
+        if label in labelled and isinstance(spec, str | Path):
+            raise ValueError(
+                f"policy {label!r} is listed twice; duplicates are not allowed (every policy "
+                "runs on the same seeds, so a second run would repeat the first)."
+            )
         if label in labelled:
             raise ValueError(
-                f"two policies are labelled {label!r}; pass a mapping label -> policy to "
-                "tell them apart."
+                f"two policies are labelled {label!r}; give them distinct name attributes "
+                "or pass a mapping label -> policy."
             )
         labelled[label] = spec
     return labelled
@@ -115,7 +124,9 @@ def write_outputs(
     figures: bool = True,
     cost_margin: float = COST_MARGIN,
 ) -> list[dict[str, object]]:
-    """Write episodes.csv, summary.csv, summary.md and one PNG per headline metric to ``out``.
+    """Write episodes.csv, summary.csv, summary.md, report.html and the PNG figures to ``out``.
+
+    report.html holds the ranked tables (``ranking``) and every figure inline.
 
     The folder is built beside ``out`` and replaces it whole (``cpf_env.atomic``):
     a run killed while writing leaves the previous results.
@@ -126,7 +137,7 @@ def write_outputs(
         command: The command line recorded in summary.md.
         reference: The policy scores are relative to.
         skipped: (policy, scenario) -> why it was not run, listed in summary.md.
-        figures: Write the PNG figures.
+        figures: Write the PNG figures (and put them in report.html).
         cost_margin: The verdict's practical-equivalence margin of the cost, a
             fraction of the reference's mean cost.
 
@@ -138,25 +149,42 @@ def write_outputs(
     if others:
         raise ValueError(f"{directory} holds files cpf-bench did not write: {others[:5]}.")
     rows = summarize(cells, reference)
+    pictures = _figures(rows, cells, reference) if figures else {}
+    page = html_report(
+        ranking.ranked_tables(rows, cells, reference, cost_margin),
+        ranking.legend(reference, cost_margin),
+        command,
+        views.regression_lines(cells, reference, cost_margin),
+        pictures,
+    )
     with atomic.staged_folder(directory) as staging:  # all files or none, no stale figure
         atomic.write_text(staging / "episodes.csv", episodes_csv(cells))
         atomic.write_text(staging / "summary.csv", summary_csv(rows))
         text = views.markdown(rows, cells, command, reference, skipped or {}, cost_margin)
         atomic.write_text(staging / "summary.md", text)
-        if figures:
-            drawings = {
-                f"{metric}.png": views.figure(rows, cells, metric, title)
-                for metric, title in HEADLINE
-            }
-            scores = profiles.normalized_scores(cells, reference)
-            if len(scores) > 1:  # the reference and at least one other policy on every scenario
-                drawings["performance_profile.png"] = profiles.profile_figure(scores, reference)
-                drawings["probability_of_improvement.png"] = profiles.improvement_figure(
-                    scores, reference
-                )
-            for name, drawing in drawings.items():
-                drawing.savefig(staging / name, dpi=100, metadata={"Software": None})
+        atomic.write_text(staging / "report.html", page)
+        for name, data in pictures.items():
+            atomic.write_bytes(staging / name, data)
     return rows
+
+
+def _figures(
+    rows: list[dict[str, object]], cells: Sequence[CellResult], reference: str
+) -> dict[str, bytes]:
+    """File name -> PNG bytes of every figure (no time stamp: the same rows, the same bytes)."""
+    drawings = {
+        f"{metric}.png": views.figure(rows, cells, metric, title) for metric, title in HEADLINE
+    }
+    scores = profiles.normalized_scores(cells, reference)
+    if len(scores) > 1:  # the reference and at least one other policy on every scenario
+        drawings["performance_profile.png"] = profiles.profile_figure(scores, reference)
+        drawings["probability_of_improvement.png"] = profiles.improvement_figure(scores, reference)
+    pictures = {}
+    for name, drawing in drawings.items():
+        buffer = io.BytesIO()
+        drawing.savefig(buffer, format="png", dpi=100, metadata={"Software": None})
+        pictures[name] = buffer.getvalue()
+    return pictures
 
 
 def _build(
@@ -231,8 +259,8 @@ def _absolute(spec: PolicySpec) -> PolicySpec:
     """An agent folder given by a relative path made absolute (Ray workers run elsewhere)."""
     if isinstance(spec, TrustedAgentFolder):
         return spec  # already absolute; keeps the user's trust
-    if isinstance(spec, Path) or (isinstance(spec, str) and spec not in baseline_names()):
-        return Path(spec).resolve()
+    if refers_to_file(spec):
+        return Path(spec).resolve()  # type: ignore[arg-type]
     return spec
 
 

@@ -30,7 +30,7 @@ __all__ = [
     "gap_table",
     "markdown",
     "markdown_table",
-    "terminal_table",
+    "regression_lines",
     "verdict_rows",
 ]
 
@@ -67,25 +67,11 @@ def verdict_rows(found: Sequence[Verdict]) -> list[list[str]]:
     return rows
 
 
-def terminal_table(cells: Sequence[CellResult], reference: str, margin: float = COST_MARGIN) -> str:
-    """The verdicts as a plain-text table for the terminal ('' without the reference)."""
-    body = verdict_rows(verdicts(cells, reference, margin))
-    if not body:
-        return ""
-    table = [list(VERDICT_HEADER), *body]
-    widths = [max(len(row[k]) for row in table) for k in range(len(VERDICT_HEADER))]
-    lines = ["  ".join(cell.ljust(w) for cell, w in zip(row, widths, strict=True)) for row in table]
-    return (
-        f"against {reference}: (equivalent: cost interval within +-{margin:.1%} of its mean)\n"
-        + "\n".join([line.rstrip() for line in lines] + _regressions(cells, reference, margin))
-    )
-
-
 #: Units of the guarded metrics' short labels, as printed.
 _UNITS = {"cross-track": " m", "heading": " rad", "formation": " m"}
 
 
-def _regressions(cells: Sequence[CellResult], reference: str, margin: float) -> list[str]:
+def regression_lines(cells: Sequence[CellResult], reference: str, margin: float) -> list[str]:
     """One line per verdict with a regressed guarded metric: the means, policy vs reference.
 
     Final-window means in SI units (m, rad; progress as a fraction of v0 T,
@@ -285,7 +271,7 @@ def _mean_and_failures(row: dict[str, object] | None) -> str:
 def _ratio(row: dict[str, object], base: dict[str, object]) -> tuple[float, float, float] | None:
     """Policy mean over the reference mean; the paired interval mapped the same way."""
     scale = float(base["mean"])  # type: ignore[arg-type]
-    if scale == 0.0 or row["diff_reference"] is None:
+    if scale <= 0.0 or row["diff_reference"] is None:
         return None
     low, high = (float(row[k]) for k in ("diff_ci_low", "diff_ci_high"))  # type: ignore[arg-type]
     mean = float(row["mean"])  # type: ignore[arg-type]
@@ -294,7 +280,8 @@ def _ratio(row: dict[str, object], base: dict[str, object]) -> tuple[float, floa
 
 #: Minor ticks of the log axis that get a label.
 _MINOR = (0.2, 0.5, 2.0, 5.0)
-#: Smallest ratio drawn on the log axis (a ratio at or below it is drawn at it, marked "<").
+#: Smallest ratio drawn on the log axis, its left edge: a mean below it is drawn there as a
+#: "<" marker, and an interval reaching below it is annotated as clipped.
 _FLOOR = 1e-3
 
 
@@ -304,7 +291,9 @@ def figure(
     """Each policy's mean over the reference's on every scenario, with the paired 95 % interval.
 
     One row per scenario, one marker per policy, on a log axis centred on 1
-    (the reference); a cell that did not run is written out as "not run".
+    (the reference); a cell that did not run is written out as "not run", a
+    ratio below 0.001 is drawn at that axis edge and marked clipped, and a
+    metric whose reference mean is not positive has no ratio (written out).
     The figure grows with the number of scenarios, so it stays readable.
     """
     index = {(r["policy"], r["scenario"]): r for r in rows if r["metric"] == metric}
@@ -323,6 +312,7 @@ def figure(
     fig = Figure(figsize=(8.0, height), layout="constrained")
     ax = fig.subplots()
     spacing = 1.0 / (len(others) + 1)
+    clipped = False
     for k, policy in enumerate(others):
         color = f"C{k % 10}"
         label: str | None = figure_label(policy)
@@ -334,25 +324,43 @@ def figure(
                 continue
             ratio = _ratio(row, base)
             if ratio is None:
-                ax.annotate("no ratio (zero mean)", (1.0, y), fontsize=7, color="grey", va="center")
+                ax.annotate(
+                    f"no ratio ({reference}'s mean <= 0)",
+                    (1.0, y),
+                    fontsize=7,
+                    color="grey",
+                    va="center",
+                )
                 continue
             mean, low, high = (max(value, _FLOOR) for value in ratio)
             ax.errorbar(
                 mean,
                 y,
                 xerr=[[mean - low], [high - mean]],
-                fmt="o",
+                fmt="<" if ratio[0] < _FLOOR else "o",
                 color=color,
                 markersize=4,
                 capsize=2,
                 label=label,
             )
             label = None
+            if ratio[1] < _FLOOR:  # pinned to the axis edge: say so
+                ax.annotate(
+                    f"< {_FLOOR:g}: clipped",
+                    (_FLOOR, y),
+                    xytext=(3, 4),
+                    textcoords="offset points",
+                    fontsize=7,
+                    color=color,
+                )
+                clipped = True
             failures = int(row["failures"])  # type: ignore[call-overload]
             if failures:
                 ax.annotate(f"{failures} failed", (high, y), fontsize=7, color="red", va="center")
     ax.axvline(1.0, color="black", linewidth=0.8)
     ax.set_xscale("log")
+    if clipped:  # the floor is the axis edge, where clipped markers and bars end
+        ax.set_xlim(left=_FLOOR)
     ax.set_yticks(range(len(names)), names, fontsize=8)
     ax.set_ylim(len(names) - 0.5, -0.5)
     ax.grid(axis="x", which="both", alpha=0.3)
@@ -360,7 +368,7 @@ def figure(
     ax.xaxis.set_major_formatter(FuncFormatter(lambda x, _: f"x{x:g}"))
     ax.xaxis.set_minor_formatter(FuncFormatter(lambda x, _: f"{x:g}" if x in _MINOR else ""))
     ax.tick_params(axis="x", which="both", labelsize=7)
-    if others:  # the reference alone has no marker to label
+    if ax.get_legend_handles_labels()[0]:  # none when no ratio was drawn
         fig.legend(fontsize=7, loc="outside lower center", ncols=min(3, len(others)))
     fig.suptitle(f"{title}\nrelative to {reference}, paired 95 % bootstrap interval", fontsize=10)
     return fig

@@ -9,14 +9,13 @@ run's own metrics), and write figures and metrics.
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from cpf_commands.common.arguments import positive_int
+from cpf_commands.common.arguments import non_negative_int, positive_int
 from cpf_commands.common.policies import policy_argument, trusting_pickles
 from cpf_env import scenarios
 
@@ -55,8 +54,9 @@ def _run_parser(prog: str = "cpf-run") -> argparse.ArgumentParser:
         default="nn_dsc",
         type=policy_argument,
         help=f"a baseline ({', '.join(sorted(POLICIES))}), a privileged reference "
-        f"({', '.join(sorted(PRIVILEGED))}, not deployable), a cpf-train --out folder or a "
-        "cpf-export .onnx file",
+        f"({', '.join(sorted(PRIVILEGED))}, not deployable), a policy an installed package "
+        "registers, package.module:NAME of your own policy class or factory "
+        "(docs/extending.md), a cpf-train --out folder or a cpf-export .onnx file",
     )
     parser.add_argument(
         "--trust-pickle",
@@ -71,7 +71,12 @@ def _run_parser(prog: str = "cpf-run") -> argparse.ArgumentParser:
         help="reading of the NN weight law of nn_dsc and its ablations (default: plain on the "
         "0.01 s scenarios *_fine, gamma_scaled elsewhere); see docs/reproduction.md",
     )
-    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument(
+        "--seed",
+        type=non_negative_int,
+        default=0,
+        help="seed of the environment and the policy, an integer >= 0 (default: 0)",
+    )
     parser.add_argument(
         "--steps",
         type=positive_int,
@@ -129,22 +134,25 @@ def _default_scenario(policy: str) -> str:
     """The paper's scenario, or the training scenario of an agent folder (its first, if several).
 
     Raises:
-        ValueError: An agent folder whose config.json is unreadable.
+        ValueError: A folder that is not an agent folder, or whose configuration is unreadable
+            (``agents.loading.read_config``'s message, naming the file and field).
     """
-    record = Path(policy) / "config.json"
-    if not record.is_file():
+    if not Path(policy).is_dir():
         return DEFAULT_SCENARIO
     try:
-        scenario = json.loads(record.read_text())["config"]["scenario"]
-    except (OSError, json.JSONDecodeError, KeyError, TypeError) as error:
-        raise ValueError(f"{record} is not a readable training record: {error}") from None
-    if isinstance(scenario, str):
-        return scenario
-    print(
-        f"cpf-run: the agent was trained on {len(scenario)} scenarios; running its first, "
-        f"{scenario[0]} (choose another with --scenario)."
-    )
-    return str(scenario[0])
+        from agents.loading import read_config
+    except ImportError as error:
+        raise ValueError(
+            f"{policy!r} is a folder, but loading trained agents needs the learning extra: "
+            "pip install 'cpf_env[rl]'."
+        ) from error
+    names = read_config(policy).scenarios
+    if len(names) > 1:
+        print(
+            f"cpf-run: the agent was trained on {len(names)} scenarios; running its first, "
+            f"{names[0]} (choose another with --scenario)."
+        )
+    return names[0]
 
 
 def _video_recorder(args: argparse.Namespace) -> VideoRecorder:
@@ -170,7 +178,10 @@ def run_main(argv: Sequence[str] | None = None, prog: str = "cpf-run") -> int:
     except ValueError as error:
         parser.error(str(error))
     if not args.quiet:
-        print("Loading the simulator kernels (numba compiles them on the first run: 10-30 s)...")
+        print(
+            "Loading the simulator kernels (numba compiles them on the first run: "
+            "about a minute of CPU, docs/speed.md)..."
+        )
         sys.stdout.flush()
     start = time.perf_counter()
     try:
@@ -205,6 +216,8 @@ def run_main(argv: Sequence[str] | None = None, prog: str = "cpf-run") -> int:
         )
         for claim in claims:
             verdict = "holds" if claim.holds else "NOT MET"
+            if claim.holds is None:
+                verdict = f"not judged: {metrics['claims_not_judged']}"
             print(
                 f"  {claim.number}. [{claim.figure}] {claim.statement}\n"
                 f"     measured: {claim.measured} -> {verdict}"

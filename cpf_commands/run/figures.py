@@ -2,7 +2,8 @@
 
 Each function draws one figure on a fresh matplotlib ``Figure`` (Agg, no
 window) and returns it; ``write_figures`` saves all five as PNG. Vessels are
-numbered 1..n in labels, as in the paper.
+numbered 0..n-1, as the environments' agents (``vessel_0`` ...) and the videos
+are; the paper's vessel k is vessel k - 1 here (figures of one vessel say so).
 """
 
 from __future__ import annotations
@@ -34,7 +35,7 @@ def paths_figure(trajectory: Trajectory) -> Figure:
     ax = fig.add_subplot()
     for i in range(trajectory.eta.shape[1]):
         (line,) = ax.plot(
-            trajectory.eta[:, i, 0], trajectory.eta[:, i, 1], lw=2.2, label=f"vessel {i + 1}"
+            trajectory.eta[:, i, 0], trajectory.eta[:, i, 1], lw=2.2, label=f"vessel {i}"
         )
         ax.plot(*trajectory.eta[0, i, :2], "o", color=line.get_color(), ms=5)
         ax.plot(trajectory.eta_desired[:, i, 0], trajectory.eta_desired[:, i, 1], "k--", lw=0.8)
@@ -45,6 +46,11 @@ def paths_figure(trajectory: Trajectory) -> Figure:
     ax.grid(alpha=0.3)
     ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8)
     return fig
+
+
+def _paper(vessel: int) -> str:
+    """The paper's number of a vessel (it counts from 1)."""
+    return f"the paper's vessel {vessel + 1}"
 
 
 def _fit(nn: NDArray[np.float64], true: NDArray[np.float64]) -> tuple[float, float]:
@@ -72,7 +78,7 @@ def nn_figure(trajectory: Trajectory, vessel: int = 1, zoom_from: float = 0.1) -
         time = trajectory.time[window]
         for k, ax in enumerate(axes[:, column]):
             if true is not None:
-                ax.plot(time, true[window, vessel, k], lw=1.4, label=f"true $f_{vessel + 1}$")
+                ax.plot(time, true[window, vessel, k], lw=1.4, label=f"true $f_{vessel}$")
             if nn is not None:
                 ax.plot(
                     time,
@@ -97,7 +103,8 @@ def nn_figure(trajectory: Trajectory, vessel: int = 1, zoom_from: float = 0.1) -
     axes[0, 0].legend(fontsize=8)
     axes[0, 0].set_title("whole run")
     fig.suptitle(
-        f"Lumped uncertainty of vessel {vessel + 1} and its NN approximation: whole run (left), "
+        f"Lumped uncertainty of vessel {vessel} ({_paper(vessel)}) and its NN approximation: "
+        "whole run (left), "
         f"from t = {trajectory.time[start]:.0f} s on its own scale (right)"
     )
     return fig
@@ -113,14 +120,14 @@ def _float32_floor(ax: Axes, v0: NDArray[np.float64], what: str) -> None:
 
 
 def coordination_figure(trajectory: Trajectory) -> Figure:
-    """Fig. 5: path-variable coordination errors theta_1 - theta_j, linear and log scale."""
+    """Fig. 5: path-variable coordination errors theta_0 - theta_j, linear and log scale."""
     fig = Figure(figsize=(8, 6), layout="constrained")
     linear, log = fig.subplots(2, 1, sharex=True)
     theta = trajectory.theta
     for j in range(1, theta.shape[1]):
         difference = theta[:, 0] - theta[:, j]
         (line,) = linear.plot(
-            trajectory.time, difference, lw=1.2, label=rf"$\theta_1 - \theta_{{{j + 1}}}$"
+            trajectory.time, difference, lw=1.2, label=rf"$\theta_0 - \theta_{{{j}}}$"
         )
         log.semilogy(trajectory.time, np.abs(difference) + 1e-16, lw=1.0, color=line.get_color())
     linear.set(ylabel="coordination error", title="Path-variable coordination errors")
@@ -175,7 +182,7 @@ def forces_figure(trajectory: Trajectory, vessel: int = 2) -> Figure:
     axes[0, 0].legend(fontsize=8, ncol=3)
     axes[0, 0].set_title("whole run (commands clipped to view)")
     axes[0, 1].set_title(f"first {end:.1f} s: where the saturation happens")
-    fig.suptitle(f"Control forces of vessel {vessel + 1}")
+    fig.suptitle(f"Control forces of vessel {vessel} ({_paper(vessel)})")
     return fig
 
 
@@ -187,7 +194,7 @@ def speed_figure(trajectory: Trajectory) -> Figure:
     if estimate is not None:
         for i in range(estimate.shape[1]):
             (line,) = value.plot(
-                trajectory.time, estimate[:, i], lw=1.2, label=rf"$\hat v_{{{i + 1}}}$"
+                trajectory.time, estimate[:, i], lw=1.2, label=rf"$\hat v_{{{i}}}$"
             )
             error.semilogy(
                 trajectory.time,

@@ -238,23 +238,21 @@ class Scenario:
             object.__setattr__(self, name, as_real(f"Scenario.{name}", getattr(self, name), unit))
         for name in ("substeps", "max_steps", "message_size"):
             object.__setattr__(self, name, as_integer(f"Scenario.{name}", getattr(self, name)))
-        checks = {
-            "dt": 0.0 < self.dt < math.inf,
-            "substeps": self.substeps >= 1,
-            "max_steps": self.max_steps >= 1,
-            "theta_dot_max": self.theta_dot_max > 0.0,
-            "message_size": self.message_size >= 0,
-            "message_max": self.message_max > 0.0,
-            "max_path_error": self.max_path_error > 0.0,
-            "model_spread": 0.0 <= self.model_spread < 1.0,
+        checks = {  # name -> (valid, what it must be)
+            "dt": (0.0 < self.dt < math.inf, "> 0 and finite"),
+            "substeps": (self.substeps >= 1, "an integer >= 1"),
+            "max_steps": (self.max_steps >= 1, "positive: an integer >= 1 (control steps)"),
+            "theta_dot_max": (self.theta_dot_max > 0.0, "> 0"),
+            "message_size": (self.message_size >= 0, "an integer >= 0"),
+            "message_max": (self.message_max > 0.0, "> 0"),
+            "max_path_error": (self.max_path_error > 0.0, "> 0 (m)"),
+            "model_spread": (0.0 <= self.model_spread < 1.0, "in [0, 1)"),
         }
-        for name, ok in checks.items():
+        for name, (ok, requirement) in checks.items():
             if not ok:
                 raise ValueError(
-                    f"Scenario.{name} = {getattr(self, name)!r} is invalid: dt must be > 0 "
-                    "and finite; theta_dot_max, message_max and max_path_error > 0; substeps and "
-                    "max_steps integers >= 1, message_size an integer >= 0, model_spread in "
-                    "[0, 1)."
+                    f"Scenario.{name} = {getattr(self, name)!r} is invalid: {name} must be "
+                    f"{requirement}."
                 )
 
     @property

@@ -72,6 +72,31 @@ def _floats(value: ArrayLike) -> NDArray[np.float64]:
     return np.ascontiguousarray(value, dtype=np.float64)
 
 
+def _seeds(seeds: object, count: int) -> list[int | None]:
+    """``count`` reset seeds checked whole: each a Python or numpy integer >= 0, or None.
+
+    Raises:
+        ValueError: Not a sequence of ``count`` entries, or an entry that is a bool, a
+            float, a string or a negative integer (named by its position).
+    """
+    if isinstance(seeds, str | bytes) or not isinstance(seeds, Sequence | np.ndarray):
+        raise ValueError(
+            f"seeds must be a list of one integer >= 0 (or None) per reset fleet, got {seeds!r}."
+        )
+    checked = list(seeds)
+    if len(checked) != count:
+        raise ValueError(f"got {len(checked)} seeds for {count} fleets; give one per fleet.")
+    for k, seed in enumerate(checked):
+        if seed is None:
+            continue
+        if isinstance(seed, bool | np.bool_) or not isinstance(seed, int | np.integer) or seed < 0:
+            raise ValueError(
+                f"seeds[{k}] is {seed!r}; each seed must be an integer >= 0 or None "
+                "(nothing was reset)."
+            )
+    return [None if seed is None else int(seed) for seed in checked]
+
+
 def _ints(value: ArrayLike) -> NDArray[np.int64]:
     """``value`` as a C-contiguous int64 array (one numba type for every scenario)."""
     return np.ascontiguousarray(value, dtype=np.int64)
@@ -233,13 +258,16 @@ class FleetSim:
         Returns:
             Observations of every fleet, shape (B, n, obs_dim), float32 (a view;
             copy it if you keep it across steps).
+
+        Raises:
+            ValueError: Bad fleet indices, or seeds that are not one integer >= 0 (or None)
+                per fleet; every seed is checked before any fleet is reset, so a refused
+                call leaves the simulator as it was.
         """
         index = np.arange(self.num_fleets) if fleets is None else _ints(fleets)
         if index.ndim != 1 or np.any((index < 0) | (index >= self.num_fleets)):
             raise ValueError(f"fleets must be indices in [0, {self.num_fleets}), got {fleets!r}.")
-        seeds = [None] * len(index) if seeds is None else list(seeds)
-        if len(seeds) != len(index):
-            raise ValueError(f"got {len(seeds)} seeds for {len(index)} fleets; give one per fleet.")
+        seeds = [None] * len(index) if seeds is None else _seeds(seeds, len(index))
         for b, seed in zip(index, seeds, strict=True):
             if seed is not None:
                 self._rngs[b] = np.random.default_rng(seed)

@@ -1,4 +1,4 @@
-"""Print the README's suite-agent tables from the committed benchmark summaries.
+"""Print docs/results.md's suite-agent tables from the committed benchmark summaries.
 
     python examples/suite_agent/tables.py        # results/suite_agent
     python examples/suite_agent/tables.py --root \

@@ -15,7 +15,7 @@ import torch
 from conftest import ROOT
 
 from agents import load_policy
-from agents.agent_folder import AgentFolderError
+from agents.folder_files import AgentFolderError
 from agents.legacy import convert_sb3_folder
 from cpf_commands.bench.cli import bench_main
 from cpf_commands.run.cli import run_main
@@ -106,7 +106,7 @@ def test_a_missing_file_is_an_error_naming_it(tmp_path: Path) -> None:
 
 
 def test_a_consistent_forgery_of_the_statistics_is_caught(tmp_path: Path) -> None:
-    """Statistics of another size, with the manifest's hash updated to match."""
+    """Statistics of another size, with the manifest's hash and size updated to match."""
     import hashlib
 
     folder = _copy(tmp_path)
@@ -116,6 +116,7 @@ def test_a_consistent_forgery_of_the_statistics_is_caught(tmp_path: Path) -> Non
     (folder / "normalization.json").write_bytes(data)
     manifest = json.loads((folder / "manifest.json").read_text())
     manifest["files"]["normalization.json"]["sha256"] = hashlib.sha256(data).hexdigest()
+    manifest["files"]["normalization.json"]["bytes"] = len(data)
     (folder / "manifest.json").write_text(json.dumps(manifest))
     with pytest.raises(AgentFolderError, match="statistics for 25 inputs"):
         load_policy(folder)
@@ -130,7 +131,8 @@ def test_the_converted_agent_acts_as_sb3_did(tmp_path: Path) -> None:
     from stable_baselines3 import PPO
     from stable_baselines3.common.vec_env import VecMonitor
 
-    from agents.training import TrainConfig, build_model, make_env
+    from agents.algorithms import build_model, make_env
+    from agents.train_config import TrainConfig
 
     policy = load_policy(AGENT)
     record = json.loads((AGENT / "config.json").read_text())
@@ -157,7 +159,8 @@ def test_an_old_folder_loads_with_trust_and_converts_to_the_same_actions(tmp_pat
     """A tiny SB3 folder written the old way (model.zip + vecnormalize.pkl) by this test."""
     from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 
-    from agents.training import TrainConfig, build_model, make_env
+    from agents.algorithms import build_model, make_env
+    from agents.train_config import TrainConfig
 
     config = TrainConfig(scenario="bench_mild", fleets=2, n_steps=16, batch_size=160, net_arch=(8,))
     env = VecNormalize(VecMonitor(make_env(config)), norm_reward=False)
@@ -191,7 +194,8 @@ def test_an_old_folder_loads_with_trust_and_converts_to_the_same_actions(tmp_pat
 def test_an_old_folder_without_its_statistics_is_refused(tmp_path: Path) -> None:
     from stable_baselines3.common.vec_env import VecMonitor
 
-    from agents.training import TrainConfig, build_model, make_env
+    from agents.algorithms import build_model, make_env
+    from agents.train_config import TrainConfig
 
     config = TrainConfig(scenario="bench_mild", fleets=2, n_steps=16, batch_size=160, net_arch=(8,))
     model = build_model(config, VecMonitor(make_env(config)))

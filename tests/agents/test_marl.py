@@ -21,7 +21,7 @@ import torch
 from torchrl.envs.utils import ExplorationType, set_exploration_type
 
 from agents import load_policy
-from agents.agent_folder import AgentFolderError
+from agents.folder_files import AgentFolderError
 from agents.marl import envs, policy_folder
 from agents.marl.tasks import CONF, CpfTask, CpfTaskClass
 from cpf_env.scenarios import paper, suite

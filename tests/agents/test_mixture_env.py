@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from agents import FleetVecEnv, TrainConfig, load_policy, train
+from agents.algorithms import make_env
 from agents.mixture_env import MixtureVecEnv, split_fleets
-from agents.training import make_env
 from cpf_commands.train import train_main
 from cpf_env import FleetSim, scenarios
 from cpf_env.envs.residual import ResidualConfig, ResidualController

@@ -9,8 +9,9 @@ import numpy as np
 import pytest
 import torch
 
+from agents.algorithms import make_env
 from agents.snapshot import SnapshotError, capture, decode_value, encode_value, restore
-from agents.training import TrainConfig, make_env
+from agents.train_config import TrainConfig
 from agents.vec_env import FleetVecEnv
 
 

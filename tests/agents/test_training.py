@@ -13,7 +13,8 @@ from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.vec_env import VecMonitor
 
 from agents import TrainConfig, load_policy, train
-from agents.training import ALGORITHMS, build_model, make_env
+from agents.algorithms import ALGORITHMS, build_model, make_env
+from agents.folder_files import AgentFolderError
 from baselines import make_policy
 from cpf_commands.train import train_main
 from cpf_env import FleetSim, scenarios
@@ -97,7 +98,7 @@ def test_loaded_policy_runs_under_evaluate_policy_and_on_another_scenario(tmp_pa
 
 
 def test_load_policy_says_what_a_folder_lacks(tmp_path: Path) -> None:
-    with pytest.raises(FileNotFoundError, match="not a cpf-train output folder"):
+    with pytest.raises(AgentFolderError, match="not a cpf-train output folder"):
         load_policy(tmp_path)
 
 
@@ -128,7 +129,7 @@ def test_cpf_train_command(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -
 
 
 def test_the_committed_agent_loads_and_corrects_the_base() -> None:
-    """The agent in results/ (README's benchmark row) loads with today's code and acts."""
+    """The agent in results/ (docs/results.md's benchmark row) loads with today's code and acts."""
     folder = ROOT / "results/residual_rl/agents"
     policy = load_policy(folder / "residual_ppo_bench_lossy_links_5m_s0")
     assert policy.scenario.name == "bench_lossy_links"

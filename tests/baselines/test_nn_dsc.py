@@ -254,7 +254,7 @@ def test_ablations_take_the_weight_law_option(name):
 
 
 def test_nn_matters_on_unknown_force_fine():
-    """Without the NN the unknown force leaves centimetres (README ablation table).
+    """Without the NN the unknown force leaves centimetres (docs/reproduction.md's ablation table).
 
     40 s, last quarter (30-40 s): dsc 1.5e-2 m, nn_dsc (leakage="plain") 7.7e-4 m
     (over 150 s: 2.4e-2 and 1.4e-3 m).
@@ -269,7 +269,7 @@ def test_nn_matters_on_unknown_force_fine():
 
 
 def test_aux_matters_on_saturation_fine():
-    """Without the auxiliary system the fleet settles much later (README ablation table).
+    """Without the auxiliary system the fleet settles much later (ablation, docs/reproduction.md).
 
     With the integrating NN, e2 = z2 - pi keeps the NN from learning the
     saturation as model error; with e2 = z2 it winds up and holds the

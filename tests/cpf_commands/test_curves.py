@@ -88,3 +88,15 @@ def test_a_run_without_evaluations_is_refused(
         curves_main([str(tmp_path / "empty"), "--out", str(tmp_path / "c")])
     assert "--eval-every" in capsys.readouterr().err
     assert not (tmp_path / "c").exists()
+
+
+def test_one_run_prints_its_cost_without_an_interval(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    (folder, *_) = _write_runs(tmp_path / "runs")
+    assert curves_main([folder, "--out", str(tmp_path / "c")]) == 0
+    printed = capsys.readouterr().out
+    assert "interval below" not in printed and "95 % interval" not in printed
+    assert "[5, 5]" not in printed and "IQM" not in printed
+    assert "cost below the base from 100 vessel-steps" in printed  # s0: 8 < 10
+    assert "final cost 5 (one run: no interval; train several seeds for one)" in printed

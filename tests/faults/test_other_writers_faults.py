@@ -63,6 +63,13 @@ def test_a_sweep_into_a_link_is_refused(tmp_path: Path) -> None:
     assert list((tmp_path / "real").iterdir()) == []
 
 
+def _agent(tmp_path: Path) -> str:
+    """A folder that passes cpf-export's first look (it is refused before it is read)."""
+    (tmp_path / "agent").mkdir()
+    (tmp_path / "agent" / "manifest.json").write_text("{}")
+    return str(tmp_path / "agent")
+
+
 def _refused(argv: list[str], capsys: pytest.CaptureFixture[str]) -> str:
     with pytest.raises(SystemExit) as raised:
         export_main(argv)
@@ -76,13 +83,14 @@ def test_an_export_into_a_link_is_refused_and_its_target_kept(
     victim = tmp_path / "victim.onnx"
     victim.write_text("keep me")
     (tmp_path / "agent.onnx").symlink_to(victim)
-    err = _refused([str(tmp_path / "agent"), str(tmp_path / "agent.onnx")], capsys)
+    err = _refused([_agent(tmp_path), str(tmp_path / "agent.onnx")], capsys)
     assert "is a symbolic link" in err and victim.read_text() == "keep me"
 
 
 def test_a_second_export_to_one_file_is_refused(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
+    agent = _agent(tmp_path)
     with atomic.FolderLock(tmp_path / "agent.onnx", "another cpf-export"):
-        err = _refused([str(tmp_path / "agent"), str(tmp_path / "agent.onnx")], capsys)
+        err = _refused([agent, str(tmp_path / "agent.onnx")], capsys)
     assert "being written by another cpf-export" in err

@@ -220,7 +220,7 @@ def test_failures_are_counted_not_dropped(tmp_path):
     assert "| 1/1 |" in (tmp_path / "summary.md").read_text()
 
 
-def test_summary_has_the_issue_columns_and_reference_scores():
+def test_summary_has_the_required_columns_and_reference_scores():
     cells = run_bench(["nn_dsc", "dsc"], ["bench_mild", "bench_switching"], seeds=4, steps=30)
     rows = bench_report.summarize(cells)
     assert set(bench_report.SUMMARY_COLUMNS) >= {
@@ -273,8 +273,11 @@ def test_a_policy_that_does_not_fit_a_scenario_skips_it_and_says_so(tmp_path):
 
 
 def test_two_policies_with_one_label_are_refused():
-    with pytest.raises(ValueError, match="labelled 'nn_dsc'"):
+    with pytest.raises(ValueError, match="'nn_dsc' is listed twice; duplicates are not allowed"):
         run_bench(["nn_dsc", "nn_dsc"], ["bench_mild"], seeds=1, steps=2)
+    scenario = scenarios.get("bench_mild")
+    with pytest.raises(ValueError, match="two policies are labelled 'off_path'"):
+        run_bench([OffPath(scenario), OffPath(scenario)], [scenario], seeds=1, steps=2)
 
 
 # --- one resolver for every command ---------------------------------------------------------

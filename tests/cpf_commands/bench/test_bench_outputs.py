@@ -36,7 +36,8 @@ def test_results_are_replaced_only_with_force_and_stale_figures_go(
     assert sorted(p.name for p in out.glob("*.png")) == figures  # refused: untouched
     assert bench_main([*QUICK, "--out", str(out), "--no-figures", "--force"]) == 0
     assert not list(out.glob("*.png"))
-    assert sorted(p.name for p in out.iterdir()) == ["episodes.csv", "summary.csv", "summary.md"]
+    names = sorted(p.name for p in out.iterdir())
+    assert names == ["episodes.csv", "report.html", "summary.csv", "summary.md"]
 
 
 def test_a_symlinked_summary_is_not_followed(tmp_path: Path) -> None:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 
@@ -89,7 +91,10 @@ def test_terminal_prints_the_verdict_against_any_reference(tmp_path, capsys):
     argv += ["--steps", "20", "--reference", "backstepping", "--out", str(tmp_path), "--quiet"]
     assert bench_main([*argv, "--no-figures"]) == 0
     out = capsys.readouterr().out
-    assert "against backstepping:" in out and "dsc" in out and "P(beats)" in out
+    assert "verdict: against backstepping" in out.replace("\n", " ")
+    assert "/ backstepping [95 %]" in out
+    ranked = re.findall(r"^  \d  (\S+)", out, flags=re.MULTILINE)
+    assert sorted(ranked) == ["backstepping", "dsc"]
     summary = (tmp_path / "summary.md").read_text()
     assert "## Verdict against backstepping" in summary
     assert "--reference backstepping" in summary
@@ -120,14 +125,17 @@ def test_marl_eval_export_has_the_nested_layout(tmp_path):
 
 
 def test_terminal_names_the_regressed_metrics_with_their_values():
-    from cpf_commands.bench.views import terminal_table
+    from cpf_commands.bench.ranking import terminal_report
+    from cpf_commands.bench.report import summarize
+
+    def terminal(cells: list[CellResult]) -> str:
+        return terminal_report(summarize(cells, "nn_dsc"), cells, "nn_dsc")
 
     heading = np.full(len(SEEDS), 0.03)
-    policy = _cell("p", BASE_COST - 50.0, heading_error_rms_window=heading)
-    text = terminal_table([REFERENCE, policy], "nn_dsc")
+    text = terminal([REFERENCE, _cell("p", BASE_COST - 50.0, heading_error_rms_window=heading)])
     assert "mixed (worse: heading)" in text
     assert "p on bench_mild, worse than nn_dsc: heading 0.03 rad vs 0.01 rad" in text
-    assert "worse than" not in terminal_table([REFERENCE, _cell("q", BASE_COST - 50.0)], "nn_dsc")
+    assert "worse than" not in terminal([REFERENCE, _cell("q", BASE_COST - 50.0)])
 
 
 # --- the practical-equivalence margin of the cost ---------------------------------------------

@@ -85,7 +85,7 @@ def test_claim_4_fails_without_the_auxiliary_system_on_the_default_scenario():
 
 
 def test_claim_thresholds_are_pinned():
-    """Loosening a threshold must be a deliberate change of this test and of the README.
+    """Loosening a threshold must be a deliberate change of this test and of docs/reproduction.md.
 
     Paper (section 4, Figs. 3-7): paths and coordination to a small
     neighbourhood (0.01 m, 0.01), speed estimates to v0 (1e-4 m/s: the float32

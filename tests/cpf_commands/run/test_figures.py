@@ -61,3 +61,20 @@ def test_float32_floor_is_marked(run, draw):
     log_axis = draw(run).axes[1]
     levels = [line.get_ydata()[0] for line in log_axis.lines if "float32" in line.get_label()]
     assert levels == [pytest.approx(floor)]
+
+
+def test_figures_number_vessels_from_0_like_the_env(run):
+    """The env's agents are vessel_0..vessel_4 and so are the figures' (the paper counts from 1)."""
+    labels = figures.paths_figure(run).axes[0].get_legend_handles_labels()[1]
+    assert [label for label in labels if label.startswith("vessel")] == [
+        f"vessel {i}" for i in range(run.eta.shape[1])
+    ]
+    coordination = figures.coordination_figure(run).axes[0].get_legend_handles_labels()[1]
+    assert coordination[0] == r"$\theta_0 - \theta_{1}$"
+    speeds = figures.speed_figure(run).axes[0].get_legend_handles_labels()[1]
+    assert speeds[0] == r"$\hat v_{0}$"
+    title = figures.forces_figure(run, vessel=2)._suptitle.get_text()
+    assert title == "Control forces of vessel 2 (the paper's vessel 3)"
+    nn = figures.nn_figure(run, vessel=1)
+    assert "vessel 1 (the paper's vessel 2)" in nn._suptitle.get_text()
+    assert nn.axes[0].get_legend_handles_labels()[1][0] == "true $f_1$"

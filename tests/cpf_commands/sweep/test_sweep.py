@@ -275,8 +275,9 @@ def test_without_ray_or_the_learning_extra_cpf_sweep_says_what_to_install(
         with pytest.raises(SystemExit):
             sweep_main(argv)
     assert 'pip install -e ".[ray]"' in capsys.readouterr().err
-    for name in ("cpf_commands.sweep.spec", "agents.training", "agents"):
-        monkeypatch.delitem(sys.modules, name)  # imported again, without stable_baselines3
+    again = ("cpf_commands.sweep.spec", "agents.training", "agents.run_folder", "agents.algorithms")
+    for name in again:
+        monkeypatch.delitem(sys.modules, name, raising=False)  # imported again, without SB3
     monkeypatch.setitem(sys.modules, "stable_baselines3", None)
     with pytest.raises(SystemExit):
         sweep_main(argv)

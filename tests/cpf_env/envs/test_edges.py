@@ -3,17 +3,12 @@
 from __future__ import annotations
 
 import dataclasses
-import re
-import subprocess
-import sys
 import warnings
-from pathlib import Path
 
 import numba
 import numpy as np
 import pettingzoo
 import pytest
-from conftest import ROOT
 from gymnasium.utils.env_checker import check_env
 
 import cpf_env
@@ -263,18 +258,3 @@ def test_one_kernel_type_for_every_scenario_and_fleet_size() -> None:
         types.add((numba.typeof(_constants(scenario.replace(message_size=0))), None))
     assert len({constants for constants, _ in types}) == 1
     assert len({arrays for _, arrays in types if arrays is not None}) == 1
-
-
-# --- The documentation's code runs as written ---------------------------------------------
-
-
-@pytest.mark.parametrize("page", ["README.md", "docs/environment.md", "docs/extending.md"])
-def test_documented_python_blocks_run(page: str, tmp_path: Path) -> None:
-    """The page's ```python blocks, in order, as one script in a fresh interpreter."""
-    blocks = re.findall(r"```python\n(.*?)```", (ROOT / page).read_text(), flags=re.DOTALL)
-    assert blocks
-    script = tmp_path / "page.py"
-    script.write_text("\n".join(blocks))
-    command = [sys.executable, str(script)]
-    result = subprocess.run(command, cwd=tmp_path, capture_output=True, text=True, check=False)
-    assert result.returncode == 0, f"{page}:\n{result.stderr[-3000:]}"

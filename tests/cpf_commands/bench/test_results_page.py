@@ -1,4 +1,4 @@
-"""The README section generator: its tables from constructed cells, and its refusals."""
+"""The results-page generator: its tables from constructed cells, and its refusals."""
 
 from __future__ import annotations
 
@@ -6,8 +6,9 @@ import math
 
 import numpy as np
 import pytest
+from conftest import ROOT
 
-from cpf_commands.bench import readme
+from cpf_commands.bench import results_page
 from cpf_commands.bench.report import CellResult
 from cpf_env.sim.fleet_metrics import METRICS
 
@@ -26,7 +27,7 @@ def test_power_table_uses_the_spread_of_paired_differences():
     base = [100.0, 110.0, 120.0, 130.0]
     other = [101.0, 109.0, 122.0, 128.0]  # differences 1, -1, 2, -2
     cells = [_cell("nn_dsc", "s", base), _cell("backstepping", "s", other)]
-    (row,) = readme._power_table(cells)[2:]
+    (row,) = results_page._power_table(cells)[2:]
     sd = np.std([1.0, -1.0, 2.0, -2.0], ddof=1)
     z = 1.959963984540054 + 0.8416212335729143
     expected = [max(2, math.ceil((z * sd / (f * 115.0)) ** 2)) for f in (0.01, 0.02, 0.05)]
@@ -39,15 +40,20 @@ def test_power_table_uses_the_spread_of_paired_differences():
 
 def test_suite_table_labels_a_cell_that_did_not_run():
     cells = [_cell("nn_dsc", "a", [1.0] * 4), _cell("nn_dsc", "b", [1.0] * 4)]
-    cells.append(_cell(readme.AGENT, "a", [0.5] * 4))
-    lines = readme._suite_table(cells)
+    cells.append(_cell(results_page.AGENT, "a", [0.5] * 4))
+    lines = results_page._suite_table(cells)
     assert "not run (layout)" in lines[-1] and "beats" in lines[-1]
 
 
-def test_readme_without_markers_is_refused_before_running(tmp_path, capsys):
-    page = tmp_path / "README.md"
+def test_page_without_markers_is_refused_before_running(tmp_path, capsys):
+    page = tmp_path / "results.md"
     page.write_text("# no markers\n")
     with pytest.raises(SystemExit):
-        readme.readme_main(["--readme", str(page), "--results", str(tmp_path)])
+        results_page.main(["--page", str(page), "--results", str(tmp_path)])
     assert "marker" in capsys.readouterr().err
     assert page.read_text() == "# no markers\n"
+
+
+def test_the_default_page_has_the_markers():
+    text = (ROOT / results_page.PAGE).read_text()
+    assert text.count(results_page.BEGIN) == 1 and text.count(results_page.END) == 1
