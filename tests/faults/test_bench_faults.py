@@ -3,17 +3,16 @@
 from __future__ import annotations
 
 import shutil
-from collections.abc import Callable
 from pathlib import Path
 
 import pytest
+from fault_injection import killed_at, small_disk
 
 from cpf_commands.bench import cli
 from cpf_commands.bench.cli import bench_main
 
-QUICK = ["--policies", "nn_dsc", "--scenarios", "wang2014", "--steps", "3", "--quiet",
-         "--no-figures"]  # fmt: skip
-FILES = ["episodes.csv", "summary.csv", "summary.md"]
+QUICK = ["--policies", "nn_dsc", "--scenarios", "wang2014", "--quiet", "--no-figures"]
+FILES = ["episodes.csv", "report.html", "summary.csv", "summary.md"]
 
 
 def _refused(argv: list[str], capsys: pytest.CaptureFixture[str]) -> str:
@@ -34,12 +33,11 @@ def _leftovers(parent: Path, name: str) -> list[str]:
 
 def test_a_bench_killed_at_any_stage_leaves_old_or_new_and_the_next_run_sees_it(
     tmp_path: Path,
-    kill_at: Callable[[int, Callable[[], object]], bool],
     capsys: pytest.CaptureFixture[str],
 ) -> None:
     """Every stage, the two renames of the swap included: the next run without --force is
     refused (the recovery runs before the --force check) and finds old or new results whole."""
-    old_run, new_run = [*QUICK, "--seeds", "1"], [*QUICK, "--seeds", "2"]
+    old_run, new_run = [*QUICK, "--steps", "3"], [*QUICK, "--steps", "4"]
     assert bench_main([*new_run, "--out", str(tmp_path / "new")]) == 0
     assert bench_main([*old_run, "--out", str(tmp_path / "old")]) == 0
     new, old = _results(tmp_path / "new"), _results(tmp_path / "old")
@@ -48,7 +46,7 @@ def test_a_bench_killed_at_any_stage_leaves_old_or_new_and_the_next_run_sees_it(
     stages = 0
     for stage in range(1, 60):
         shutil.copytree(tmp_path / "old", out)
-        killed = kill_at(stage, lambda: bench_main([*new_run, "--out", str(out), "--force"]))
+        killed = killed_at(stage, lambda: bench_main([*new_run, "--out", str(out), "--force"]))
         # the next run without --force: refused, the folder whole (old, or new if swapped in)
         assert "--force" in _refused([*old_run, "--out", str(out)], capsys)
         assert _results(out) in (old, new), stage
@@ -58,18 +56,18 @@ def test_a_bench_killed_at_any_stage_leaves_old_or_new_and_the_next_run_sees_it(
             break
         stages += 1
         shutil.rmtree(out)
-    assert stages >= 12  # 3 files x (flush, rename, flush the folder) + the swap
+    assert stages >= 16  # 4 files x (flush, rename, flush the folder) + the swap
 
 
 def test_a_bench_killed_between_the_two_renames_is_restored_before_the_force_check(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     out = tmp_path / "out"
-    assert bench_main([*QUICK, "--seeds", "1", "--out", str(out)]) == 0
+    assert bench_main([*QUICK, "--steps", "3", "--out", str(out)]) == 0
     before = _results(out)
     out.rename(tmp_path / ".out.old-1764660000000000000-42")  # killed after the first rename
     assert "already holds cpf-bench results; pass --force" in _refused(
-        [*QUICK, "--seeds", "2", "--out", str(out)], capsys
+        [*QUICK, "--steps", "4", "--out", str(out)], capsys
     )
     assert _results(out) == before and _leftovers(tmp_path, "out") == []
 
@@ -116,19 +114,20 @@ def test_the_memory_check_counts_policies_x_seeds_x_series(
 
 
 def test_a_full_disk_while_writing_keeps_the_old_results(
-    full_disk, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    out = full_disk.root / "out"
-    assert bench_main([*QUICK, "--seeds", "1", "--out", str(out)]) == 0
-    before = _results(out)
-    real = cli.run_bench
+    with small_disk(tmp_path, monkeypatch) as full_disk:
+        out = full_disk.root / "out"
+        assert bench_main([*QUICK, "--steps", "3", "--out", str(out)]) == 0
+        before = _results(out)
+        real = cli.run_bench
 
-    def then_fill(*args: object, **kwargs: object) -> object:
-        full_disk.fill()  # after the checks, before the outputs are written
-        return real(*args, **kwargs)
+        def then_fill(*args: object, **kwargs: object) -> object:
+            full_disk.fill()  # after the checks, before the outputs are written
+            return real(*args, **kwargs)
 
-    monkeypatch.setattr(cli, "run_bench", then_fill)
-    err = _refused([*QUICK, "--seeds", "2", "--out", str(out), "--force"], capsys)
-    assert "could not write the results" in err and "No space left" in err
-    assert _results(out) == before
-    assert full_disk.entries() == [".out.lock", "out"]
+        monkeypatch.setattr(cli, "run_bench", then_fill)
+        err = _refused([*QUICK, "--steps", "4", "--out", str(out), "--force"], capsys)
+        assert "could not write the results" in err and "No space left" in err
+        assert _results(out) == before
+        assert full_disk.entries() == [".out.lock", "out"]

@@ -3,10 +3,10 @@
 from __future__ import annotations
 
 import shutil
-from collections.abc import Callable
 from pathlib import Path
 
 import pytest
+from fault_injection import killed_at
 
 from cpf_commands.export import export_main
 from cpf_commands.sweep.cli import run_sweep
@@ -17,9 +17,7 @@ def _tree(folder: Path) -> dict[str, str]:
     return {p.name: p.read_text() for p in sorted(folder.iterdir())}
 
 
-def test_a_staged_folder_killed_at_any_stage_is_old_or_new_after_recovery(
-    tmp_path: Path, kill_at: Callable[[int, Callable[[], object]], bool]
-) -> None:
+def test_a_staged_folder_killed_at_any_stage_is_old_or_new_after_recovery(tmp_path: Path) -> None:
     folder = tmp_path / "out"
     old, new = {"a.csv": "old", "b.csv": "old"}, {"a.csv": "new", "c.csv": "new"}
 
@@ -32,7 +30,7 @@ def test_a_staged_folder_killed_at_any_stage_is_old_or_new_after_recovery(
         folder.mkdir()
         for name, text in old.items():
             (folder / name).write_text(text)
-        killed = kill_at(stage, write)
+        killed = killed_at(stage, write)
         with atomic.FolderLock(folder):
             assert _tree(folder) in (old, new), stage
         assert sorted(p.name for p in tmp_path.iterdir()) == [".out.lock", "out"]

@@ -6,10 +6,10 @@ import os
 import shutil
 import subprocess
 import sys
-from collections.abc import Callable
 from pathlib import Path
 
 import pytest
+from fault_injection import killed_at, small_disk
 
 from cpf_commands.run import reproduce as reproduce_module
 from cpf_commands.run.cli import run_main
@@ -45,9 +45,7 @@ def test_an_existing_output_needs_force(tmp_path: Path, capsys: pytest.CaptureFi
     assert _results(tmp_path / FOLDER) != before
 
 
-def test_a_run_killed_at_any_stage_leaves_old_or_new_whole(
-    tmp_path: Path, kill_at: Callable[[int, Callable[[], object]], bool]
-) -> None:
+def test_a_run_killed_at_any_stage_leaves_old_or_new_whole(tmp_path: Path) -> None:
     """Never a new metrics.json beside an old or half-written trajectory.npz."""
     _write(tmp_path / "new", seed=1)
     _write(tmp_path / "old", seed=0)
@@ -57,7 +55,7 @@ def test_a_run_killed_at_any_stage_leaves_old_or_new_whole(
     stages = 0
     for stage in range(1, 40):
         shutil.copytree(tmp_path / "old", out)
-        killed = kill_at(stage, lambda: _write(out, seed=1, force=True))
+        killed = killed_at(stage, lambda: _write(out, seed=1, force=True))
         with pytest.raises(ValueError, match="pass --force"):  # recovered first, then refused
             _write(out, seed=1)
         assert _results(out / FOLDER) in (old, new), stage
@@ -144,30 +142,31 @@ def test_an_output_that_is_a_link_is_refused_before_the_run(
 
 
 def test_a_full_disk_while_writing_is_one_line_and_keeps_the_old_results(
-    full_disk, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    out = full_disk.root
-    real = reproduce_module.run_episode
-    filled = []
+    with small_disk(tmp_path, monkeypatch) as full_disk:
+        out = full_disk.root
+        real = reproduce_module.run_episode
+        filled = []
 
-    def then_fill(*args: object, **kwargs: object) -> object:
-        trajectory = real(*args, **kwargs)
-        if filled:
-            full_disk.fill()  # after the checks, before the outputs are written
-        return trajectory
+        def then_fill(*args: object, **kwargs: object) -> object:
+            trajectory = real(*args, **kwargs)
+            if filled:
+                full_disk.fill()  # after the checks, before the outputs are written
+            return trajectory
 
-    monkeypatch.setattr(reproduce_module, "run_episode", then_fill)
-    assert run_main([*QUICK, "--out", str(out)]) == 0
-    before = _results(out / FOLDER)
-    filled.append(True)
-    err = _refused([*QUICK, "--out", str(out / "fresh")], capsys)  # no traceback
-    assert "could not write the results" in err and "No space left" in err
-    assert list((out / "fresh").iterdir()) == [out / "fresh" / f".{FOLDER}.lock"]  # no half
-    full_disk.empty()
-    err = _refused([*QUICK, "--out", str(out), "--seed", "1", "--force"], capsys)
-    assert "could not write the results" in err and "No space left" in err
-    assert _results(out / FOLDER) == before
-    assert full_disk.entries() == [f".{FOLDER}.lock", "fresh", FOLDER]
+        monkeypatch.setattr(reproduce_module, "run_episode", then_fill)
+        assert run_main([*QUICK, "--out", str(out)]) == 0
+        before = _results(out / FOLDER)
+        filled.append(True)
+        err = _refused([*QUICK, "--out", str(out / "fresh")], capsys)  # no traceback
+        assert "could not write the results" in err and "No space left" in err
+        assert list((out / "fresh").iterdir()) == [out / "fresh" / f".{FOLDER}.lock"]  # no half
+        full_disk.empty()
+        err = _refused([*QUICK, "--out", str(out), "--seed", "1", "--force"], capsys)
+        assert "could not write the results" in err and "No space left" in err
+        assert _results(out / FOLDER) == before
+        assert full_disk.entries() == [f".{FOLDER}.lock", "fresh", FOLDER]
 
 
 def test_too_little_space_is_refused_before_the_run(
@@ -183,7 +182,7 @@ def test_too_little_space_is_refused_before_the_run(
 _KILLED_RUN = """
 import sys
 sys.path.insert(0, sys.argv[1])
-from conftest import KillingOs
+from fault_injection import KillingOs
 from cpf_commands.run.cli import run_main
 from cpf_env import atomic
 atomic.os = KillingOs(int(sys.argv[2]))

@@ -7,11 +7,11 @@ import shutil
 import subprocess
 import sys
 import time
-from collections.abc import Callable
 from pathlib import Path
 
 import pytest
 import torch
+from fault_injection import killed_at
 
 from agents import TrainConfig, train
 from agents.agent_folder import AgentFolderError, read_agent
@@ -43,7 +43,6 @@ def _leftovers(parent: Path, name: str) -> list[str]:
 
 def test_a_save_killed_at_any_stage_leaves_no_half_agent_and_resume_writes_it(
     tmp_path: Path,
-    kill_at: Callable[[int, Callable[[], object]], bool],
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
     """The probe's case: killed while saving, the folder never fails its manifest check,
@@ -60,7 +59,7 @@ def test_a_save_killed_at_any_stage_leaves_no_half_agent_and_resume_writes_it(
     shutil.copytree(folder, pristine)
     stages, between = 0, []
     for stage in range(1, 80):
-        killed = kill_at(stage, lambda: finish(runs[0], False))
+        killed = killed_at(stage, lambda: finish(runs[0], False))
         if not folder.exists():  # killed between the two renames: the old folder is kept
             between.append(stage)
             (old,) = (p for p in tmp_path.iterdir() if p.name.startswith(".run.old-"))

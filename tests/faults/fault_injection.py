@@ -1,6 +1,8 @@
 """Fault injection for the writers: kills at every file-system stage, a full disk.
 
-``kill_at(k, write)`` runs ``write`` in a forked child whose ``cpf_env.atomic``
+A plain module (not a conftest: ``tests/conftest.py`` is imported by name), so the
+tests import what they use. ``killed_at(k, write)`` runs ``write`` in a forked child
+whose ``cpf_env.atomic``
 sees a stand-in ``os`` module that SIGKILLs the process just before its k-th
 file-system stage (an ``fsync``, ``replace`` or ``rename``: a file written but
 not flushed, flushed but not renamed into place, a folder between the two
@@ -9,15 +11,16 @@ every stage of a writer; the child is really killed (no ``finally``, no
 cleanup), so the parent sees what a crash leaves on disk. ``KillingOs`` is
 importable by a subprocess driver for the kills of a fresh process.
 
-``full_disk`` gives a folder on a small file system: a 16 MiB tmpfs mounted
-for the test where the machine allows it (root on Linux), whose ``fill()``
-then takes all of its free space, so writes fail with a real ENOSPC; where
-mounting is not allowed, ``fill()`` makes ``cpf_env.atomic.write_bytes``
-raise ENOSPC instead (``FullDisk.real`` says which).
+``small_disk(tmp_path, monkeypatch)`` gives a folder on a small file system: a
+16 MiB tmpfs mounted for the test where the machine allows it (root on Linux),
+whose ``fill()`` then takes all of its free space, so writes fail with a real
+ENOSPC; where mounting is not allowed, ``fill()`` makes
+``cpf_env.atomic.write_bytes`` raise ENOSPC instead (``FullDisk.real`` says which).
 """
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import os
 import signal
@@ -57,7 +60,7 @@ class KillingOs:
         return stage
 
 
-def _killed_at(at: int, write: Callable[[], object]) -> bool:
+def killed_at(at: int, write: Callable[[], object]) -> bool:
     """Run ``write`` in a child killed at its ``at``-th stage; False if it finished first."""
     sys.stdout.flush()
     sys.stderr.flush()
@@ -86,12 +89,6 @@ def _killed_at(at: int, write: Callable[[], object]) -> bool:
         return True
     assert os.WEXITSTATUS(status) == 0, f"the writer failed (not killed) at stage {at}"
     return False
-
-
-@pytest.fixture
-def kill_at() -> Callable[[int, Callable[[], object]], bool]:
-    """``kill_at(k, write)``: True if ``write`` was killed at its k-th stage."""
-    return _killed_at
 
 
 class FullDisk:
@@ -149,8 +146,8 @@ def _mount_tmpfs(root: Path) -> bool:
     return mounted.returncode == 0
 
 
-@pytest.fixture
-def full_disk(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Iterator[FullDisk]:
+@contextlib.contextmanager
+def small_disk(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Iterator[FullDisk]:
     """A 16 MiB tmpfs (or the ENOSPC fallback) to fill while a writer runs."""
     root = tmp_path / "small"
     root.mkdir()
