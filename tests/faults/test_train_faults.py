@@ -135,3 +135,18 @@ def test_too_little_space_is_refused_before_training(
         train(CONFIG, tmp_path / "run", progress=False)
     assert learned == []
     assert sorted(p.name for p in tmp_path.iterdir()) == [".run.lock"]  # nothing else left
+
+
+def test_an_aborted_force_says_the_old_run_stays(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from cpf_commands.train import train_main
+
+    def second_ctrl_c(*args: object, **kwargs: object) -> None:
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr("agents.training.train", second_ctrl_c)
+    (tmp_path / "run").mkdir()
+    (tmp_path / "run" / "config.json").write_text("{}")
+    assert train_main(["--out", str(tmp_path / "run"), "--force", "--quiet"]) == 130
+    assert "it holds the earlier run as it was" in capsys.readouterr().err
