@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import json
 import re
+import tempfile
 import warnings
 from pathlib import Path
 from typing import Any
@@ -147,23 +148,21 @@ def export_onnx(folder: str | Path, out: str | Path, checks: int = 1000) -> floa
     graph = _Graph(network, normalization, residual_range(config, scenario)).eval()
     example = torch.zeros(1, scenario.n, network.input_size, dtype=torch.float32)
     target = Path(out)
-    staging = target.with_name(f".{target.name}.export.tmp")
-    try:
+    with tempfile.TemporaryDirectory() as scratch:  # its own: no name to collide or link
+        exported = Path(scratch) / "graph.onnx"
         with warnings.catch_warnings():
             # the TorchScript exporter: the torch.export one needs onnxscript, not a dependency
             warnings.simplefilter("ignore", DeprecationWarning)
             torch.onnx.export(
                 graph,
                 (example,),
-                str(staging),
+                str(exported),
                 input_names=["inputs"],
                 output_names=["action", "residual"],
                 dynamic_axes={"inputs": {0: "B"}, "action": {0: "B"}, "residual": {0: "B"}},
                 dynamo=False,
             )
-        model = onnx.load(str(staging))
-    finally:
-        staging.unlink(missing_ok=True)
+        model = onnx.load(str(exported))
     for key, value in ((CONFIG_KEY, json.dumps(record)), (HASH_KEY, _UNSEALED.decode())):
         entry = model.metadata_props.add()
         entry.key, entry.value = key, value

@@ -12,8 +12,18 @@ The folder during and after a run (``docs/residual_rl.md`` has the user's view):
   ``normalization.json``, ``config.json``, ``manifest.json``; ``agents.agent_folder``)
   and SB3's ``model.zip``.
 
-A killed run leaves its last checkpoint; ``--resume`` continues from it. A
-resumed run ends with the same weights, normalization statistics, evaluation
+The agent and ``model.zip`` are written whole: a copy of the run folder
+(hard links, so no data is copied) gets them and replaces the folder
+(``cpf_env.atomic.staged_folder``), so a run killed while saving leaves the
+folder as it was before the save, never a folder failing its manifest check.
+A run killed while training or saving leaves its last checkpoint;
+``--resume`` continues from it, and a checkpoint that already reached the
+budget (a run killed while saving its agent) only writes the agent. A
+replaced run (``overwrite``, ``cpf-train --force``) is trained in a staging
+folder beside the old one and swapped in the same way once its agent is
+written (or after Ctrl-C); killed before, the old run stays.
+
+A resumed run ends with the same weights, normalization statistics, evaluation
 costs and ``progress.csv`` values as an uninterrupted run at the same seed;
 only wall-clock columns and fields (``time/*``, ``wall_clock_seconds``,
 ``evaluation_seconds``, ``train_seconds``, ``vessel_steps_per_second``)
@@ -22,7 +32,9 @@ differ (``tests/agents/test_resume.py``).
 
 from __future__ import annotations
 
+import io
 import json
+import os
 import platform
 import shutil
 from collections.abc import Sequence
@@ -36,9 +48,16 @@ from stable_baselines3.common.logger import CSVOutputFormat, KVWriter, Logger, m
 from stable_baselines3.common.running_mean_std import RunningMeanStd
 from stable_baselines3.common.vec_env import VecEnv, VecMonitor, VecNormalize
 
-from agents.agent_folder import Normalization, actor_tensors, network_from_tensors, write_agent
+from agents.agent_folder import (
+    Normalization,
+    actor_tensors,
+    network_from_tensors,
+    read_agent,
+    write_agent,
+)
 from agents.algorithms import build_model, make_env, planned_timesteps
 from agents.checkpoint import checkpoint_timesteps, load_checkpoint
+from agents.folder_files import AgentFolderError
 from agents.mixture_env import BalancedRewards, MixtureVecEnv
 from agents.schedule import (
     BEST,
@@ -110,11 +129,14 @@ def prepare_resume(folder: Path, config: TrainConfig) -> Path:
 
     Also tidies what a killed run left (the caller holds the folder's lock): a
     ``checkpoint/`` or ``best/`` killed between the two renames of its swap is put
-    back, and staging and scratch folders are removed.
+    back, and staging and scratch folders are removed. A checkpoint that reached
+    the budget while the folder holds no complete agent of it (the run was
+    killed while saving) is returned too: the resumed run only writes the agent.
 
     Raises:
         ValueError: No checkpoint, ``config`` differs from the run's in anything
-            but ``timesteps``, or a budget the checkpoint has reached already.
+            but ``timesteps``, or a budget the checkpoint and the agent have
+            reached already.
     """
     saved, _, _ = read_run_record(folder)
     for child in (CHECKPOINT, BEST):  # a run killed while swapping one in: put it back
@@ -138,7 +160,7 @@ def prepare_resume(folder: Path, config: TrainConfig) -> Path:
             "first one, or ran with --checkpoint-every 0); start it again with --force."
         )
     done = checkpoint_timesteps(checkpoint)
-    if config.timesteps <= done:
+    if config.timesteps <= done and _holds_agent(folder, done):
         raise ValueError(
             f"the checkpoint in {checkpoint} has trained {done:,} vessel-steps already, as many "
             f"as the budget of {config.timesteps:,}; give a larger -n to extend the run."
@@ -146,10 +168,40 @@ def prepare_resume(folder: Path, config: TrainConfig) -> Path:
     return checkpoint
 
 
+def _holds_agent(folder: Path, timesteps: int) -> bool:
+    """Whether ``folder`` holds a complete, final agent trained for ``timesteps`` vessel-steps."""
+    try:
+        record, _, _ = read_agent(folder)
+    except (AgentFolderError, OSError):
+        return False
+    return record.get("timesteps_done") == timesteps and not record.get("interrupted")
+
+
+def _link_tree(source: Path, target: Path) -> None:
+    """Copy the folder ``source`` into ``target`` as hard links (copies where links fail).
+
+    Every writer replaces files (``cpf_env.atomic``) rather than writing into
+    them, so the two folders never change each other's files.
+    """
+
+    def link(src: str, dst: str) -> None:
+        try:
+            os.link(src, dst)
+        except OSError:
+            shutil.copy2(src, dst)
+
+    shutil.copytree(source, target, symlinks=True, dirs_exist_ok=True, copy_function=link)
+
+
 class _AppendingCSV(CSVOutputFormat):
-    """SB3's ``progress.csv`` writer, continuing the rows a checkpoint kept."""
+    """SB3's ``progress.csv`` writer, continuing the rows a checkpoint kept.
+
+    The file is replaced, not truncated: a hard link of it (a copy of the run
+    folder) keeps its content.
+    """
 
     def __init__(self, filename: str, previous: str) -> None:
+        Path(filename).unlink(missing_ok=True)
         super().__init__(filename)
         if previous:
             self.file.write(previous)
@@ -179,11 +231,16 @@ class TrainingRun:
 
     Args:
         config: The run's configuration.
-        folder: The run folder (exists; claimed by the caller's lock).
+        folder: The folder the run works in (exists): the run folder, or a staging
+            folder beside it that replaces it at the end (``overwrite``).
         schedule: Evaluation and checkpoint periods.
         evaluate: Agent folder -> mean cost per scenario, or None.
         checkpoint: The checkpoint folder to resume from, or None (a fresh run).
         tensorboard_log: Parent folder of the TensorBoard event files, or None.
+        destination: The run folder (claimed by the caller's lock); None: ``folder``.
+
+    Raises:
+        ValueError: Too little free space for the run's outputs.
     """
 
     def __init__(
@@ -194,8 +251,10 @@ class TrainingRun:
         evaluate: Evaluator | None,
         checkpoint: Path | None,
         tensorboard_log: str | Path | None,
+        destination: Path | None = None,
     ) -> None:
         self.config, self.folder = config, folder
+        self.destination = folder if destination is None else destination
         self.resumed = checkpoint is not None
         torch.manual_seed(config.seed)
         if config.torch_threads is not None:
@@ -214,12 +273,13 @@ class TrainingRun:
                     self.env, norm_obs=True, norm_reward=False, gamma=config.gamma
                 )
         self.model = build_model(config, self.env)
+        atomic.check_writable(self.destination, _bytes_needed(self.model))
         previous = ""
         if checkpoint is not None and (checkpoint / PROGRESS).is_file():
             previous = (checkpoint / PROGRESS).read_text()
         outputs: list[KVWriter] = [_AppendingCSV(str(folder / PROGRESS), previous)]
         if tensorboard_log is not None:
-            events = Path(tensorboard_log) / folder.name
+            events = Path(tensorboard_log) / self.destination.name
             outputs.append(make_output_format("tensorboard", str(events)))
         self.model.set_logger(Logger(str(folder), outputs))
         state: dict[str, Any] = {}
@@ -241,10 +301,22 @@ class TrainingRun:
     def learn(self, progress: bool, callbacks: Sequence[BaseCallback]) -> None:
         """Train to the budget (or Ctrl-C), then write the agent and ``model.zip``.
 
+        A run resumed from a checkpoint at the budget only writes them.
+
         Raises:
             TrainingInterrupted: After Ctrl-C, once the checkpoint and agent are written.
         """
         done = int(self.model.num_timesteps)
+        if done >= self.total:
+            self.model.logger.close()
+            if progress:
+                print(
+                    f"cpf-train: the checkpoint has trained {done:,} vessel-steps, the whole "
+                    "budget; writing its agent (the run was stopped while saving it).",
+                    flush=True,
+                )
+            self._finish(interrupted=False)
+            return
         if progress and self.total != self.config.timesteps:
             print(
                 f"cpf-train: the budget of {self.config.timesteps:,} vessel-steps is rounded "
@@ -252,6 +324,7 @@ class TrainingRun:
                 flush=True,
             )
         bar = ProgressBar(self.total, done, progress, self.schedule)
+        stopped: TrainingInterrupted | None = None
         try:
             with self.interrupt:
                 self.model.learn(
@@ -259,13 +332,14 @@ class TrainingRun:
                     callback=[self.schedule, bar, *self._mixture_logs(), *callbacks],
                     reset_num_timesteps=not self.resumed,
                 )
-        except TrainingInterrupted:
-            self._finish(interrupted=True)
-            raise
+        except TrainingInterrupted as stop:
+            stopped = stop
         finally:
             bar._on_training_end()
             self.model.logger.close()
-        self._finish(interrupted=False)
+        self._finish(interrupted=stopped is not None)
+        if stopped is not None:
+            raise stopped
 
     def _mixture_logs(self) -> list[BaseCallback]:
         """Per-scenario episode costs in the logs, for a mixture."""
@@ -311,6 +385,28 @@ class TrainingRun:
         write_agent(folder, record, network, normalization)
 
     def _finish(self, interrupted: bool) -> None:
-        """Write the agent and SB3's ``model.zip`` into the run folder."""
-        self.model.save(self.folder / "model.zip")  # SB3's format; evaluation never reads it
-        self.write_agent(self.folder, interrupted=interrupted)
+        """Replace the run folder with a copy of the working folder, the agent and ``model.zip``.
+
+        Killed before the swap, the run folder is as it was (its checkpoint stays).
+        """
+        saved = io.BytesIO()
+        self.model.save(saved)  # SB3's format; evaluation never reads it
+        with atomic.staged_folder(self.destination) as staging:
+            _link_tree(self.folder, staging)
+            atomic.write_bytes(staging / "model.zip", saved.getvalue())
+            self.write_agent(staging, interrupted=interrupted)
+
+
+def _bytes_needed(model: Any) -> int:
+    """Disk space a run's outputs need at most (a generous estimate).
+
+    The model's parameters appear, with the optimizer's two moments, in
+    ``model.zip`` and the checkpoint, each up to twice while being replaced,
+    and as the actor in the agent, ``best/`` and an evaluation's scratch copy;
+    SAC's replay buffer is in the checkpoint (twice while it is replaced).
+    """
+    parameters = sum(p.numel() * p.element_size() for p in model.policy.parameters())
+    buffer = getattr(model, "replay_buffer", None)
+    stored = vars(buffer).values() if buffer is not None else ()
+    replay = sum(value.nbytes for value in stored if isinstance(value, np.ndarray))
+    return 16 * parameters + 2 * replay + 2**20

@@ -5,7 +5,9 @@ builds ``FleetVecEnv`` (or ``MixtureVecEnv``) -> ``VecMonitor`` ->
 ``VecNormalize`` (observations only; rewards stay in their units so episode costs read as the
 benchmark's), creates PPO or SAC with residual-learning defaults and learns
 in the run folder ``out`` (a lock refuses a second run on the same folder;
-``agents.run_folder`` lists its files): held-out evaluations and the best
+``agents.run_folder`` lists its files and how they are written whole;
+``overwrite`` trains beside the old run, which stays until the new agent is
+written): held-out evaluations and the best
 agent (``best/``), checkpoints every K vessel-steps (``checkpoint/``, from
 which ``resume=True`` continues bit for bit), and at the end (or after
 Ctrl-C) the agent itself:
@@ -68,7 +70,9 @@ def train(
         out: Output folder (created).
         progress: Show a progress bar (with the latest evaluation cost) and say how the
             budget was rounded.
-        overwrite: Delete a run already in ``out`` first.
+        overwrite: Replace a run already in ``out``: the new run is trained beside it
+            and replaces it whole once its agent is written; killed before, the old
+            run stays as it was.
         callbacks: More SB3 callbacks (a sweep's reporting to Ray Tune, say).
         evaluate: Agent folder -> mean cost per scenario on held-out seeds (``cpf-train``
             passes the benchmark's ``test`` split); None: no evaluation.
@@ -84,7 +88,8 @@ def train(
 
     Raises:
         FileExistsError: ``out`` holds files and neither ``overwrite`` nor ``resume``.
-        ValueError: ``out`` is empty or a file, a held-out evaluation scenario or seed
+        ValueError: ``out`` is empty, a file, a symbolic link, not writable or short of
+            space for the run, a held-out evaluation scenario or seed
             (``splits.check_training``), nothing to resume, or a configuration that
             differs from the run's own.
         TrainingInterrupted: Ctrl-C; the checkpoint and the agent so far are written.
@@ -101,36 +106,51 @@ def train(
             raise ValueError(
                 "--tensorboard-log needs tensorboard: pip install 'cpf_env[rl]'."
             ) from error
-    with atomic.FolderLock(folder, "another training run"):
+    atomic.check_writable(folder)  # the space is checked once the model exists
+    with atomic.FolderLock(folder, "another training run"):  # recovers a killed swap first
         if resume:
             resume_state = prepare_resume(folder, config)
-            write_run_record(folder, config, schedule, getattr(evaluate, "settings", None))
+            workdir = folder
         else:
-            if folder.exists() and any(folder.iterdir()):
-                if not overwrite:
-                    held = "a trained model" if (folder / "config.json").exists() else "files"
-                    raise FileExistsError(
-                        f"{folder} already holds {held}; choose another output folder, "
-                        "overwrite it (cpf-train --force, train(..., overwrite=True)) or "
-                        "continue it (cpf-train --resume)."
-                    )
-                shutil.rmtree(folder)
-            folder.mkdir(parents=True, exist_ok=True)
-            write_run_record(folder, config, schedule, getattr(evaluate, "settings", None))
+            replacing = folder.is_dir() and any(folder.iterdir())
+            if replacing and not overwrite:
+                held = "a trained model" if (folder / "config.json").exists() else "files"
+                raise FileExistsError(
+                    f"{folder} already holds {held}; choose another output folder, "
+                    "overwrite it (cpf-train --force, train(..., overwrite=True)) or "
+                    "continue it (cpf-train --resume)."
+                )
+            # The new run is built beside the old one, which stays until the new agent is
+            # written; a killed run's staging folder goes with the next lock.
+            workdir = atomic.new_staging_folder(folder) if replacing else folder
             resume_state = None
-        for name, text in (run_files or {}).items():
-            atomic.write_text(folder / name, text)
-        TrainingRun(config, folder, schedule, evaluate, resume_state, tensorboard_log).learn(
-            progress, callbacks
-        )
+        fresh = workdir == folder and not resume and not folder.exists()
+        try:
+            try:
+                workdir.mkdir(parents=True, exist_ok=True)
+                write_run_record(workdir, config, schedule, getattr(evaluate, "settings", None))
+                for name, text in (run_files or {}).items():
+                    atomic.write_text(workdir / name, text)
+                run = TrainingRun(
+                    config, workdir, schedule, evaluate, resume_state, tensorboard_log, folder
+                )
+            except BaseException:  # refused before training (no space, say): nothing left
+                if fresh:
+                    shutil.rmtree(folder, ignore_errors=True)
+                raise
+            run.learn(progress, callbacks)
+        finally:
+            if workdir != folder:  # swapped in by learn, or a failed run: the old one stays
+                shutil.rmtree(workdir, ignore_errors=True)
     return folder
 
 
 def _output_folder(out: str | Path) -> Path:
-    """``out`` as a folder path, refusing an empty one and an existing file."""
+    """``out`` as a folder path, refusing an empty one, a symbolic link and an existing file."""
     if not str(out).strip():
         raise ValueError("the output folder is empty; give one (cpf-train --out DIR).")
     folder = Path(out)
+    atomic.refuse_link(folder)
     if folder.exists() and not folder.is_dir():
         raise ValueError(f"{folder} is a file; give a folder for the trained agent.")
     return folder

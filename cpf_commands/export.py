@@ -16,6 +16,8 @@ import shlex
 from collections.abc import Sequence
 from pathlib import Path
 
+from cpf_env import atomic
+
 __all__ = ["export_main"]
 
 
@@ -67,8 +69,13 @@ def export_main(argv: Sequence[str] | None = None) -> int:
         _check_paths(Path(args.folder), Path(args.out))
         from agents.onnx_policy import export_onnx
 
-        difference = export_onnx(args.folder, args.out, checks=args.checks)
-    except (ImportError, ValueError, FileNotFoundError, OSError) as error:
+        # before the work: writable, not a link, room for about twice the weights
+        weights = Path(args.folder) / "policy.safetensors"
+        needed = 2 * weights.stat().st_size + 2**20 if weights.is_file() else 0
+        atomic.check_writable(args.out, needed)
+        with atomic.FolderLock(args.out, "another cpf-export"):
+            difference = export_onnx(args.folder, args.out, checks=args.checks)
+    except (ImportError, ValueError, OSError, atomic.FolderLockedError) as error:
         parser.error(str(error))
     print(
         f"cpf-export: wrote {args.out}; max |ONNX - torch| over {args.checks} inputs: "

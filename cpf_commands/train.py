@@ -336,6 +336,8 @@ def train_main(argv: Sequence[str] | None = None) -> int:
     except ValueError as error:
         parser.error(str(error))
     evaluate = TestSplitEvaluator(config.scenarios, seeds, steps)
+    out = Path(args.out)
+    replacing = args.force and not args.resume and out.is_dir() and any(out.iterdir())
     try:
         folder = train(
             config,
@@ -357,6 +359,13 @@ def train_main(argv: Sequence[str] | None = None) -> int:
         )
         return 130
     except KeyboardInterrupt:
+        if replacing:  # the new run was built beside the old one, and is gone
+            print(
+                f"cpf-train: aborted; --force replaces {args.out} only once the new agent is "
+                "written, so it holds the earlier run as it was.",
+                file=sys.stderr,
+            )
+            return 130
         print(
             f"cpf-train: aborted; the last periodic checkpoint (if any) is in "
             f"{args.out}/checkpoint/: cpf-train --resume --out {args.out}",

@@ -9,15 +9,26 @@ the old output or the new one, never a mix:
   target (``os.replace`` is atomic on POSIX and Windows). A target that is a
   symbolic link is replaced by a regular file; the link's target is left alone.
 - ``staged_folder``: a context manager yielding an empty temporary sibling of
-  the destination; on success the destination is replaced by it, on an error
-  the sibling is removed and the destination is left as it was. Replacing an
-  existing folder takes two renames (old -> ``.NAME.old-*``, new -> NAME);
-  ``recover_folder`` (called by ``staged_folder`` and ``FolderLock``) restores
-  the old folder if a process died between them; under the lock it also
-  removes the staging folders of killed runs.
+  the destination (``.NAME.new-*``, ``new_staging_folder``); on success the
+  destination is replaced by it (``swap_in``), on an error the sibling is
+  removed and the destination is left as it was. Replacing an existing
+  folder takes two renames (old -> ``.NAME.old-*``, new -> NAME);
+  ``recover_folder`` restores the old folder if a process died between them
+  and removes the staging folders of killed writers.
 - ``FolderLock``: an advisory ``flock`` on ``.NAME.lock`` beside the folder
   (not inside it, since the folder itself is replaced); a second writer gets
-  ``FolderLockedError`` at once instead of waiting. POSIX only.
+  ``FolderLockedError`` at once instead of waiting. As soon as it holds the
+  lock it runs ``recover_folder``, so a command sees the folder as the last
+  complete writer left it before it decides anything about it (whether
+  ``--force`` is needed, whether a run can be resumed). POSIX only.
+- ``check_writable``: what a command checks before it starts working: the
+  destination is not a symbolic link, its parent is writable and has the
+  free space the outputs need.
+
+Nothing is written through a symbolic link: a destination that is one is
+refused (``refuse_link``, called by ``check_writable``, ``staged_folder`` and
+``swap_in``), the lock file is opened with ``O_NOFOLLOW``, and a link left
+inside an old folder goes with that folder, its target untouched.
 
 This module imports nothing of the package, so every layer may use it.
 """
@@ -28,6 +39,7 @@ import contextlib
 import os
 import shutil
 import tempfile
+import time
 from collections.abc import Iterator
 from pathlib import Path
 from types import TracebackType
@@ -37,8 +49,11 @@ __all__ = [
     "FolderLock",
     "FolderLockedError",
     "check_writable",
+    "new_staging_folder",
     "recover_folder",
+    "refuse_link",
     "staged_folder",
+    "swap_in",
     "write_bytes",
     "write_text",
 ]
@@ -94,7 +109,7 @@ def write_text(path: str | Path, text: str) -> None:
 
 
 def _siblings(destination: Path, kind: str) -> list[Path]:
-    """Leftover ``.NAME.<kind>-*`` siblings of ``destination``."""
+    """Leftover ``.NAME.<kind>-*`` siblings of ``destination`` (oldest first)."""
     return sorted(destination.parent.glob(f".{destination.name}.{kind}-*"))
 
 
@@ -102,8 +117,8 @@ def recover_folder(destination: str | Path, remove_leftovers: bool = False) -> N
     """Undo what a process killed while replacing ``destination`` left behind.
 
     If ``destination`` is missing but its previous version survives as
-    ``.NAME.old-*`` (killed between the two renames), the old version is put
-    back.
+    ``.NAME.old-*`` (killed between the two renames of ``swap_in``), the old
+    version is put back.
 
     Args:
         destination: The folder.
@@ -115,13 +130,75 @@ def recover_folder(destination: str | Path, remove_leftovers: bool = False) -> N
     if not folder.parent.is_dir():
         return
     old = _siblings(folder, "old")
-    if old and not folder.exists():
-        os.replace(old[-1], folder)
+    if old and not os.path.lexists(folder):
+        os.rename(old[-1], folder)
         old = old[:-1]
+        _fsync_directory(folder.parent)
     if not remove_leftovers:
         return
     for leftover in [*old, *_siblings(folder, "new")]:
-        shutil.rmtree(leftover, ignore_errors=True)
+        if leftover.is_dir() and not leftover.is_symlink():
+            shutil.rmtree(leftover, ignore_errors=True)
+        else:
+            leftover.unlink(missing_ok=True)
+
+
+def refuse_link(path: str | Path) -> None:
+    """Refuse an output location that is a symbolic link: nothing is written through one.
+
+    Raises:
+        ValueError: ``path`` is a symbolic link, with what to do about it.
+    """
+    target = Path(path)
+    if target.is_symlink():
+        raise ValueError(
+            f"{target} is a symbolic link (to {os.readlink(target)}); outputs are never "
+            "written through a link: give the real path, or another one."
+        )
+
+
+def _refuse_file(folder: Path) -> None:
+    """Refuse a folder destination that is a link or an existing file."""
+    refuse_link(folder)
+    if folder.exists() and not folder.is_dir():
+        raise ValueError(f"{folder} is a file; give a folder (it is created if needed).")
+
+
+def new_staging_folder(destination: str | Path) -> Path:
+    """An empty ``.NAME.new-*`` sibling of ``destination`` to build its next version in.
+
+    ``swap_in`` makes it the destination; the staging folder of a killed writer
+    is removed by the next ``FolderLock`` on the destination. The parent is created.
+    """
+    folder = Path(destination)
+    folder.parent.mkdir(parents=True, exist_ok=True)
+    staging = Path(tempfile.mkdtemp(dir=folder.parent, prefix=f".{folder.name}.new-"))
+    staging.chmod(0o777 & ~_umask())  # as mkdir would create it, not mkdtemp's 0700
+    return staging
+
+
+def swap_in(staging: str | Path, destination: str | Path) -> None:
+    """Make the complete folder ``staging`` the ``destination``, replacing the old one whole.
+
+    Two renames (old -> ``.NAME.old-<time>-<pid>``, staging -> NAME); a
+    process killed between them leaves the old version as ``.NAME.old-*``,
+    which ``recover_folder`` puts back. The old version is then deleted.
+
+    Raises:
+        ValueError: ``destination`` is a symbolic link or a file; nothing is renamed.
+    """
+    new, folder = Path(staging), Path(destination)
+    _refuse_file(folder)
+    _fsync_directory(new)
+    if folder.exists():
+        retired = folder.parent / f".{folder.name}.old-{time.time_ns()}-{os.getpid()}"
+        os.rename(folder, retired)
+        os.rename(new, folder)
+        _fsync_directory(folder.parent)
+        shutil.rmtree(retired, ignore_errors=True)
+    else:
+        os.rename(new, folder)
+        _fsync_directory(folder.parent)
 
 
 @contextlib.contextmanager
@@ -135,25 +212,18 @@ def staged_folder(destination: str | Path) -> Iterator[Path]:
         An empty temporary folder on the same file system; write everything there.
 
     Raises:
+        ValueError: ``destination`` is a symbolic link or a file (refused before
+            anything is built).
         OSError: The parent is not writable. On any error inside the block the
             staging folder is removed and ``destination`` is unchanged.
     """
     folder = Path(destination)
-    folder.parent.mkdir(parents=True, exist_ok=True)
+    _refuse_file(folder)
     recover_folder(folder)
-    staging = Path(tempfile.mkdtemp(dir=folder.parent, prefix=f".{folder.name}.new-"))
+    staging = new_staging_folder(folder)
     try:
-        staging.chmod(0o777 & ~_umask())  # as mkdir would create it, not mkdtemp's 0700
         yield staging
-        _fsync_directory(staging)
-        if folder.exists():
-            retired = Path(tempfile.mkdtemp(dir=folder.parent, prefix=f".{folder.name}.old-"))
-            os.replace(folder, retired)  # an empty directory is replaced by rename
-            os.replace(staging, folder)
-            shutil.rmtree(retired, ignore_errors=True)
-        else:
-            os.replace(staging, folder)
-        _fsync_directory(folder.parent)
+        swap_in(staging, folder)
     except BaseException:
         shutil.rmtree(staging, ignore_errors=True)
         raise
@@ -162,18 +232,20 @@ def staged_folder(destination: str | Path) -> Iterator[Path]:
 def check_writable(destination: str | Path, needed_bytes: int = 0) -> None:
     """Fail before a long run if ``destination`` cannot be written.
 
-    Creates the parent folders, writes and removes a probe file beside
-    ``destination`` and checks the free space.
+    Refuses a destination that is a symbolic link, creates the parent folders,
+    writes and removes a probe file beside ``destination`` and checks the free
+    space.
 
     Args:
-        destination: The output folder that will be created or replaced.
+        destination: The output (a folder or a file) that will be created or replaced.
         needed_bytes: Free space the outputs need (0: do not check).
 
     Raises:
-        ValueError: The location is not writable or has too little free space,
-            with what to do about it.
+        ValueError: The location is a link, is not writable or has too little free
+            space, with what to do about it.
     """
     folder = Path(destination)
+    refuse_link(folder)
     try:
         folder.parent.mkdir(parents=True, exist_ok=True)
         with tempfile.TemporaryFile(dir=folder.parent, prefix=f".{folder.name}.probe-"):
@@ -216,13 +288,25 @@ class FolderLock:
     def acquire(self) -> None:
         """Take the lock (creating the parent folders).
 
+        Then, holding it, puts back a folder whose replacement was killed
+        between its two renames and removes the staging folders of killed
+        writers (``recover_folder``).
+
         Raises:
             FolderLockedError: Another process holds it.
+            ValueError: The lock file cannot be opened (or is a symbolic link).
         """
         import fcntl
 
         self.folder.parent.mkdir(parents=True, exist_ok=True)
-        handle = open(self.path, "a")  # held until release()
+        try:  # never through a link
+            descriptor = os.open(self.path, os.O_WRONLY | os.O_CREAT | os.O_NOFOLLOW, 0o666)
+        except OSError as error:
+            raise ValueError(
+                f"cannot open the lock file {self.path}: {error.strerror or error} (a symbolic "
+                "link is refused); remove it or choose another folder."
+            ) from error
+        handle = os.fdopen(descriptor, "w")  # held until release()
         try:
             fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
@@ -232,7 +316,11 @@ class FolderLock:
                 "for it to finish or choose another folder."
             ) from None
         self._handle = handle
-        recover_folder(self.folder, remove_leftovers=True)
+        try:
+            recover_folder(self.folder, remove_leftovers=True)
+        except BaseException:
+            self.release()
+            raise
 
     def release(self) -> None:
         """Release the lock (the lock file stays; it is empty)."""

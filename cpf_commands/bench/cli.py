@@ -1,21 +1,23 @@
 """``cpf-bench``: the command around ``cpf_commands.bench.run``.
 
 It checks the output folder before anything runs (``--force``, a lock,
-writable, disk and memory for ``--seeds``), runs ``run_bench`` and prints its
-answer (``cpf_commands.bench.ranking``: per scenario and over the suite, the
-policies ranked by mean cost with their ratio to the reference, normalized
-score and verdict, and the best deployable policy named); ``cpf-bench
---help`` lists the flags.
+writable, not a link, disk, and memory for policies x seeds x series), runs
+``run_bench`` and prints its answer (``cpf_commands.bench.ranking``: per
+scenario and over the suite, the policies ranked by mean cost with their ratio
+to the reference, normalized score and verdict, and the best deployable policy
+named); ``cpf-bench --help`` lists the flags.
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import shlex
 import time
 from collections.abc import Sequence
 
 from cpf_commands.bench import ranking
+from cpf_commands.bench.episodes import METRICS
 from cpf_commands.bench.marl_eval import write_marl_eval
 from cpf_commands.bench.report import summarize
 from cpf_commands.bench.run import (
@@ -26,6 +28,7 @@ from cpf_commands.bench.run import (
     reference_label,
     run_bench,
 )
+from cpf_commands.bench.stats import REPLICATES
 from cpf_commands.bench.verdict import COST_MARGIN, check_margin
 from cpf_commands.common.arguments import add_scenarios_argument, non_negative_int
 from cpf_commands.common.outputs import claim_output_folder
@@ -34,14 +37,19 @@ from cpf_commands.common.ray_runtime import add_address_argument
 from cpf_env import atomic
 from cpf_env.envs.parallel import make_scenario
 from cpf_env.scenarios.splits import SPLITS
-from cpf_env.scenarios.suite import list_suite
+from cpf_env.scenarios.suite import is_deterministic, list_suite
 
 __all__ = ["bench_main"]
 
-#: Memory per fleet and step of an episode's recorded series (15 float64 series, rounded up).
-SERIES_BYTES_PER_STEP = 16 * 8
-#: Memory per vessel of a fleet's simulator and policy state (generous).
-STATE_BYTES_PER_VESSEL = 8 * 1024
+#: Memory per fleet and step of a batch's recorded series and their reduction (measured
+#: 256 B on bench_large_fleet: 15 float64 series and the temporaries of their reduction).
+SERIES_BYTES_PER_STEP = 256
+#: Memory per vessel of a fleet's simulator, policy and step-record state (measured about
+#: 24 KiB on bench_large_fleet, rounded up).
+STATE_BYTES_PER_VESSEL = 32 * 1024
+#: Memory per metric, bootstrap replicate and seed of a cell's summary: the resampled
+#: metrics and their sorted copy for the IQM (measured 2.5 x 8 B, rounded up).
+BOOTSTRAP_BYTES = 3 * 8
 #: Disk space per episode of the outputs (a row of episodes.csv, generous).
 OUTPUT_BYTES_PER_EPISODE = 1024
 
@@ -159,22 +167,54 @@ def _command(args: argparse.Namespace) -> str:
     return shlex.join(parts)
 
 
+def _memory_needed(args: argparse.Namespace) -> tuple[int, int]:
+    """Bytes of memory the run's largest batch and its summary hold (generous estimates).
+
+    A local run steps every policy on a scenario in one simulator of
+    policies x seeds fleets, each recording its series over the horizon; the
+    scenarios run one after another. With Ray each (policy, scenario) cell is a
+    task of its own, at most one per CPU at a time. The summary then
+    bootstraps every metric of one cell at a time over its seeds.
+
+    Returns:
+        (largest batch, summary) in bytes; the run needs the larger of the two.
+    """
+    batches, episodes = [], []
+    for name in args.scenarios:
+        scenario = make_scenario(name)
+        seeds = 1 if is_deterministic(scenario) else args.seeds
+        horizon = args.steps or scenario.max_steps
+        batches.append(
+            seeds * (horizon * SERIES_BYTES_PER_STEP + scenario.n * STATE_BYTES_PER_VESSEL)
+        )
+        episodes.append(seeds)
+    policies = len(args.policies)
+    if args.ray or args.address is not None:
+        batch = max(batches) * min(policies * len(batches), os.cpu_count() or 1)
+    else:
+        batch = max(batches) * policies
+    return batch, max(episodes) * len(METRICS) * REPLICATES * BOOTSTRAP_BYTES
+
+
 def _claim_output(args: argparse.Namespace) -> atomic.FolderLock:
     """Refuse a run whose flags, memory or output folder would fail it; lock --out."""
     if args.seeds < 1:
         raise ValueError(f"--seeds must be >= 1, got {args.seeds}.")
     labelled_policies(args.policies)  # a policy listed twice
     check_margin(args.cost_margin)
-    horizons = [args.steps or make_scenario(name).max_steps for name in args.scenarios]
-    fleets = max(make_scenario(name).n for name in args.scenarios)
-    needed = args.seeds * (max(horizons) * SERIES_BYTES_PER_STEP + fleets * STATE_BYTES_PER_VESSEL)
+    batch, summary = _memory_needed(args)
     available = _available_memory()
-    if available is not None and needed > available:
+    if available is not None and max(batch, summary) > available:
         raise ValueError(
-            f"--seeds {args.seeds} needs about {needed / 2**30:.1f} GiB of memory for one "
-            f"(policy, scenario) cell ({max(horizons)} steps), but {available / 2**30:.1f} GiB "
-            "are available; lower --seeds or --steps."
+            f"{len(args.policies)} policies x --seeds {args.seeds} need about "
+            f"{max(batch, summary) / 2**30:.1f} GiB of memory ({batch / 2**30:.1f} GiB for the "
+            f"largest batch, every policy's fleets on a scenario at once; "
+            f"{summary / 2**30:.1f} GiB for the summary's bootstrap intervals), but "
+            f"{available / 2**30:.1f} GiB are available; lower --seeds or --steps, or bench "
+            "fewer policies at a time."
         )
+    if args.marl_eval is not None:
+        atomic.check_writable(args.marl_eval)
     return claim_output_folder(
         args.out,
         OUTPUT_FILES,

@@ -83,7 +83,15 @@ def _run_parser(prog: str = "cpf-run") -> argparse.ArgumentParser:
         default=None,
         help="control steps, >= 1 (default: the scenario's episode length)",
     )
-    parser.add_argument("--out", default="outputs", help="output directory (default: outputs)")
+    parser.add_argument(
+        "--out",
+        default="outputs",
+        help="output directory; the run writes its subfolder <scenario>_<policy> whole at the "
+        "end (default: outputs)",
+    )
+    parser.add_argument(
+        "--force", action="store_true", help="replace the results already in that subfolder"
+    )
     parser.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
     parser.add_argument(
         "--video",
@@ -187,11 +195,14 @@ def run_main(argv: Sequence[str] | None = None, prog: str = "cpf-run") -> int:
             progress=not args.quiet,
             leakage=args.leakage,
             observer=video,
+            force=args.force,
         )
         if video is not None:
             video.write(args.video)
     except ValueError as error:
         parser.error(str(error))
+    except OSError as error:  # disk full while writing: the previous results are intact
+        parser.error(f"could not write the results to {args.out}: {error}")
     elapsed = time.perf_counter() - start
     options = "".join(f", {k}={v}" for k, v in metrics["policy_options"].items())
     print(

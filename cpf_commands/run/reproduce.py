@@ -26,9 +26,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from baselines import POLICIES, NNDSCGains
+from cpf_commands.common.outputs import claim_output_folder
 from cpf_commands.common.rollout import StepObserver
 from cpf_commands.run.experiment import run_episode
 from cpf_commands.run.figures import write_figures
+from cpf_env import atomic
 from cpf_env.envs.parallel import make_scenario
 from cpf_env.scenarios import Scenario
 from cpf_env.scenarios.fine import FINE_SCENARIOS
@@ -41,6 +43,7 @@ __all__ = [
     "NN_TRACKING_TOLERANCE",
     "PAPER_SCENARIOS",
     "PATH_TOLERANCE",
+    "RUN_FILES",
     "SATURATION_TRANSIENT",
     "SPEED_TOLERANCE",
     "Claim",
@@ -50,9 +53,16 @@ __all__ = [
     "policy_options",
     "predicted_nn_error",
     "reproduce",
+    "run_folder",
     "settling_time",
     "warm_up",
 ]
+
+#: The files of cpf-run's output folder (shell patterns; the figures are fig3_*.png .. fig7_*.png).
+RUN_FILES = ("metrics.json", "trajectory.npz", "fig*.png")
+#: Disk space of the outputs per vessel and control step (trajectory.npz uncompressed, generous),
+#: and of the figures.
+OUTPUT_BYTES_PER_VESSEL_STEP, FIGURE_BYTES = 1024, 4 * 2**20
 
 #: Thresholds over the last quarter (m; path-variable units; m/s).
 PATH_TOLERANCE, COORDINATION_TOLERANCE, SPEED_TOLERANCE = 0.01, 0.01, 1e-4
@@ -360,6 +370,7 @@ def reproduce(
     progress: bool = False,
     leakage: str | None = None,
     observer: StepObserver | None = None,
+    force: bool = False,
 ) -> tuple[dict[str, Any], list[Claim]]:
     """Run the reproduction and write ``metrics.json``, ``trajectory.npz`` and figures.
 
@@ -368,14 +379,16 @@ def reproduce(
         policy: A baseline name or a ``cpf-train --out`` folder (``resolve_policy``).
         seed: Seed of environment and policy.
         steps: Control steps (default: the scenario's episode length).
-        out: Output directory; a subdirectory ``<scenario>_<policy>`` is written.
-            None writes nothing.
+        out: Output directory; its subdirectory ``<scenario>_<policy>`` (``run_folder``)
+            is checked and locked before the episode runs and written whole at the
+            end (``cpf_env.atomic.staged_folder``). None writes nothing.
         figures: Write the PNG figures.
         progress: Show a progress bar (after compiling the kernels, so that its
             time estimate is that of the run).
         leakage: Weight-law reading of nn_dsc and its ablations (default:
             ``default_leakage(scenario)``); must be None for other policies.
         observer: Also sees every step of the episode (``cpf-run --video``).
+        force: Replace the results already in the output folder (``cpf-run --force``).
 
     Returns:
         (metrics, claims); the claims are empty off the paper's scenarios,
@@ -384,9 +397,46 @@ def reproduce(
         ``policy``, ``policy_options``, ``seed``,
         ``settling_time_s``, ``claims`` (each with ``holds``) and, when it
         writes, ``output_directory``.
+
+    Raises:
+        ValueError: A bad argument, or an output folder that is a file or a link,
+            holds other files, holds results without ``force``, is not writable,
+            lacks space, or is being written by another cpf-run.
+        OSError: The outputs could not be written (disk full); the folder is as it was.
     """
     resolved = make_scenario(scenario)
     options = policy_options(policy, resolved.name, leakage)
+    if out is None:
+        return _reproduce(resolved, policy, options, seed, steps, progress, observer, None, False)
+    directory = run_folder(out, resolved.name, policy)
+    horizon = resolved.max_steps if steps is None else max(int(steps), 1)
+    needed = horizon * resolved.n * OUTPUT_BYTES_PER_VESSEL_STEP + figures * FIGURE_BYTES
+    lock = claim_output_folder(directory, RUN_FILES, force, "cpf-run", needed_bytes=needed)
+    try:
+        return _reproduce(
+            resolved, policy, options, seed, steps, progress, observer, directory, figures
+        )
+    finally:
+        lock.release()
+
+
+def run_folder(out: str | Path, scenario: str, policy: str) -> Path:
+    """The output folder of a cpf-run: ``out/<scenario>_<policy folder's name>``."""
+    return Path(out) / f"{scenario}_{Path(policy).name}"
+
+
+def _reproduce(
+    resolved: Scenario,
+    policy: str,
+    options: dict[str, Any],
+    seed: int,
+    steps: int | None,
+    progress: bool,
+    observer: StepObserver | None,
+    directory: Path | None,
+    figures: bool,
+) -> tuple[dict[str, Any], list[Claim]]:
+    """``reproduce`` once its output folder (if any) is claimed."""
     if progress:
         warm_up(resolved)
     trajectory = run_episode(
@@ -417,12 +467,11 @@ def reproduce(
         settling_time_s=settling_time(trajectory),
         claims=[asdict(claim) for claim in claims],
     )
-    if out is not None:
-        directory = Path(out) / f"{resolved.name}_{Path(policy).name}"
-        directory.mkdir(parents=True, exist_ok=True)
-        (directory / "metrics.json").write_text(json.dumps(metrics, indent=2))
-        trajectory.save(str(directory / "trajectory.npz"))
-        if figures:
-            write_figures(trajectory, directory)
+    if directory is not None:
+        with atomic.staged_folder(directory) as staging:  # all files or none, nothing followed
+            atomic.write_text(staging / "metrics.json", json.dumps(metrics, indent=2))
+            trajectory.save(str(staging / "trajectory.npz"))
+            if figures:
+                write_figures(trajectory, staging)
         metrics["output_directory"] = str(directory)
     return metrics, claims

@@ -24,12 +24,10 @@ Example::
 from __future__ import annotations
 
 import argparse
-import contextlib
-import fcntl
 import os
 import shlex
 import sys
-from collections.abc import Iterator, Sequence
+from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -40,6 +38,7 @@ from cpf_commands.common.ray_runtime import (
     resolve_address,
     start_ray,
 )
+from cpf_env import atomic
 
 if TYPE_CHECKING:  # the learning extra is imported only when a sweep runs
     from cpf_commands.sweep.spec import SweepSpec
@@ -105,25 +104,6 @@ def _usable_cpus() -> int:
     return os.cpu_count() or 1
 
 
-@contextlib.contextmanager
-def _only_run_on(folder: Path) -> Iterator[None]:
-    """Hold ``folder/.lock`` while trials run: a second cpf-sweep on the same --out is refused.
-
-    Raises:
-        ValueError: Another process holds the lock.
-    """
-    folder.mkdir(parents=True, exist_ok=True)
-    with open(folder / ".lock", "w") as lock:
-        try:
-            fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            raise ValueError(
-                f"another cpf-sweep is running on --out {folder}; wait for it to end (or "
-                "stop it), or choose another --out."
-            ) from None
-        yield  # the lock goes with the file's closing
-
-
 def _tuner(
     tune: Any, spec: SweepSpec, folder: Path, max_concurrent: int | None, quiet: bool
 ) -> Any:
@@ -183,11 +163,10 @@ def _run_trials(
     try:
         from ray import tune
 
-        with _only_run_on(folder):
-            spec.save(folder)
-            for name in ("summary.md", "summary.csv"):  # never left behind by an aborted run
-                (folder / name).unlink(missing_ok=True)
-            grid = _tuner(tune, spec, folder, max_concurrent, quiet).fit()
+        spec.save(folder)
+        for name in ("summary.md", "summary.csv"):  # never left behind by an aborted run
+            (folder / name).unlink(missing_ok=True)
+        grid = _tuner(tune, spec, folder, max_concurrent, quiet).fit()
     except KeyboardInterrupt:  # with Ray Client, Tune's own Ctrl-C handling is on the cluster
         print("cpf-sweep: interrupted; rerun the same command to resume.", file=sys.stderr)
         return {}
@@ -246,14 +225,37 @@ def run_sweep(
         "stale: ..." or "not finished").
 
     Raises:
-        ValueError: ``out`` is a file or holds a different sweep; a malformed
-            address; more CPUs per trial than this machine has (local Ray).
+        ValueError: ``out`` is a file, a symbolic link, not writable, holds a
+            different sweep or is being written by another cpf-sweep (its lock,
+            ``.NAME.lock`` beside it, is held for the whole command); a
+            malformed address; more CPUs per trial than this machine has (local Ray).
         ImportError: Ray is not installed.
         ConnectionError: No Ray cluster answers at ``address``.
     """
+    atomic.check_writable(out)  # before resolving: never through a link
+    folder = Path(out).resolve()
+    try:
+        lock = atomic.FolderLock(folder, "another cpf-sweep")
+        lock.acquire()
+    except atomic.FolderLockedError as error:
+        raise ValueError(str(error)) from None
+    try:
+        return _run_sweep(spec, folder, address, max_concurrent, command, quiet)
+    finally:
+        lock.release()
+
+
+def _run_sweep(
+    spec: SweepSpec,
+    folder: Path,
+    address: str | None,
+    max_concurrent: int | None,
+    command: str,
+    quiet: bool,
+) -> list[dict[str, Any]]:
+    """``run_sweep`` in its locked folder."""
     from cpf_commands.sweep.report import summary_csv, summary_markdown, summary_rows
 
-    folder = Path(out).resolve()
     errors: dict[str, str] = {}
     total, done = len(list(spec.trials())), 0
     if spec.check_folder(folder):
@@ -272,8 +274,8 @@ def run_sweep(
             )
         errors = _run_trials(spec, folder, address, max_concurrent, quiet)
     rows = summary_rows(spec, folder, errors)
-    (folder / "summary.md").write_text(summary_markdown(spec, rows, command))
-    (folder / "summary.csv").write_text(summary_csv(rows))
+    atomic.write_text(folder / "summary.md", summary_markdown(spec, rows, command))
+    atomic.write_text(folder / "summary.csv", summary_csv(rows))
     return rows
 
 

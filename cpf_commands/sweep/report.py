@@ -16,7 +16,6 @@ from __future__ import annotations
 import csv
 import io
 import json
-import os
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -27,6 +26,7 @@ from agents.training import TrainConfig
 from cpf_commands.bench.run import BASE_SEED
 from cpf_commands.bench.views import markdown_table
 from cpf_commands.sweep.spec import SweepSpec, trial_name
+from cpf_env import atomic
 
 __all__ = [
     "EVALUATION_FILE",
@@ -52,9 +52,7 @@ def _read_json(path: Path) -> dict[str, Any] | None:
 
 def write_evaluation(folder: Path, record: dict[str, Any]) -> None:
     """Write a trial's ``evaluation.json`` atomically (a reader sees all of it or nothing)."""
-    partial = folder / f".{EVALUATION_FILE}.partial"
-    partial.write_text(json.dumps(record, indent=2) + "\n")
-    os.replace(partial, folder / EVALUATION_FILE)
+    atomic.write_text(folder / EVALUATION_FILE, json.dumps(record, indent=2) + "\n")
 
 
 def trial_state(folder: Path, config: TrainConfig) -> tuple[str, dict[str, Any]]:

@@ -31,6 +31,7 @@ from typing import Any
 
 import cpf_env
 from agents.training import TrainConfig
+from cpf_env import atomic
 
 __all__ = ["SweepSpec", "parse_setting", "trial_name"]
 
@@ -248,7 +249,7 @@ class SweepSpec:
     def save(self, folder: Path) -> None:
         """Write ``sweep.json`` to ``folder`` (created if needed)."""
         folder.mkdir(parents=True, exist_ok=True)
-        (folder / "sweep.json").write_text(json.dumps(self.to_json(), indent=2) + "\n")
+        atomic.write_text(folder / "sweep.json", json.dumps(self.to_json(), indent=2) + "\n")
 
 
 def trial_name(params: dict[str, Any], spec: SweepSpec) -> str:

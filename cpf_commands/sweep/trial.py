@@ -13,7 +13,6 @@ checkpoints).
 from __future__ import annotations
 
 import json
-import shutil
 import time
 from pathlib import Path
 from typing import Any
@@ -111,7 +110,8 @@ def run_trial(params: dict[str, Any], spec: SweepSpec, out: str) -> None:
     if state == "done":
         tune.report(record)
         return
-    shutil.rmtree(folder, ignore_errors=True)  # nothing of an earlier agent is left to mix in
+    # A new folder replaces the old one whole once the agent is written (nothing of an
+    # earlier agent is left to mix in); killed before, the old folder stays, unfinished.
     train(config, folder, progress=False, overwrite=True, callbacks=[_TuneReport()])
     record = json.loads((folder / "config.json").read_text())
     result: dict[str, Any] = {

@@ -71,11 +71,12 @@ def test_an_unwritable_out_and_too_many_seeds_are_refused_before_the_run(
     blocker.write_text("")
     assert "cannot write" in _refused([*QUICK, "--out", str(blocker / "out")], capsys)
     start = time.perf_counter()
-    message = _refused(["--seeds", "1000000", "--scenarios", "bench_mild", "--out",
-                        str(tmp_path / "o"), "--quiet"], capsys)  # fmt: skip
+    message = _refused(["--policies", "nn_dsc", "dsc", "--seeds", "1000000", "--scenarios",
+                        "bench_mild", "--out", str(tmp_path / "o"), "--quiet"], capsys)  # fmt: skip
     assert time.perf_counter() - start < 5.0
-    # 1e6 fleets x (2000 steps x 16 series x 8 B + 5 vessels x 8 KiB) = 2.9696e11 B
-    assert "--seeds 1000000 needs about 276.6 GiB" in message
+    # batch: 2 policies x 1e6 fleets x (2000 steps x 256 B + 5 vessels x 32 KiB) = 1.35e12 B;
+    # summary: 1e6 seeds x 54 metrics x 2000 replicates x 24 B = 2.592e12 B, the larger
+    assert "2 policies x --seeds 1000000 need about 2414.0 GiB" in message
     monkeypatch.setattr(atomic.shutil, "disk_usage", lambda path: type("U", (), {"free": 10}))
     assert "MiB free" in _refused([*QUICK, "--out", str(tmp_path / "o")], capsys)
     assert ran == []

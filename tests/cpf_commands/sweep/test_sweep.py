@@ -6,7 +6,6 @@ The runs on Ray itself are in ``test_ray.py`` (marker ``ray``).
 from __future__ import annotations
 
 import contextlib
-import fcntl
 import importlib
 import json
 import os
@@ -34,6 +33,7 @@ from cpf_commands.sweep.report import (
 )
 from cpf_commands.sweep.spec import SweepSpec, parse_setting, trial_name
 from cpf_commands.sweep.trial import run_trial
+from cpf_env import atomic
 from cpf_env.sim.precompile import KERNEL_MODULES, kernels_of_package, precompile
 
 # --- --set parsing ---------------------------------------------------------------------------
@@ -319,9 +319,8 @@ def test_a_second_sweep_on_the_same_out_is_refused_while_one_runs(tmp_path, monk
     )
     monkeypatch.delenv("RAY_ADDRESS", raising=False)
     spec = SweepSpec(("bench_mild",), (0,), fixed={"timesteps": 100})
-    with open(tmp_path / ".lock", "w") as running:  # as the first cpf-sweep holds it
-        fcntl.flock(running, fcntl.LOCK_EX)
-        with pytest.raises(ValueError, match=f"another cpf-sweep is running on --out {tmp_path}"):
+    with atomic.FolderLock(tmp_path):  # as the first cpf-sweep holds it
+        with pytest.raises(ValueError, match=f"{tmp_path} is being written by another cpf-sweep"):
             run_sweep(spec, tmp_path)
 
 
