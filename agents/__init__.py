@@ -20,7 +20,8 @@ from __future__ import annotations
 import cpf_env  # noqa: F401
 from agents.loading import TrainedPolicy, load_policy
 from agents.mixture_env import MixtureVecEnv
-from agents.training import TrainConfig, train
+from agents.train_config import TrainConfig
+from agents.training import train
 from agents.vec_env import FleetVecEnv
 
 __all__ = ["FleetVecEnv", "MixtureVecEnv", "TrainConfig", "TrainedPolicy", "load_policy", "train"]

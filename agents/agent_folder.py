@@ -37,8 +37,8 @@ import torch
 from safetensors.torch import load as load_tensors
 from safetensors.torch import save as save_tensors
 
-from cpf_env import atomic
 from cpf_env.envs.input_statistics import InputStatistics
+from cpf_env.infra import atomic
 
 __all__ = [
     "FORMAT",
@@ -153,7 +153,7 @@ def write_with_manifest(
 ) -> None:
     """Write ``files`` and the manifest of their hashes into ``folder``, each atomically.
 
-    The caller makes the folder as a whole appear at once (``cpf_env.atomic.staged_folder``).
+    The caller makes the folder as a whole appear at once (``cpf_env.infra.atomic.staged_folder``).
     """
     import cpf_env
 
@@ -179,7 +179,7 @@ def write_agent(
     """Write the agent files and their manifest into ``folder`` (a staging folder).
 
     Each file is written atomically; the caller makes the folder as a whole
-    appear at once (``cpf_env.atomic.staged_folder``).
+    appear at once (``cpf_env.infra.atomic.staged_folder``).
 
     Args:
         folder: Existing folder to write into.
@@ -266,7 +266,7 @@ def read_agent(folder: Path) -> tuple[dict[str, Any], PolicyNetwork, Normalizati
     Raises:
         AgentFolderError: A missing, unreadable, altered or inconsistent file (named).
     """
-    from agents.training import TrainConfig
+    from agents.train_config import TrainConfig
 
     manifest = _read_manifest(folder)
     try:

@@ -25,7 +25,7 @@ from agents.agent_folder import (
     network_from_tensors,
     write_agent,
 )
-from cpf_env import atomic
+from cpf_env.infra import atomic
 
 __all__ = ["PICKLE_WARNING", "convert_sb3_folder", "is_sb3_folder", "read_sb3_folder"]
 
@@ -53,7 +53,8 @@ def read_sb3_folder(
         AgentFolderError: A missing statistics file the config asks for, or an
             unreadable file (named).
     """
-    from agents.training import ALGORITHMS, TrainConfig
+    from agents.train_config import TrainConfig
+    from agents.training import ALGORITHMS
 
     warnings.warn(PICKLE_WARNING.format(folder=folder), UserWarning, stacklevel=3)
     try:

@@ -54,8 +54,9 @@ from agents.schedule import (
     evaluations_csv,
 )
 from agents.slot_statistics import SlotSharedVecNormalize
-from agents.training import TrainConfig, build_model, make_env, planned_timesteps
-from cpf_env import atomic
+from agents.train_config import TrainConfig
+from agents.training import build_model, make_env, planned_timesteps
+from cpf_env.infra import atomic
 
 __all__ = ["RUN_RECORD", "TrainingRun", "prepare_resume", "read_run_record", "write_run_record"]
 

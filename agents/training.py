@@ -49,11 +49,10 @@ from agents.mixture_env import MixtureVecEnv
 from agents.schedule import Evaluator, RunSchedule
 from agents.train_config import TrainConfig
 from agents.vec_env import FleetVecEnv
-from cpf_env import atomic
+from cpf_env.infra import atomic
 from cpf_env.scenarios.splits import check_training
 
-# TrainConfig lives in agents.train_config; it is exported here too, where callers found it.
-__all__ = ["ALGORITHMS", "TrainConfig", "build_model", "make_env", "train"]
+__all__ = ["ALGORITHMS", "build_model", "make_env", "train"]
 
 #: SB3 algorithms by name.
 ALGORITHMS: dict[str, type[BaseAlgorithm]] = {"ppo": PPO, "sac": SAC}
@@ -188,7 +187,7 @@ def train(
             (``splits.check_training``), nothing to resume, or a configuration that
             differs from the run's own.
         TrainingInterrupted: Ctrl-C; the checkpoint and the agent so far are written.
-        cpf_env.atomic.FolderLockedError: Another run is writing ``out``.
+        cpf_env.infra.atomic.FolderLockedError: Another run is writing ``out``.
     """
     from agents.run_folder import TrainingRun, prepare_resume, write_run_record
 

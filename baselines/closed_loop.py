@@ -20,14 +20,14 @@ also
 
 * hold a fleet that has left its path (``terminated``) at zero actions from
   the step after, noting the step it left at (``ended``), and
-* write every step into a ``cpf_env.sim.recording.StepRecord``, row k for
+* write every step into a ``cpf_env.evaluation.recording.StepRecord``, row k for
   step k of the call, as ``FleetMetrics.record`` does from Python.
 
 Only policies whose whole step is compiled qualify (``supports``): those with
 a compiled kinetic part that act on their observation alone, and the
 privileged references of ``baselines.privileged``, whose ideal-link
 observations and true lumped uncertainty the loop reads from the simulator
-with the compiled functions of ``cpf_env.sim.privileged``. A kinetic part
+with the compiled functions of ``cpf_env.evaluation.privileged``. A kinetic part
 written in Python or a trained agent take the per-step path.
 """
 
@@ -51,11 +51,11 @@ from baselines.kernel_types import (
 from baselines.kernels import WORK_ROWS, _act_fleet
 from baselines.policy import DIAGNOSTICS, Policy
 from baselines.privileged import PrivilegedPolicy
+from cpf_env.evaluation.privileged import fleet_ideal_observations, fleet_lumped_uncertainty
+from cpf_env.evaluation.recording import CHUNK, StepRecord, new_record, record_fleet
 from cpf_env.sim.arrays import FleetArrays, KernelConstants
 from cpf_env.sim.fleet import FleetSim
 from cpf_env.sim.kernels import step_fleet
-from cpf_env.sim.privileged import fleet_ideal_observations, fleet_lumped_uncertainty
-from cpf_env.sim.recording import CHUNK, StepRecord, new_record, record_fleet
 from cpf_env.sim.threads import PARALLEL_MIN_FLEETS
 
 __all__ = ["ClosedLoop"]

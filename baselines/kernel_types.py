@@ -81,7 +81,7 @@ class PolicyStates(NamedTuple):
 
 
 class KnownDynamics(NamedTuple):
-    """What a privileged reference is told per acting row (``cpf_env.sim.privileged``).
+    """What a privileged reference is told per acting row (``cpf_env.evaluation.privileged``).
 
     Read only when ``PolicyConstants.privileged``; the deployable policies get
     ``NO_KNOWLEDGE`` (no rows).

@@ -41,7 +41,7 @@ from baselines.kernel_types import (
     PolicyOutputs,
     PolicyStates,
 )
-from cpf_env.model import kernel_cache
+from cpf_env.infra import kernel_cache
 from cpf_env.model.vessel import coriolis_coefficients, damping_coefficients
 from cpf_env.sim.observation import (
     LEADER,

@@ -3,7 +3,7 @@
 Not deployable: they show how much better a controller of the same
 structure could do with perfect information, so that "how much of the gap
 did a policy close" has a top. Each is its deployable parent with two
-pieces of knowledge from the simulator (``cpf_env.sim.privileged``):
+pieces of knowledge from the simulator (``cpf_env.evaluation.privileged``):
 
 1. **the true lumped uncertainty**: per vessel the force f with
    M nu' = tau - f (true model, the paper's unmodeled dynamics and
@@ -44,9 +44,9 @@ from baselines.backstepping import BacksteppingPolicy
 from baselines.kernel_types import KnownDynamics
 from baselines.nn_dsc import NNDSCPolicy
 from baselines.policy import Policy
+from cpf_env.evaluation.privileged import ideal_link_observations, true_dynamics
 from cpf_env.sim.fleet import FleetSim
 from cpf_env.sim.observation import SLOTS
-from cpf_env.sim.privileged import ideal_link_observations, true_dynamics
 
 __all__ = ["BacksteppingPrivileged", "NNDSCPrivileged", "PrivilegedPolicy"]
 

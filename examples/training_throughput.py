@@ -87,7 +87,7 @@ def timed_ppo(
     ``seed=None`` for SuperSuit's vector env, which has no ``seed()``; ``n_epochs`` and
     ``batch_size`` override the defaults.
     """
-    from agents.training import TrainConfig
+    from agents.train_config import TrainConfig
 
     config = TrainConfig()
     env = make_env()
@@ -111,10 +111,10 @@ def timed_ppo(
 def supersuit_env(fleets: int) -> VecEnv:
     """``fleets`` ResidualWrapper ParallelEnvs as one SB3 VecEnv through SuperSuit."""
     import supersuit
+    from cpf_env.envs.wrappers import ResidualWrapper
 
     import cpf_env
     from baselines import make_policy
-    from cpf_env.envs.wrappers import ResidualWrapper
 
     def one() -> Any:
         env = cpf_env.parallel_env("bench_saturation")

@@ -42,10 +42,9 @@ from agents.agent_folder import (
     read_verified,
     write_with_manifest,
 )
-from cpf_env import atomic
 from cpf_env.envs.input_statistics import InputStatistics
-from cpf_env.envs.parallel import make_scenario
-from cpf_env.scenarios import Scenario
+from cpf_env.infra import atomic
+from cpf_env.scenarios import Scenario, make_scenario
 
 if TYPE_CHECKING:
     from agents.loading import TrainedPolicy
@@ -161,7 +160,7 @@ def load_marl_policy(folder: str | Path, scenario: str | Scenario | None = None)
         AgentFolderError: A missing, altered or inconsistent file (named).
     """
     from agents.loading import TorchActor, TrainedPolicy
-    from agents.training import TrainConfig
+    from agents.train_config import TrainConfig
 
     path = Path(folder)
     manifest = json.loads((path / MANIFEST).read_text())

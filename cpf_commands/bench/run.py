@@ -32,7 +32,6 @@ from cpf_commands.bench.report import HEADLINE, CellResult, episodes_csv, summar
 from cpf_commands.bench.verdict import COST_MARGIN, check_margin
 from cpf_commands.common.outputs import foreign_files
 from cpf_commands.common.policies import (
-    BenchPolicy,
     PolicySpec,
     TrustedAgentFolder,
     baseline_names,
@@ -41,9 +40,9 @@ from cpf_commands.common.policies import (
 )
 from cpf_commands.common.ray_runtime import start_ray
 from cpf_commands.common.rollout import rollout_group
-from cpf_env import atomic
-from cpf_env.envs.parallel import make_scenario
-from cpf_env.scenarios import Scenario
+from cpf_env.envs.policy import FleetPolicy
+from cpf_env.infra import atomic
+from cpf_env.scenarios import Scenario, make_scenario
 from cpf_env.scenarios.splits import EVALUATION_SEED, SPLITS, split_scenario
 from cpf_env.scenarios.suite import is_deterministic
 
@@ -117,7 +116,7 @@ def write_outputs(
 ) -> list[dict[str, object]]:
     """Write episodes.csv, summary.csv, summary.md and one PNG per headline metric to ``out``.
 
-    The folder is built beside ``out`` and replaces it whole (``cpf_env.atomic``):
+    The folder is built beside ``out`` and replaces it whole (``cpf_env.infra.atomic``):
     a run killed while writing leaves the previous results.
 
     Args:
@@ -161,13 +160,13 @@ def write_outputs(
 
 def _build(
     labelled: dict[str, PolicySpec], tasks: Sequence[Scenario]
-) -> tuple[dict[tuple[str, str], BenchPolicy], dict[tuple[str, str], str]]:
+) -> tuple[dict[tuple[str, str], FleetPolicy], dict[tuple[str, str], str]]:
     """Each policy built for each scenario, and the (label, scenario) pairs that did not fit.
 
     Raises:
         ValueError: A policy that fits none of the scenarios (the first reason).
     """
-    built: dict[tuple[str, str], BenchPolicy] = {}
+    built: dict[tuple[str, str], FleetPolicy] = {}
     skipped: dict[tuple[str, str], str] = {}
     for label, spec in labelled.items():
         reasons = []
@@ -201,7 +200,7 @@ def run_cell(
 
 def _run_here(
     jobs: Sequence[_Job],
-    built: dict[tuple[str, str], BenchPolicy],
+    built: dict[tuple[str, str], FleetPolicy],
     steps: int | None,
     progress: bool,
 ) -> list[CellResult]:

@@ -7,7 +7,7 @@ the path is a file, the folder holds files the command did not write (it
 would replace them), it holds results and ``--force`` was not given, it is
 not writable, or its disk is too full. The returned lock refuses a second
 writer until the command ends. The outputs are then written with
-``cpf_env.atomic.staged_folder``: the folder is replaced by a complete new
+``cpf_env.infra.atomic.staged_folder``: the folder is replaced by a complete new
 one, so stale files of an earlier run (figures a ``--no-figures`` run does not
 draw) disappear and a symbolic link in the old folder is never followed.
 """
@@ -17,7 +17,7 @@ from __future__ import annotations
 from collections.abc import Collection
 from pathlib import Path
 
-from cpf_env import atomic
+from cpf_env.infra import atomic
 
 __all__ = ["claim_output_folder", "foreign_files"]
 

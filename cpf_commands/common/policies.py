@@ -29,12 +29,10 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-from cpf_env.envs.parallel import make_scenario
 from cpf_env.envs.policy import FleetPolicy
-from cpf_env.scenarios import Scenario
+from cpf_env.scenarios import Scenario, make_scenario
 
 __all__ = [
-    "BenchPolicy",
     "FleetPolicy",
     "PolicySpec",
     "TrustedAgentFolder",
@@ -45,10 +43,6 @@ __all__ = [
     "trusting_pickles",
 ]
 
-
-#: The policy contract (``cpf_env.envs.policy.FleetPolicy``) under the name the commands used
-#: before it was defined once; kept for existing callers.
-BenchPolicy = FleetPolicy
 
 PolicySpec = str | Path | FleetPolicy | Callable[[Scenario], FleetPolicy]
 

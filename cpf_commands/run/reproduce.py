@@ -29,11 +29,10 @@ from baselines import POLICIES, NNDSCGains
 from cpf_commands.common.rollout import StepObserver
 from cpf_commands.run.experiment import run_episode
 from cpf_commands.run.figures import write_figures
-from cpf_env.envs.parallel import make_scenario
-from cpf_env.scenarios import Scenario
+from cpf_env.evaluation.metrics import Trajectory, episode_metrics, final_window
+from cpf_env.scenarios import Scenario, make_scenario
 from cpf_env.scenarios.fine import FINE_SCENARIOS
 from cpf_env.sim.fleet import FleetSim
-from cpf_env.sim.metrics import Trajectory, episode_metrics, final_window
 
 __all__ = [
     "COMMAND_BOUND",

@@ -30,7 +30,7 @@ from pathlib import Path
 from typing import Any
 
 import cpf_env
-from agents.training import TrainConfig
+from agents.train_config import TrainConfig
 
 __all__ = ["SweepSpec", "parse_setting", "trial_name"]
 

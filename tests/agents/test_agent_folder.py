@@ -130,7 +130,8 @@ def test_the_converted_agent_acts_as_sb3_did(tmp_path: Path) -> None:
     from stable_baselines3 import PPO
     from stable_baselines3.common.vec_env import VecMonitor
 
-    from agents.training import TrainConfig, build_model, make_env
+    from agents.train_config import TrainConfig
+    from agents.training import build_model, make_env
 
     policy = load_policy(AGENT)
     record = json.loads((AGENT / "config.json").read_text())
@@ -157,7 +158,8 @@ def test_an_old_folder_loads_with_trust_and_converts_to_the_same_actions(tmp_pat
     """A tiny SB3 folder written the old way (model.zip + vecnormalize.pkl) by this test."""
     from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 
-    from agents.training import TrainConfig, build_model, make_env
+    from agents.train_config import TrainConfig
+    from agents.training import build_model, make_env
 
     config = TrainConfig(scenario="bench_mild", fleets=2, n_steps=16, batch_size=160, net_arch=(8,))
     env = VecNormalize(VecMonitor(make_env(config)), norm_reward=False)
@@ -191,7 +193,8 @@ def test_an_old_folder_loads_with_trust_and_converts_to_the_same_actions(tmp_pat
 def test_an_old_folder_without_its_statistics_is_refused(tmp_path: Path) -> None:
     from stable_baselines3.common.vec_env import VecMonitor
 
-    from agents.training import TrainConfig, build_model, make_env
+    from agents.train_config import TrainConfig
+    from agents.training import build_model, make_env
 
     config = TrainConfig(scenario="bench_mild", fleets=2, n_steps=16, batch_size=160, net_arch=(8,))
     model = build_model(config, VecMonitor(make_env(config)))

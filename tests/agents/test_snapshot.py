@@ -10,7 +10,8 @@ import pytest
 import torch
 
 from agents.snapshot import SnapshotError, capture, decode_value, encode_value, restore
-from agents.training import TrainConfig, make_env
+from agents.train_config import TrainConfig
+from agents.training import make_env
 from agents.vec_env import FleetVecEnv
 
 

@@ -9,8 +9,8 @@ import baselines
 from baselines.closed_loop import ClosedLoop
 from baselines.policy import Policy
 from cpf_env import scenarios
+from cpf_env.evaluation.recording import CHUNK, new_record
 from cpf_env.sim.fleet import PARALLEL_MIN_FLEETS, FleetSim
-from cpf_env.sim.recording import CHUNK, new_record
 
 EVERY_POLICY = (*baselines.POLICIES, *baselines.PRIVILEGED)
 

@@ -9,7 +9,7 @@ import pytest
 
 from cpf_commands.bench import readme
 from cpf_commands.bench.report import CellResult
-from cpf_env.sim.fleet_metrics import METRICS
+from cpf_env.evaluation.fleet_metrics import METRICS
 
 SEEDS = tuple(range(4))
 

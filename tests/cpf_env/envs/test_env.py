@@ -19,7 +19,8 @@ from pettingzoo.test import api_test, parallel_api_test, parallel_seed_test, see
 
 import cpf_env
 from cpf_env import scenarios
-from cpf_env.envs.parallel import INFO_LEVELS, CooperativePathFollowingEnv
+from cpf_env.envs.core import INFO_LEVELS
+from cpf_env.envs.parallel import CooperativePathFollowingEnv
 from cpf_env.model.links import LinkImpairments
 from cpf_env.scenarios import Scenario, SpeedSchedule
 from cpf_env.scenarios.reward_weights import REWARD_TERMS, RewardWeights
@@ -494,13 +495,14 @@ def test_closed_envs_are_freed_after_their_spaces_were_asked_for() -> None:
     import weakref
 
     from baselines import make_policy
-    from cpf_env.envs.wrappers import ResidualWrapper
 
     alive = []
     for _ in range(200):
         env = cpf_env.parallel_env("wang2014")
         inner = cpf_env.parallel_env("wang2014")
-        wrapped = ResidualWrapper(inner, make_policy("nn_dsc", inner.scenario))
+        wrapped = cpf_env.parallel_env(
+            "wang2014", base_policy=make_policy("nn_dsc", inner.scenario)
+        )
         for agent in env.possible_agents:
             assert env.observation_space(agent) is env.observation_space(agent)
             env.action_space(agent)

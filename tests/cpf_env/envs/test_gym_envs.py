@@ -94,7 +94,7 @@ def test_vector_env_matches_single_envs_bit_for_bit() -> None:
     """Env k (vector seed s) == CentralizedFleetEnv seeded s + k, through autoresets."""
     num_envs, seed, steps = 3, 10, 250
     overrides = {"scenario": "heterogeneous", "max_steps": 60}  # random starts and models
-    envs = CentralizedFleetVectorEnv(num_envs, **overrides)
+    envs = CentralizedFleetVectorEnv(num_envs=num_envs, **overrides)
     singles = [CentralizedFleetEnv(**overrides) for _ in range(num_envs)]
     obs, infos = envs.reset(seed=seed)
     done = np.zeros(num_envs, dtype=bool)
@@ -138,7 +138,7 @@ def test_native_vector_env_matches_sync_vector_env() -> None:
 
 
 def test_autoreset_next_step_after_truncation_and_termination() -> None:
-    envs = CentralizedFleetVectorEnv(2, max_steps=3)
+    envs = CentralizedFleetVectorEnv(num_envs=2, max_steps=3)
     first, _ = envs.reset(seed=0)
     actions = np.zeros(envs.action_space.shape, dtype=np.float32)
     for step in range(1, 4):
@@ -149,7 +149,9 @@ def test_autoreset_next_step_after_truncation_and_termination() -> None:
     assert np.array_equal(obs, first) and not rewards.any()
     assert not terminated.any() and not truncated.any() and not envs.sim.arrays.step.any()
 
-    envs = CentralizedFleetVectorEnv(2, max_path_error=0.5)  # wang2014 starts ~1 m off the path
+    envs = CentralizedFleetVectorEnv(
+        num_envs=2, max_path_error=0.5
+    )  # wang2014 starts ~1 m off the path
     first, _ = envs.reset(seed=0)
     _, _, terminated, truncated, _ = envs.step(actions)
     assert terminated.all() and not truncated.any()
@@ -197,7 +199,7 @@ def test_bad_action_raises_and_leaves_state_untouched(
         env.step(make_bad(np.zeros(env.action_space.shape, dtype=np.float32)))
     assert_unchanged(before, env.sim)
 
-    envs = CentralizedFleetVectorEnv(2, scenario="lossy_links", max_steps=6)  # delay 5 < 6
+    envs = CentralizedFleetVectorEnv(num_envs=2, scenario="lossy_links", max_steps=6)  # delay 5 < 6
     envs.reset(seed=0)
     for _ in range(6):
         envs.step(np.zeros(envs.action_space.shape))  # both truncated: the next step would reset
@@ -213,4 +215,4 @@ def test_step_before_reset_raises() -> None:
     with pytest.raises(RuntimeError, match="reset"):
         CentralizedFleetEnv().step(np.zeros(25))
     with pytest.raises(RuntimeError, match="reset"):
-        CentralizedFleetVectorEnv(2).step(np.zeros((2, 25)))
+        CentralizedFleetVectorEnv(num_envs=2).step(np.zeros((2, 25)))

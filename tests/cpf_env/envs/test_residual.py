@@ -1,4 +1,4 @@
-"""Residual control: the composition rule, what the base is told, and the ParallelEnv wrapper."""
+"""Residual control: the composition rule, what the base is told, the ParallelEnv's form."""
 
 from __future__ import annotations
 
@@ -9,15 +9,20 @@ from pettingzoo.test import parallel_api_test
 import cpf_env
 from baselines import make_policy
 from cpf_env import FleetSim, scenarios
+from cpf_env.envs.parallel import CooperativePathFollowingEnv
 from cpf_env.envs.residual import EXTRAS, ResidualConfig, ResidualController
-from cpf_env.envs.wrappers import ResidualWrapper
 
 SCENARIO = "bench_lossy_links"  # random starts and packet loss: every seed differs
 
 
-def wrapped(steps: int = 300, **options: object) -> ResidualWrapper:
-    env = cpf_env.parallel_env(SCENARIO, max_steps=steps)
-    return ResidualWrapper(env, make_policy("nn_dsc", env), **options)  # type: ignore[arg-type]
+def wrapped(steps: int = 300, **options: object) -> CooperativePathFollowingEnv:
+    scenario = cpf_env.scenarios.make_scenario(SCENARIO, max_steps=steps)
+    return cpf_env.parallel_env(
+        scenario,
+        info_level="full",
+        base_policy=make_policy("nn_dsc", scenario),
+        residual=ResidualConfig(**options),  # type: ignore[arg-type]
+    )
 
 
 @pytest.mark.parametrize("mode", ["force", "force_and_rate", "kinematic"])
@@ -33,12 +38,12 @@ def test_zero_residual_reproduces_the_base_policy_bit_for_bit(mode: str) -> None
     while reference.agents:
         actions = policy.act(expected)
         expected, rewards, terms, truncs, _ = reference.step(actions)
-        zero = {agent: np.zeros(env.controller.action_size, np.float32) for agent in env.agents}
+        zero = {agent: np.zeros(env.core.action_size, np.float32) for agent in env.agents}
         observations, got_rewards, got_terms, got_truncs, infos = env.step(zero)
         for agent in expected:
             assert np.array_equal(observations[agent][:d], expected[agent])
             assert got_rewards[agent] == rewards[agent]
-            assert np.array_equal(infos[agent]["residual"], np.zeros(env.controller.action_size))
+            assert np.array_equal(infos[agent]["residual"], np.zeros(env.core.action_size))
         assert (got_terms, got_truncs) == (terms, truncs)
         steps += 1
     assert steps == 300 and not env.agents

@@ -21,7 +21,8 @@ from torchrl.envs.utils import check_env_specs
 import cpf_env
 from cpf_env import FleetSim, scenarios
 from cpf_env.envs import torchrl_env
-from cpf_env.envs.torchrl_env import ERROR_KEYS, GROUP, TorchRLFleetEnv
+from cpf_env.envs.torchrl_env import GROUP, TorchRLFleetEnv
+from cpf_env.sim.arrays import ERROR_KEYS
 
 pytestmark = pytest.mark.torchrl
 
@@ -206,7 +207,7 @@ def test_bad_actions_raise_and_leave_the_state_untouched() -> None:
     with pytest.raises(ValueError, match=r"no \('vessel', 'action'\) entry"):
         env.step(td.clone())
     with pytest.raises(ValueError, match="info_level must be one of"):
-        TorchRLFleetEnv(SCENARIO, num_fleets=2, info_level="full")
+        TorchRLFleetEnv(SCENARIO, num_fleets=2, info_level="verbose")
     with pytest.raises(ValueError, match="num_fleets must be an integer >= 1"):
         TorchRLFleetEnv(SCENARIO, num_fleets=0)
 
