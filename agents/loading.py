@@ -34,7 +34,7 @@ from agents.legacy import is_sb3_folder, read_sb3_folder
 from agents.marl.policy_folder import is_marl_folder, load_marl_policy
 from agents.resolve import resolve_base_policy
 from agents.train_config import TrainConfig
-from baselines.interface import PolicyInterface
+from cpf_env.envs.policy import FleetPolicy
 from cpf_env.envs.residual import ResidualController, learner_config
 from cpf_env.scenarios import Scenario, make_scenario
 from cpf_env.sim.fleet import observation_layout
@@ -136,7 +136,7 @@ class TorchActor:
             torch.set_num_threads(threads)
 
 
-class TrainedPolicy(PolicyInterface):
+class TrainedPolicy(FleetPolicy):
     """Base policy plus a trained network, with the analytic policies' interface.
 
     Args:

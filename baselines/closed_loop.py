@@ -49,7 +49,7 @@ from baselines.kernel_types import (
     PolicyStates,
 )
 from baselines.kernels import WORK_ROWS, _act_fleet
-from baselines.policy import DIAGNOSTICS, Policy
+from baselines.policy import DIAGNOSTICS, AnalyticPolicy
 from baselines.privileged import PrivilegedPolicy
 from cpf_env.evaluation.privileged import fleet_ideal_observations, fleet_lumped_uncertainty
 from cpf_env.evaluation.recording import CHUNK, StepRecord, new_record, record_fleet
@@ -199,8 +199,8 @@ class ClosedLoop:
             a number of fleets that is not a multiple of P.
     """
 
-    def __init__(self, policies: Policy | Sequence[Policy], sim: FleetSim) -> None:
-        members = [policies] if isinstance(policies, Policy) else list(policies)
+    def __init__(self, policies: AnalyticPolicy | Sequence[AnalyticPolicy], sim: FleetSim) -> None:
+        members = [policies] if isinstance(policies, AnalyticPolicy) else list(policies)
         if not members:
             raise ValueError("ClosedLoop needs at least one policy.")
         for policy in members:
@@ -243,15 +243,15 @@ class ClosedLoop:
 
     @staticmethod
     def supports(policy: object) -> bool:
-        """True for a compiled ``Policy`` acting on its observation alone, or a privileged one."""
-        if not isinstance(policy, Policy) or policy.kinetics == KINETICS_PYTHON:
+        """True for a compiled ``AnalyticPolicy`` acting on its observation alone, or privileged."""
+        if not isinstance(policy, AnalyticPolicy) or policy.kinetics == KINETICS_PYTHON:
             return False
         if isinstance(policy, PrivilegedPolicy):  # the kernel reads what it is told itself
             return True
         return (
             not policy.privileged
-            and type(policy)._observations is Policy._observations
-            and type(policy)._knowledge is Policy._knowledge
+            and type(policy)._observations is AnalyticPolicy._observations
+            and type(policy)._knowledge is AnalyticPolicy._knowledge
         )
 
     @property

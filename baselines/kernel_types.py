@@ -113,7 +113,7 @@ class CooperativeOutputs(NamedTuple):
     """The cooperative layer's signals of one step, (R, n) each.
 
     What ``cooperative_rows`` writes, and what a kinetic part written in Python
-    (``Policy._kinetics``) receives as ``cooperation``.
+    (``AnalyticPolicy._kinetics``) receives as ``cooperation``.
     """
 
     vhat: np.ndarray  # speed estimate vhat_i used at this step (m/s)

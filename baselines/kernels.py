@@ -20,7 +20,7 @@ docstrings, so that:
   step with the inputs held over the control period.
 
 ``cooperative_rows`` runs the cooperative layer alone, for policies whose
-kinetic part is written in Python (``Policy._kinetics``, see
+kinetic part is written in Python (``AnalyticPolicy._kinetics``, see
 ``docs/extending.md``).
 """
 

@@ -43,7 +43,7 @@ from numpy.typing import ArrayLike, NDArray
 from baselines.backstepping import BacksteppingPolicy
 from baselines.kernel_types import KnownDynamics
 from baselines.nn_dsc import NNDSCPolicy
-from baselines.policy import Policy
+from baselines.policy import AnalyticPolicy
 from cpf_env.evaluation.privileged import ideal_link_observations, true_dynamics
 from cpf_env.sim.fleet import FleetSim
 from cpf_env.sim.observation import SLOTS
@@ -62,12 +62,12 @@ def _simulator_of(env: object) -> FleetSim | None:
     return None
 
 
-class PrivilegedPolicy(Policy):
+class PrivilegedPolicy(AnalyticPolicy):
     """Mixin of the privileged references: observations and knowledge read from a FleetSim.
 
     Args:
         env: A FleetSim or an env with one (bound at once), or anything
-            ``Policy`` accepts (then ``bind_simulator`` before acting).
+            ``AnalyticPolicy`` accepts (then ``bind_simulator`` before acting).
         **options: The parent's gains.
     """
 

@@ -40,7 +40,7 @@ from numpy.typing import NDArray
 from tqdm.auto import tqdm
 
 from baselines.closed_loop import ClosedLoop
-from baselines.policy import Policy
+from baselines.policy import AnalyticPolicy
 from cpf_env.envs.policy import FleetPolicy
 from cpf_env.evaluation.fleet_metrics import FleetMetrics
 from cpf_env.evaluation.recording import CHUNK
@@ -149,7 +149,7 @@ def rollout_group(
 class _Batch:
     """P policies on S fleets each in one simulator, measured step by step.
 
-    Policy p acts on fleets p S .. (p + 1) S - 1; fleet p S + k is reset with
+    AnalyticPolicy p acts on fleets p S .. (p + 1) S - 1; fleet p S + k is reset with
     seed k. ``ended`` holds the step at which each fleet left its path, -1
     while it has not.
     """
@@ -230,7 +230,7 @@ class _CompiledBatch(_Batch):
     """Compiled analytic policies (``ClosedLoop.supports``): ``rows`` steps of all in one call."""
 
     def _prepare(self) -> None:
-        self.loop = ClosedLoop(cast("list[Policy]", self.policies), self.sim)
+        self.loop = ClosedLoop(cast("list[AnalyticPolicy]", self.policies), self.sim)
         self.ended = self.loop.ended
 
     def advance(self, t: int, rows: int, observer: StepObserver | None) -> None:

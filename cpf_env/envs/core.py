@@ -262,7 +262,9 @@ class EpisodeCore:
             raise ValueError(
                 f"got {len(listed)} seeds for {len(fleets)} fleets; give one per fleet."
             )
-        return [check_seed(seed, f"seed of fleet {k}") for seed, k in zip(listed, fleets, strict=True)]
+        return [
+            check_seed(seed, f"seed of fleet {k}") for seed, k in zip(listed, fleets, strict=True)
+        ]
 
     def reseed(self, seed: int | None) -> None:
         """Fleet k draws its next episodes from ``default_rng(seed + k)``; None: fresh entropy.
@@ -295,7 +297,7 @@ class EpisodeCore:
             ValueError: A bad seed or fleet index; nothing is changed.
         """
         every = fleets is None
-        index = np.arange(self.num_fleets) if every else self._fleet_index(fleets)
+        index = np.arange(self.num_fleets) if fleets is None else self._fleet_index(fleets)
         seed_list = self.fleet_seeds(seeds, index)
         obs = self.sim.reset(seeds=seed_list, fleets=None if every else index)
         self.horizon[index] = self.scenario.max_steps

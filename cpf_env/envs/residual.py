@@ -204,7 +204,7 @@ def learner_config(
     return ResidualConfig() if residual is None else residual
 
 
-class ZeroPolicy:
+class ZeroPolicy(FleetPolicy):
     """The base of a learner that commands everything itself: all-zero actions.
 
     Args:
