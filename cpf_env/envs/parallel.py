@@ -266,7 +266,20 @@ class CooperativePathFollowingEnv(ParallelEnv):
                 f"unexpected {extra}."
             )
         batch = np.empty((1, self.scenario.n, self.core.action_size))
-        for agent in self.agents:  # each agent named on its first problem
+        shape = (self.core.action_size,)
+        for agent in self.agents:  # the cheap checks of check_action; the rest on the batch
+            array = np.asarray(actions[agent])
+            if array.dtype.kind not in "iuf" or array.shape != shape:
+                return self._checked_batch(actions)
+            batch[0, self._index[agent]] = array
+        if not np.isfinite(batch).all():
+            return self._checked_batch(actions)
+        return batch
+
+    def _checked_batch(self, actions: dict[str, Any]) -> NDArray[np.float64]:
+        """The batch built with ``check_action`` per agent, which raises on the first bad one."""
+        batch = np.empty((1, self.scenario.n, self.core.action_size))
+        for agent in self.agents:
             batch[0, self._index[agent]] = self.check_action(agent, actions[agent])
         return batch
 

@@ -275,7 +275,8 @@ def test_without_ray_or_the_learning_extra_cpf_sweep_says_what_to_install(
         with pytest.raises(SystemExit):
             sweep_main(argv)
     assert 'pip install -e ".[ray]"' in capsys.readouterr().err
-    for name in ("cpf_commands.sweep.spec", "agents.training", "agents"):
+    cached = [name for name in sys.modules if name == "agents" or name.startswith("agents.")]
+    for name in ["cpf_commands.sweep.spec", *cached]:
         monkeypatch.delitem(sys.modules, name)  # imported again, without stable_baselines3
     monkeypatch.setitem(sys.modules, "stable_baselines3", None)
     with pytest.raises(SystemExit):

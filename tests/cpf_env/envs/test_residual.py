@@ -160,7 +160,7 @@ def test_wrapper_rejects_bad_corrections_before_any_state_changes() -> None:
     before = env.unwrapped.sim.arrays.eta.copy()
     good = {agent: np.zeros(3, np.float32) for agent in env.agents}
     for bad, message in [
-        ({**good, "vessel_2": np.zeros(4)}, "correction of vessel_2"),
+        ({**good, "vessel_2": np.zeros(4)}, "action of vessel_2"),
         ({**good, "vessel_1": np.array([np.nan, 0, 0])}, "not finite"),
         ({**good, "vessel_0": np.array([1j, 0, 0])}, "real numbers"),
         ({k: v for k, v in good.items() if k != "vessel_4"}, "one entry per live agent"),
