@@ -121,8 +121,9 @@ class TorchRLFleetEnv(EnvBase):
         **overrides: ``Scenario`` field overrides, as in ``cpf_env.parallel_env``.
 
     Attributes:
-        core: The ``EpisodeCore`` (``core.sim.arrays`` holds anything else, e.g. poses).
+        core: The ``EpisodeCore``.
         scenario: The task.
+        sim: The ``FleetSim`` (``core.sim``; its ``arrays`` hold anything else, e.g. poses).
         num_fleets: B.
         n: Vessels per fleet.
         group_map: ``{"vessel": ["vessel_0", ...]}``, as TorchRL's multi-agent envs.
@@ -147,8 +148,13 @@ class TorchRLFleetEnv(EnvBase):
         resolved = _checked_device(device)
         self.info_level = check_info_level(info_level)
         self.scenario = make_scenario(scenario, **overrides)
+        if isinstance(base_policy, str):
+            raise TypeError(
+                f"base_policy must be a policy object, got the name {base_policy!r}; to give "
+                "a name, build the env with agents.marl.make_env."
+            )
         self.core = EpisodeCore(self.scenario, num_fleets, base_policy, residual, stagger)
-        self.num_fleets, self.n = self.core.num_fleets, self.core.n
+        self.sim, self.num_fleets, self.n = self.core.sim, self.core.num_fleets, self.core.n
         self.state = check_flag(state, "state")
         self.group_map = {GROUP: [f"vessel_{i}" for i in range(self.n)]}
         self.input_statistics = self._statistics(normalize, normalization_steps)
