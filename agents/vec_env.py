@@ -31,7 +31,7 @@ is reset in the same step, its last observation in ``terminal_observation``.
 
 Infos follow ``info_level`` (``"none"``, the default of every route: an empty
 dict per slot, the hot path at thousands of slots; ``"minimal"``/``"full"``:
-each slot's row of ``EpisodeCore.info_arrays``), plus SB3's entries of ending
+each slot's ``EpisodeCore.vessel_infos``), plus SB3's entries of ending
 slots. The arrays are always in ``env.core`` (``core.info_arrays("full")``).
 
 Example:
@@ -166,10 +166,10 @@ class FleetVecEnv(VecEnv):
             (observations (num_envs, input_size) float32, rewards (num_envs,) float32,
             dones (num_envs,) bool, infos (list of num_envs dicts)).
         """
-        self.core.step(self._actions)
+        self.core.step(self._actions, checked=True)
         rewards = self.core.reward.astype(np.float32).reshape(-1)
         terminated = self.core.terminated
-        infos = self._infos()
+        infos = self.core.vessel_infos(self.info_level)
         fleets, terminal = self.core.reset_ended()
         for row, b in enumerate(fleets):
             truncated = not terminated[b]
@@ -211,15 +211,6 @@ class FleetVecEnv(VecEnv):
         return [False] * len(self._slots(indices))
 
     # --- helpers --------------------------------------------------------------------------
-
-    def _infos(self) -> list[dict[str, Any]]:
-        """One dict per slot: its vessel's row of each info array (empty at ``"none"``)."""
-        infos: list[dict[str, Any]] = [{} for _ in range(self.num_envs)]
-        for key, value in self.core.info_arrays(self.info_level).items():
-            rows = value.reshape(self.num_envs, *value.shape[2:])
-            for slot, row in zip(infos, rows, strict=True):
-                slot[key] = row
-        return infos
 
     def _flat(self, array: NDArray[np.float32]) -> NDArray[np.float32]:
         """(B, n, d) -> (B * n, d), slot k * n + i = vessel i of fleet k."""

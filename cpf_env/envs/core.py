@@ -138,7 +138,7 @@ def action_bounds(scenario: Scenario) -> tuple[NDArray[np.float32], NDArray[np.f
 def checked_actions(
     actions: ArrayLike, expected: tuple[int, ...], form: str, axes: tuple[str, ...]
 ) -> NDArray[np.float64]:
-    """``actions`` as a new float64 array of shape ``expected``, checked whole.
+    """``actions`` as a float64 array of shape ``expected`` (no copy if it is one), checked whole.
 
     Args:
         actions: The actions as given.
@@ -156,7 +156,7 @@ def checked_actions(
         raise ValueError(f"actions must be real numbers, got dtype {array.dtype} ({kind}).")
     if array.shape != expected:
         raise ValueError(f"actions must have shape {form} = {expected}, got {array.shape}.")
-    checked = np.array(array, dtype=np.float64, order="C")
+    checked = np.asarray(array, dtype=np.float64)
     if not np.isfinite(checked).all():
         where = np.argwhere(~np.isfinite(checked))[0]
         place = ", ".join(name.format(k) for name, k in zip(axes, where, strict=True))
@@ -183,8 +183,6 @@ class EpisodeCore:
         num_fleets: B.
         n: Vessels per fleet.
         horizon: (B,) int, the step at which each fleet's episode is truncated.
-        inputs: (B, n, input_size) float32, the last observation (raw form) or
-            learner input (residual form) of every vessel.
         last_base_actions: (B, n, 4 + m) the base's commands of the last step
             (residual form).
         last_residual: (B, n, k) the last correction in physical units (residual form).
@@ -216,9 +214,18 @@ class EpisodeCore:
             None if config is None else ResidualController(scenario, base_policy, B, config)
         )
         self.horizon = np.full(B, scenario.max_steps, dtype=np.int64)
-        self.inputs = np.zeros((B, self.n, self.input_size), dtype=np.float32)
+        self._inputs = np.zeros((B, self.n, self.input_size), dtype=np.float32)
         self.last_base_actions = np.zeros((B, self.n, self.sim.act_dim))
         self.last_residual = np.zeros((B, self.n, self.action_size))
+
+    @property
+    def inputs(self) -> NDArray[np.float32]:
+        """(B, n, input_size) float32: the last observations or learner inputs.
+
+        In the raw form, the simulator's own observation array. Copy what you keep
+        across steps.
+        """
+        return self.sim.arrays.obs if self.controller is None else self._inputs
 
     @property
     def input_size(self) -> int:
@@ -325,10 +332,12 @@ class EpisodeCore:
         Returns:
             (fleets (E,), terminal inputs (E, n, input_size) float32).
         """
-        fleets = np.flatnonzero(self.ended)
+        ended = self.ended
+        if not ended.any():
+            return np.zeros(0, dtype=np.int64), self.inputs[:0].copy()
+        fleets = np.flatnonzero(ended)
         terminal = self.inputs[fleets].copy()
-        if fleets.size:
-            self.reset(fleets=fleets)
+        self.reset(fleets=fleets)
         return fleets, terminal
 
     def _fleet_index(self, fleets: ArrayLike) -> NDArray[np.int64]:
@@ -355,23 +364,25 @@ class EpisodeCore:
         expected = (self.num_fleets, self.n, self.action_size)
         return checked_actions(actions, expected, form, ("fleet {}", "vessel_{}", "component {}"))
 
-    def step(self, actions: ArrayLike) -> None:
+    def step(self, actions: ArrayLike, checked: bool = False) -> None:
         """Advance every fleet one control period ``dt`` with checked actions.
 
         Args:
             actions: (B, n, 4 + m) raw commands, or (B, n, k) corrections in [-1, 1]
                 (clipped to it) in the residual form.
+            checked: The actions are what ``check_actions`` returned (an adapter that
+                checks them before its own bookkeeping); they are not checked again.
 
         Raises:
             ValueError: Bad actions (``check_actions``); nothing is changed.
             RuntimeError: Stepping before reset, or the plant diverged
                 (``FleetSim.step``).
         """
-        checked = self.check_actions(actions)
+        batch = np.asarray(actions) if checked else self.check_actions(actions)
         if self.controller is None:
-            obs = self.sim.step(checked)
+            obs = self.sim.step(batch)
         else:
-            command = self.controller.compose(checked)
+            command = self.controller.compose(batch)
             self.last_base_actions = self.controller.base_actions.copy()
             self.last_residual = self.controller.residual.copy()
             obs = self.sim.step(command)
@@ -401,36 +412,68 @@ class EpisodeCore:
 
     # --- infos ----------------------------------------------------------------------------
 
-    def info_arrays(self, level: str) -> dict[str, NDArray[Any]]:
+    def info_arrays(self, level: str, fleet: int | None = None) -> dict[str, NDArray[Any]]:
         """The infos of ``level`` as new (B, n, ...) arrays, one per quantity.
 
         ``"none"``: nothing; ``"minimal"``: ``path_error``, ``heading_error``,
         ``sync_error``, ``speed_error`` (m, rad, ~m, m/s); ``"full"``: also
         ``tau_command``, ``tau_applied`` (N, N, N m), ``saturated`` (per axis),
         ``eta``, ``nu``, ``theta``, ``reward_terms`` and, in the residual form,
-        ``base_command`` and ``residual`` of the last step.
+        ``base_command`` and ``residual`` of the last step. With ``fleet``, that
+        fleet's (n, ...) arrays only.
         """
         if level == "none":
             return {}
-        a = self.sim.arrays
-        infos: dict[str, NDArray[Any]] = {
-            name: a.errors[:, :, k].copy() for name, k in arrays.ERROR_KEYS
-        }
-        if level == "minimal":
+        errors, others = self._info_parts(level, slice(None) if fleet is None else fleet)
+        return {name: errors[..., k] for name, k in arrays.ERROR_KEYS} | others
+
+    def vessel_infos(self, level: str, fleet: int | None = None) -> list[dict[str, Any]]:
+        """``info_arrays`` as one dict per vessel (B n of them, or n of ``fleet``).
+
+        Per-vessel scalars are python floats; vectors are rows of new arrays, so no
+        later step writes to them. For the routes whose library wants a dict per
+        agent (PettingZoo) or per slot (SB3).
+        """
+        count = self.n if fleet is not None else self.num_fleets * self.n
+        if level == "none":
+            return [{} for _ in range(count)]
+        errors, others = self._info_parts(level, slice(None) if fleet is None else fleet)
+        rows = errors.reshape(count, -1).tolist()
+        infos = [{name: row[k] for name, k in arrays.ERROR_KEYS} for row in rows]
+        if not others:
             return infos
-        infos |= {
-            "tau_command": a.tau_command.copy(),
-            "tau_applied": a.tau_applied.copy(),
-            "saturated": a.tau_command != a.tau_applied,
-            "eta": a.eta.copy(),
-            "nu": a.nu.copy(),
-            "theta": a.theta.copy(),
-            "reward_terms": a.reward_terms.copy(),
+        if fleet is None:  # (B, n, ...) -> (B n, ...)
+            others = {key: value.reshape(count, *value.shape[2:]) for key, value in others.items()}
+        columns = {
+            key: value.tolist() if value.ndim == 1 else value for key, value in others.items()
+        }
+        for key, column in columns.items():
+            for info, row in zip(infos, column, strict=False):
+                info[key] = row
+        return infos
+
+    def _info_parts(
+        self, level: str, rows: int | slice
+    ) -> tuple[NDArray[np.float64], dict[str, NDArray[Any]]]:
+        """A new copy of the errors (..., 4) and the other arrays of ``level``."""
+        a = self.sim.arrays
+        errors = a.errors[rows].copy()
+        if level == "minimal":
+            return errors, {}
+        tau_command, tau_applied = a.tau_command[rows].copy(), a.tau_applied[rows].copy()
+        others = {
+            "tau_command": tau_command,
+            "tau_applied": tau_applied,
+            "saturated": tau_command != tau_applied,
+            "eta": a.eta[rows].copy(),
+            "nu": a.nu[rows].copy(),
+            "theta": a.theta[rows].copy(),
+            "reward_terms": a.reward_terms[rows].copy(),
         }
         if self.controller is not None:
-            infos["base_command"] = self.last_base_actions.copy()
-            infos["residual"] = self.last_residual.copy()
-        return infos
+            others["base_command"] = self.last_base_actions[rows].copy()
+            others["residual"] = self.last_residual[rows].copy()
+        return errors, others
 
     def state(self) -> NDArray[np.float32]:
         """Global state (B, 10 n) float32: per vessel eta (3), nu (3), theta, tau_applied (3)."""
@@ -441,13 +484,10 @@ class EpisodeCore:
     # --- helpers --------------------------------------------------------------------------
 
     def _observe(self, obs: NDArray[np.float32], fleets: NDArray[np.int64] | None) -> None:
-        """Keep the inputs of all fleets, or of the listed (just reset) ones."""
+        """Keep the learner inputs of all fleets, or of the listed (just reset) ones."""
         if self.controller is None:
-            if fleets is None:
-                self.inputs[:] = obs
-            else:
-                self.inputs[fleets] = obs[fleets]
-        elif fleets is None:
-            self.inputs[:] = self.controller.observe(obs)
+            return  # the raw form's inputs are the simulator's observations
+        if fleets is None:
+            self._inputs[:] = self.controller.observe(obs)
         else:
-            self.inputs[fleets] = self.controller.observe(obs[fleets], fleets=fleets)
+            self._inputs[fleets] = self.controller.observe(obs[fleets], fleets=fleets)

@@ -211,7 +211,7 @@ class CentralizedFleetEnv(gymnasium.Env[NDArray[np.float32], NDArray[np.float32]
         """
         if self._done:
             raise RuntimeError("the episode is over (or never started); call reset().")
-        self.core.step(_as_actions(self.core, action, batched=False))
+        self.core.step(_as_actions(self.core, action, batched=False), checked=True)
         terminated = bool(self.core.terminated[0])
         truncated = bool(self.core.truncated[0])
         self._done = terminated or truncated
@@ -332,8 +332,10 @@ class CentralizedFleetVectorEnv(VectorEnv[NDArray[np.float32], NDArray[np.float3
         """
         batch = _as_actions(self.core, actions, batched=True)
         restart = self._autoreset.copy()
-        batch[restart] = 0.0
-        self.core.step(batch)
+        if restart.any():
+            batch = batch.copy()  # not the caller's array
+            batch[restart] = 0.0
+        self.core.step(batch, checked=True)
         terminated, truncated = self.core.terminated, self.core.truncated
         rewards = self.core.reward.mean(axis=1)
         if restart.any():

@@ -235,7 +235,7 @@ class CooperativePathFollowingEnv(ParallelEnv):
             raise RuntimeError("the episode is over (or never started); call reset().")
         batch = self._action_batch(actions)
         try:
-            self.core.step(batch)
+            self.core.step(batch, checked=True)
         except RuntimeError:
             self.agents = []  # no live agents over a diverged (NaN) state
             raise
@@ -313,17 +313,11 @@ class CooperativePathFollowingEnv(ParallelEnv):
         return dict(zip(self.possible_agents, inputs[0].copy(), strict=True))
 
     def _infos(self) -> dict[str, dict[str, Any]]:
-        """Per-agent infos at ``self.info_level`` (``EpisodeCore.info_arrays`` of fleet 0).
-
-        Per-vessel scalars become python floats; vectors are rows of new arrays, so
-        no later step writes to them.
-        """
-        infos: dict[str, dict[str, Any]] = {agent: {} for agent in self.possible_agents}
-        for key, value in self.core.info_arrays(self.info_level).items():
-            rows = value[0].tolist() if value.ndim == 2 else value[0]
-            for agent, row in zip(self.possible_agents, rows, strict=True):
-                infos[agent][key] = row
-        return infos
+        """Per-agent infos at ``self.info_level`` (``EpisodeCore.vessel_infos`` of fleet 0)."""
+        if self.info_level == "none":  # the hot path: no list to build and zip
+            return {agent: {} for agent in self.possible_agents}
+        infos = self.core.vessel_infos(self.info_level, fleet=0)
+        return dict(zip(self.possible_agents, infos, strict=True))
 
     def state(self) -> NDArray[np.float32]:
         """Global state (n * 10,): per vessel eta (3), nu (3), theta, tau_applied (3)."""
