@@ -14,7 +14,10 @@ trajectories and the same ends, bit for bit.
 
 from __future__ import annotations
 
+import dataclasses
 import importlib.util
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 import pytest
@@ -22,7 +25,7 @@ import pytest
 import cpf_env
 from agents import FleetVecEnv, MixtureVecEnv
 from baselines import make_policy
-from cpf_env.envs.gym_envs import CentralizedFleetVectorEnv
+from cpf_env.envs.gym_envs import CentralizedFleetEnv, CentralizedFleetVectorEnv
 
 SCENARIO, FLEETS, SEED, STEPS, MAX_STEPS = "bench_lossy_links", 3, 11, 300, 40
 
@@ -112,13 +115,14 @@ def gym_vector_env() -> list[list[Episode]]:
     return record.done
 
 
-def torchrl_env() -> list[list[Episode]]:
+def torchrl_env(env: Any = None) -> list[list[Episode]]:
+    """``agents.marl.make_env`` with its defaults (or the given TorchRL env of the same)."""
     import torch
 
     from agents.marl.envs import make_env
     from cpf_env.envs.torchrl_env import GROUP
 
-    env = make_env(SCENARIO, FLEETS, seed=SEED, max_steps=MAX_STEPS)
+    env = make_env(SCENARIO, FLEETS, seed=SEED, max_steps=MAX_STEPS) if env is None else env
     td = env.reset()
     record = Recorder(td[GROUP, "observation"].numpy())
     zero = torch.zeros(env.full_action_spec[GROUP, "action"].shape)
@@ -133,22 +137,75 @@ def torchrl_env() -> list[list[Episode]]:
     return record.done
 
 
-def parallel_env_fleet(fleet: int, episodes: int) -> list[Episode]:
+def parallel_env_fleet(
+    fleet: int, episodes: int, make: Callable[[], Any] | None = None
+) -> list[Episode]:
     """Fleet k's episodes on the ParallelEnv (one fleet, no stagger), reset with seed SEED + k."""
-    env = cpf_env.parallel_env(SCENARIO, max_steps=MAX_STEPS)
-    policy = make_policy("nn_dsc", env.scenario)
+    env = cpf_env.parallel_env(SCENARIO, max_steps=MAX_STEPS) if make is None else make()
+    policy = make_policy("nn_dsc", SCENARIO)
     found: list[Episode] = []
     for e in range(episodes):
         observations, _ = env.reset(seed=SEED + fleet if e == 0 else None)
         policy.reset()
-        trajectory = [np.stack(list(observations.values()))]
-        terminated = False
-        while env.agents:
-            observations, _r, terminations, _t, _i = env.step(policy.act(observations))
-            trajectory.append(np.stack(list(observations.values())))
-            terminated = any(terminations.values())
+        trajectory = [np.stack([observations[a] for a in policy.agents])]
+        terminated = done = False
+        while not done:
+            observations, _r, terminations, truncations, _i = env.step(policy.act(observations))
+            trajectory.append(np.stack([observations[a] for a in policy.agents]))
+            terminated = terminations["vessel_0"]
+            done = terminated or truncations["vessel_0"]
         found.append((np.stack(trajectory), terminated))
     return found
+
+
+def aec_fleet(fleet: int, episodes: int) -> list[Episode]:
+    """Fleet k's episodes on the AEC form (``cpf_env.env``), agents acting in turn."""
+    env = cpf_env.env(SCENARIO, max_cycles=MAX_STEPS)
+    policy = make_policy("nn_dsc", SCENARIO)
+    found: list[Episode] = []
+    for e in range(episodes):
+        env.reset(seed=SEED + fleet if e == 0 else None)
+        policy.reset()
+        observe = lambda: {a: env.observe(a) for a in policy.agents}  # noqa: E731
+        trajectory, done, terminated = [np.stack(list(observe().values()))], False, False
+        while not done:
+            actions = policy.act(observe())
+            for agent in env.agent_iter(len(env.agents)):  # one turn each, then the fleet steps
+                env.step(actions[agent])
+            trajectory.append(np.stack(list(observe().values())))
+            _o, _r, terminated, truncated, _i = env.last()
+            done = terminated or truncated
+        found.append((np.stack(trajectory), bool(terminated)))
+    return found
+
+
+def gym_single_fleet(fleet: int, episodes: int) -> list[Episode]:
+    """Fleet k's episodes on ``CentralizedFleetEnv`` (one fleet), reset with seed SEED + k."""
+    env = CentralizedFleetEnv(SCENARIO, max_steps=MAX_STEPS)
+    policy = make_policy("nn_dsc", SCENARIO)
+    shape = (env.scenario.n, -1)
+    found: list[Episode] = []
+    for e in range(episodes):
+        obs, _ = env.reset(seed=SEED + fleet if e == 0 else None)
+        policy.reset()
+        trajectory, done, terminated = [obs.reshape(shape)], False, False
+        while not done:
+            action = policy.act_batch(obs.reshape(1, *shape)).reshape(-1)
+            obs, _r, terminated, truncated, _i = env.step(action)
+            trajectory.append(obs.reshape(shape))
+            done = terminated or truncated
+        found.append((np.stack(trajectory), terminated))
+    return found
+
+
+def assert_prefixes(reference: list[list[Episode]], single: Callable[[int, int], Any]) -> None:
+    """Each fleet's batched episodes are prefixes of a one-fleet route's (never staggered)."""
+    for k in range(FLEETS):
+        episodes = single(k, len(reference[k]))
+        for (obs, ended), (obs_single, ended_single) in zip(reference[k], episodes, strict=True):
+            assert np.array_equal(obs, obs_single[: len(obs)])
+            if len(obs) == len(obs_single):
+                assert ended == ended_single
 
 
 def assert_same_episodes(expected: list[list[Episode]], got: list[list[Episode]]) -> None:
@@ -194,11 +251,36 @@ def test_the_torchrl_env_plays_the_same_episodes(reference: list[list[Episode]])
     assert_same_episodes(reference, torchrl_env())
 
 
-def test_the_parallel_env_plays_each_fleets_episodes(reference: list[list[Episode]]) -> None:
-    for k in range(FLEETS):
-        single = parallel_env_fleet(k, len(reference[k]))
-        for (obs, ended), (obs_single, ended_single) in zip(reference[k], single, strict=True):
-            # one fleet is never staggered: the batched fleet's episode is a prefix of it
-            assert np.array_equal(obs, obs_single[: len(obs)])
-            if len(obs) == len(obs_single):
-                assert ended == ended_single
+def test_the_one_fleet_routes_play_each_fleets_episodes(reference: list[list[Episode]]) -> None:
+    assert_prefixes(reference, parallel_env_fleet)
+    assert_prefixes(reference, aec_fleet)
+    assert_prefixes(reference, gym_single_fleet)
+
+
+@pytest.mark.benchmarl
+def test_the_benchmarl_task_plays_the_same_episodes(reference: list[list[Episode]]) -> None:
+    """The task's env with the task config's defaults (unnormalized inputs, to compare)."""
+    pytest.importorskip("benchmarl")
+    from agents.marl.tasks import CpfTask, CpfTaskConfig
+
+    config = CpfTaskConfig(scenario=SCENARIO, max_steps=MAX_STEPS, normalize=False)
+    task = CpfTask.BENCH_LOSSY_LINKS.get_task(config=dataclasses.asdict(config))
+    env = task.get_env_fun(FLEETS, True, SEED, "cpu")()
+    assert_same_episodes(reference, torchrl_env(env))
+
+
+@pytest.mark.ray
+def test_the_rllib_glue_plays_each_fleets_episodes(reference: list[list[Episode]]) -> None:
+    """``examples/rllib_ppo.py``'s env creator: the ParallelEnv in RLlib's wrapper."""
+    pytest.importorskip("ray.rllib")
+    from conftest import ROOT
+
+    spec = importlib.util.spec_from_file_location("rllib_ppo", ROOT / "examples" / "rllib_ppo.py")
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+
+    def make() -> Any:
+        return module.make_rllib_env({"scenario": SCENARIO, "max_steps": MAX_STEPS})
+
+    assert_prefixes(reference, lambda k, count: parallel_env_fleet(k, count, make))
