@@ -168,8 +168,11 @@ class FleetVecEnv(VecEnv):
         """
         self.core.step(self._actions, checked=True)
         rewards = self.core.reward.astype(np.float32).reshape(-1)
-        terminated = self.core.terminated
+        terminated, ended = self.core.terminated, self.core.ended
         infos = self.core.vessel_infos(self.info_level)
+        if not ended.any():  # the hot path
+            obs = self._flat(self.core.inputs).copy()
+            return obs, rewards, np.zeros(self.num_envs, dtype=bool), infos
         fleets, terminal = self.core.reset_ended()
         for row, b in enumerate(fleets):
             truncated = not terminated[b]

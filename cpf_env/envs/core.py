@@ -137,8 +137,8 @@ def action_bounds(scenario: Scenario) -> tuple[NDArray[np.float32], NDArray[np.f
 
 def checked_actions(
     actions: ArrayLike, expected: tuple[int, ...], form: str, axes: tuple[str, ...]
-) -> NDArray[np.float64]:
-    """``actions`` as a float64 array of shape ``expected`` (no copy if it is one), checked whole.
+) -> NDArray[Any]:
+    """``actions`` as an array of shape ``expected`` (not copied), checked whole.
 
     Args:
         actions: The actions as given.
@@ -156,12 +156,11 @@ def checked_actions(
         raise ValueError(f"actions must be real numbers, got dtype {array.dtype} ({kind}).")
     if array.shape != expected:
         raise ValueError(f"actions must have shape {form} = {expected}, got {array.shape}.")
-    checked = np.asarray(array, dtype=np.float64)
-    if not np.isfinite(checked).all():
-        where = np.argwhere(~np.isfinite(checked))[0]
+    if not np.isfinite(array).all():
+        where = np.argwhere(~np.isfinite(array))[0]
         place = ", ".join(name.format(k) for name, k in zip(axes, where, strict=True))
-        raise ValueError(f"action of {place} is {checked[tuple(where)]}: actions must be finite.")
-    return checked
+        raise ValueError(f"action of {place} is {array[tuple(where)]}: actions must be finite.")
+    return array
 
 
 class EpisodeCore:
@@ -353,8 +352,8 @@ class EpisodeCore:
 
     # --- stepping -------------------------------------------------------------------------
 
-    def check_actions(self, actions: ArrayLike) -> NDArray[np.float64]:
-        """The action batch as float64 (B, n, action_size), checked whole; changes nothing.
+    def check_actions(self, actions: ArrayLike) -> NDArray[Any]:
+        """The action batch (B, n, action_size) as an array, checked whole; changes nothing.
 
         Raises:
             ValueError: Wrong shape, not real numbers (bools, complex, strings), or a
@@ -425,7 +424,7 @@ class EpisodeCore:
         if level == "none":
             return {}
         errors, others = self._info_parts(level, slice(None) if fleet is None else fleet)
-        return {name: errors[..., k] for name, k in arrays.ERROR_KEYS} | others
+        return {name: errors[..., k].copy() for name, k in arrays.ERROR_KEYS} | others
 
     def vessel_infos(self, level: str, fleet: int | None = None) -> list[dict[str, Any]]:
         """``info_arrays`` as one dict per vessel (B n of them, or n of ``fleet``).
@@ -455,9 +454,9 @@ class EpisodeCore:
     def _info_parts(
         self, level: str, rows: int | slice
     ) -> tuple[NDArray[np.float64], dict[str, NDArray[Any]]]:
-        """A new copy of the errors (..., 4) and the other arrays of ``level``."""
+        """The errors (..., 4) (a view: copy or convert them) and new arrays of the others."""
         a = self.sim.arrays
-        errors = a.errors[rows].copy()
+        errors = a.errors[rows]
         if level == "minimal":
             return errors, {}
         tau_command, tau_applied = a.tau_command[rows].copy(), a.tau_applied[rows].copy()

@@ -52,7 +52,7 @@ def _fleet_spaces(core: EpisodeCore) -> tuple[spaces.Box[np.float32], spaces.Box
     )
 
 
-def _as_actions(core: EpisodeCore, actions: ArrayLike, batched: bool) -> NDArray[np.float64]:
+def _as_actions(core: EpisodeCore, actions: ArrayLike, batched: bool) -> NDArray[Any]:
     """Flat actions, (n a,) or (B, n a), checked whole and returned as (B, n, a) float64."""
     array = np.asarray(actions)
     per_fleet = core.n * core.action_size
