@@ -443,12 +443,23 @@ class EpisodeCore:
             return infos
         if fleet is None:  # (B, n, ...) -> (B n, ...)
             others = {key: value.reshape(count, *value.shape[2:]) for key, value in others.items()}
-        columns = {
-            key: value.tolist() if value.ndim == 1 else value for key, value in others.items()
-        }
-        for key, column in columns.items():
-            for info, row in zip(infos, column, strict=False):
-                info[key] = row
+        tau_command, tau_applied = others["tau_command"], others["tau_applied"]
+        saturated, eta, nu = others["saturated"], others["eta"], others["nu"]
+        reward_terms, theta = others["reward_terms"], others["theta"].tolist()
+        for i, info in enumerate(infos):  # a dict display: the fastest way to add them
+            info |= {
+                "tau_command": tau_command[i],
+                "tau_applied": tau_applied[i],
+                "saturated": saturated[i],
+                "eta": eta[i],
+                "nu": nu[i],
+                "theta": theta[i],
+                "reward_terms": reward_terms[i],
+            }
+        if self.controller is not None:
+            base, residual = others["base_command"], others["residual"]
+            for i, info in enumerate(infos):
+                info |= {"base_command": base[i], "residual": residual[i]}
         return infos
 
     def _info_parts(
