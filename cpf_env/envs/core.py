@@ -136,7 +136,11 @@ def action_bounds(scenario: Scenario) -> tuple[NDArray[np.float32], NDArray[np.f
 
 
 def checked_actions(
-    actions: ArrayLike, expected: tuple[int, ...], form: str, axes: tuple[str, ...]
+    actions: ArrayLike,
+    expected: tuple[int, ...],
+    form: str,
+    axes: tuple[str, ...],
+    finite: bool = True,
 ) -> NDArray[Any]:
     """``actions`` as an array of shape ``expected`` (not copied), checked whole.
 
@@ -145,6 +149,7 @@ def checked_actions(
         expected: The required shape.
         form: How the message writes the shape, e.g. ``"(B, n, k)"``.
         axes: How the message names an index along each axis, e.g. ``"fleet {}"``.
+        finite: Also check that every entry is finite.
 
     Raises:
         ValueError: Wrong shape, not real numbers (bools, complex, strings), or a
@@ -156,7 +161,7 @@ def checked_actions(
         raise ValueError(f"actions must be real numbers, got dtype {array.dtype} ({kind}).")
     if array.shape != expected:
         raise ValueError(f"actions must have shape {form} = {expected}, got {array.shape}.")
-    if not np.isfinite(array).all():
+    if finite and not np.isfinite(array).all():
         where = np.argwhere(~np.isfinite(array))[0]
         place = ", ".join(name.format(k) for name, k in zip(axes, where, strict=True))
         raise ValueError(f"action of {place} is {array[tuple(where)]}: actions must be finite.")
@@ -352,16 +357,17 @@ class EpisodeCore:
 
     # --- stepping -------------------------------------------------------------------------
 
-    def check_actions(self, actions: ArrayLike) -> NDArray[Any]:
+    def check_actions(self, actions: ArrayLike, finite: bool = True) -> NDArray[Any]:
         """The action batch (B, n, action_size) as an array, checked whole; changes nothing.
 
         Raises:
-            ValueError: Wrong shape, not real numbers (bools, complex, strings), or a
-                non-finite entry (named by fleet, vessel, component).
+            ValueError: Wrong shape, not real numbers (bools, complex, strings), or (with
+                ``finite``) a non-finite entry (named by fleet, vessel, component).
         """
         form = "(B, n, 4 + m)" if self.controller is None else "(B, n, k)"
         expected = (self.num_fleets, self.n, self.action_size)
-        return checked_actions(actions, expected, form, ("fleet {}", "vessel_{}", "component {}"))
+        axes = ("fleet {}", "vessel_{}", "component {}")
+        return checked_actions(actions, expected, form, axes, finite)
 
     def step(self, actions: ArrayLike, checked: bool = False) -> None:
         """Advance every fleet one control period ``dt`` with checked actions.
@@ -373,11 +379,13 @@ class EpisodeCore:
                 checks them before its own bookkeeping); they are not checked again.
 
         Raises:
-            ValueError: Bad actions (``check_actions``); nothing is changed.
+            ValueError: Bad actions; nothing is changed. Shape and type are checked
+                here; finiteness where the values enter, before anything is written:
+                ``FleetSim.step``'s kernel (raw) or ``ResidualController.compose``.
             RuntimeError: Stepping before reset, or the plant diverged
                 (``FleetSim.step``).
         """
-        batch = np.asarray(actions) if checked else self.check_actions(actions)
+        batch = np.asarray(actions) if checked else self.check_actions(actions, finite=False)
         if self.controller is None:
             obs = self.sim.step(batch)
         else:
