@@ -35,7 +35,7 @@ from baselines.backstepping import BacksteppingPolicy
 from baselines.delay_compensated import BacksteppingDelayCompensated, NNDSCDelayCompensated
 from baselines.gains import BacksteppingGains, CooperativeGains, NNDSCGains
 from baselines.nn_dsc import DSCPolicy, GlobalSpeedPolicy, NNDSCPolicy, NoAuxPolicy
-from baselines.policy import DIAGNOSTICS, Policy
+from baselines.policy import DIAGNOSTICS, AnalyticPolicy
 from baselines.privileged import BacksteppingPrivileged, NNDSCPrivileged, PrivilegedPolicy
 
 __all__ = [
@@ -43,6 +43,7 @@ __all__ = [
     "HEADROOM_REFERENCE",
     "POLICIES",
     "PRIVILEGED",
+    "AnalyticPolicy",
     "BacksteppingDelayCompensated",
     "BacksteppingGains",
     "BacksteppingPolicy",
@@ -55,13 +56,12 @@ __all__ = [
     "NNDSCPolicy",
     "NNDSCPrivileged",
     "NoAuxPolicy",
-    "Policy",
     "PrivilegedPolicy",
     "make_policy",
 ]
 
 #: Deployable policy classes by name (local observation only).
-POLICIES: dict[str, type[Policy]] = {
+POLICIES: dict[str, type[AnalyticPolicy]] = {
     policy.name: policy
     for policy in (
         NNDSCPolicy,
@@ -82,7 +82,7 @@ PRIVILEGED: dict[str, type[PrivilegedPolicy]] = {
 HEADROOM_REFERENCE = NNDSCPrivileged.name
 
 
-def make_policy(name: str, env: object, **options: Any) -> Policy:
+def make_policy(name: str, env: object, **options: Any) -> AnalyticPolicy:
     """Build the policy ``name`` for the scenario of ``env``.
 
     Args:
@@ -95,7 +95,7 @@ def make_policy(name: str, env: object, **options: Any) -> Policy:
     Raises:
         ValueError: Unknown name or option (the message lists the valid ones).
     """
-    known: dict[str, type[Policy]] = {**POLICIES, **PRIVILEGED}
+    known: dict[str, type[AnalyticPolicy]] = {**POLICIES, **PRIVILEGED}
     if name not in known:
         raise ValueError(f"unknown policy {name!r}; choose one of {sorted(known)}.")
     return known[name](env, **options)

@@ -20,7 +20,7 @@ docstrings, so that:
   step with the inputs held over the control period.
 
 ``cooperative_rows`` runs the cooperative layer alone, for policies whose
-kinetic part is written in Python (``Policy._kinetics``, see
+kinetic part is written in Python (``AnalyticPolicy._kinetics``, see
 ``docs/extending.md``).
 """
 
@@ -41,7 +41,7 @@ from baselines.kernel_types import (
     PolicyOutputs,
     PolicyStates,
 )
-from cpf_env.model import kernel_cache
+from cpf_env.infra import kernel_cache
 from cpf_env.model.vessel import coriolis_coefficients, damping_coefficients
 from cpf_env.sim.observation import (
     LEADER,

@@ -3,7 +3,7 @@
 Not deployable: they show how much better a controller of the same
 structure could do with perfect information, so that "how much of the gap
 did a policy close" has a top. Each is its deployable parent with two
-pieces of knowledge from the simulator (``cpf_env.sim.privileged``):
+pieces of knowledge from the simulator (``cpf_env.evaluation.privileged``):
 
 1. **the true lumped uncertainty**: per vessel the force f with
    M nu' = tau - f (true model, the paper's unmodeled dynamics and
@@ -43,10 +43,10 @@ from numpy.typing import ArrayLike, NDArray
 from baselines.backstepping import BacksteppingPolicy
 from baselines.kernel_types import KnownDynamics
 from baselines.nn_dsc import NNDSCPolicy
-from baselines.policy import Policy
+from baselines.policy import AnalyticPolicy
+from cpf_env.evaluation.privileged import ideal_link_observations, true_dynamics
 from cpf_env.sim.fleet import FleetSim
 from cpf_env.sim.observation import SLOTS
-from cpf_env.sim.privileged import ideal_link_observations, true_dynamics
 
 __all__ = ["BacksteppingPrivileged", "NNDSCPrivileged", "PrivilegedPolicy"]
 
@@ -62,12 +62,12 @@ def _simulator_of(env: object) -> FleetSim | None:
     return None
 
 
-class PrivilegedPolicy(Policy):
+class PrivilegedPolicy(AnalyticPolicy):
     """Mixin of the privileged references: observations and knowledge read from a FleetSim.
 
     Args:
         env: A FleetSim or an env with one (bound at once), or anything
-            ``Policy`` accepts (then ``bind_simulator`` before acting).
+            ``AnalyticPolicy`` accepts (then ``bind_simulator`` before acting).
         **options: The parent's gains.
     """
 

@@ -35,7 +35,6 @@ from cpf_commands.bench.report import HEADLINE, CellResult, episodes_csv, summar
 from cpf_commands.bench.verdict import COST_MARGIN, check_margin
 from cpf_commands.common.outputs import foreign_files
 from cpf_commands.common.policies import (
-    BenchPolicy,
     PolicySpec,
     TrustedAgentFolder,
     policy_label,
@@ -44,9 +43,9 @@ from cpf_commands.common.policies import (
 )
 from cpf_commands.common.ray_runtime import start_ray
 from cpf_commands.common.rollout import rollout_group
-from cpf_env import atomic
-from cpf_env.envs.parallel import make_scenario
-from cpf_env.scenarios import Scenario
+from cpf_env.envs.policy import FleetPolicy
+from cpf_env.infra import atomic
+from cpf_env.scenarios import Scenario, make_scenario
 from cpf_env.scenarios.splits import EVALUATION_SEED, SPLITS, split_scenario
 from cpf_env.scenarios.suite import is_deterministic
 
@@ -128,7 +127,7 @@ def write_outputs(
 
     report.html holds the ranked tables (``ranking``) and every figure inline.
 
-    The folder is built beside ``out`` and replaces it whole (``cpf_env.atomic``):
+    The folder is built beside ``out`` and replaces it whole (``cpf_env.infra.atomic``):
     a run killed while writing leaves the previous results.
 
     Args:
@@ -189,13 +188,13 @@ def _figures(
 
 def _build(
     labelled: dict[str, PolicySpec], tasks: Sequence[Scenario]
-) -> tuple[dict[tuple[str, str], BenchPolicy], dict[tuple[str, str], str]]:
+) -> tuple[dict[tuple[str, str], FleetPolicy], dict[tuple[str, str], str]]:
     """Each policy built for each scenario, and the (label, scenario) pairs that did not fit.
 
     Raises:
         ValueError: A policy that fits none of the scenarios (the first reason).
     """
-    built: dict[tuple[str, str], BenchPolicy] = {}
+    built: dict[tuple[str, str], FleetPolicy] = {}
     skipped: dict[tuple[str, str], str] = {}
     for label, spec in labelled.items():
         reasons = []
@@ -229,7 +228,7 @@ def run_cell(
 
 def _run_here(
     jobs: Sequence[_Job],
-    built: dict[tuple[str, str], BenchPolicy],
+    built: dict[tuple[str, str], FleetPolicy],
     steps: int | None,
     progress: bool,
 ) -> list[CellResult]:

@@ -38,7 +38,7 @@ from cpf_commands.common.ray_runtime import (
     resolve_address,
     start_ray,
 )
-from cpf_env import atomic
+from cpf_env.infra import atomic
 
 if TYPE_CHECKING:  # the learning extra is imported only when a sweep runs
     from cpf_commands.sweep.spec import SweepSpec

@@ -7,10 +7,10 @@ import pytest
 
 import baselines
 from baselines.closed_loop import ClosedLoop
-from baselines.policy import Policy
+from baselines.policy import AnalyticPolicy
 from cpf_env import scenarios
+from cpf_env.evaluation.recording import CHUNK, new_record
 from cpf_env.sim.fleet import PARALLEL_MIN_FLEETS, FleetSim
-from cpf_env.sim.recording import CHUNK, new_record
 
 EVERY_POLICY = (*baselines.POLICIES, *baselines.PRIVILEGED)
 
@@ -112,7 +112,7 @@ def test_policies_that_read_the_simulator_through_python_are_refused():
     task = scenarios.get("wang2014")
     sim = FleetSim(task, num_fleets=2)
 
-    class PythonKinetics(Policy):
+    class PythonKinetics(AnalyticPolicy):
         name = "python_kinetics"
 
     assert ClosedLoop.supports(baselines.make_policy("nn_dsc_privileged", task))

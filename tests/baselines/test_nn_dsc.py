@@ -12,9 +12,9 @@ from baselines.policy import DIAGNOSTICS
 from cpf_commands.run.experiment import run_episode
 from cpf_commands.run.reproduce import settling_time
 from cpf_env import scenarios
+from cpf_env.evaluation.metrics import episode_metrics
 from cpf_env.sim import arrays
 from cpf_env.sim.fleet import FleetSim
-from cpf_env.sim.metrics import episode_metrics
 
 
 def _run(policy_name: str, scenario: str, steps: int | None = None, **options):

@@ -10,10 +10,10 @@ import pytest
 import baselines
 from cpf_commands.common.rollout import rollout, rollout_group
 from cpf_env import FleetSim, scenarios
-from cpf_env.envs.parallel import make_scenario
+from cpf_env.evaluation.privileged import ideal_link_observations, lumped_uncertainty, true_dynamics
 from cpf_env.model.vessel import coriolis_matrix, damping_matrix
+from cpf_env.scenarios import make_scenario
 from cpf_env.sim.observation import SLOT_AGE, SLOT_MSG, SLOTS
-from cpf_env.sim.privileged import ideal_link_observations, lumped_uncertainty, true_dynamics
 
 
 def _no_uncertainty(name: str = "wang2014"):
