@@ -17,7 +17,8 @@ file keyed by a SHA-256 digest of:
   metrics (``cpf_env.sim.fleet_metrics``).
 
 A cell whose seeds the matching file all holds is read instead of run; any
-other is run and its seeds merged into the file (written atomically).
+other is run and, when it ran whole episodes, its seeds merged into the file
+(written atomically).
 ``CACHE_DIRECTORY`` is ``results/bench_cache`` of a source checkout, where
 the files for the test split of the suite (20 seeds) are committed;
 outside a checkout (an installed package) nothing is cached. The files are
@@ -86,9 +87,13 @@ def load_cell(
     task: Scenario,
     seeds: Sequence[int],
     steps: int | None,
-    directory: Path = CACHE_DIRECTORY,
+    directory: Path | None = None,
 ) -> dict[str, NDArray[np.float64]] | None:
-    """The cached metrics (name -> (S,)) of a cell, or None unless every seed is cached."""
+    """The cached metrics (name -> (S,)) of a cell, or None unless every seed is cached.
+
+    ``directory`` defaults to ``CACHE_DIRECTORY``.
+    """
+    directory = CACHE_DIRECTORY if directory is None else directory
     key = cell_key(policy, task, steps)
     episodes = _read(_path(directory, policy, task, key), key)
     if not seeds or any(str(int(seed)) not in episodes for seed in seeds):
@@ -106,9 +111,13 @@ def store_cell(
     seeds: Sequence[int],
     steps: int | None,
     metrics: dict[str, NDArray[np.float64]],
-    directory: Path = CACHE_DIRECTORY,
+    directory: Path | None = None,
 ) -> Path | None:
-    """Merge a cell's episodes into its cache file; None (nothing written) outside a checkout."""
+    """Merge a cell's episodes into its cache file; None (nothing written) outside a checkout.
+
+    ``directory`` defaults to ``CACHE_DIRECTORY``.
+    """
+    directory = CACHE_DIRECTORY if directory is None else directory
     if not directory.parent.is_dir():
         return None
     directory.mkdir(exist_ok=True)

@@ -10,7 +10,8 @@ one (policy, scenario) cell per task (``cpf_commands.bench.episodes``). A
 scenario in which nothing is random (``cpf_env.scenarios.suite.is_deterministic``)
 runs one episode: its seeds would all give the same one. The cells of the
 receding-horizon policies (``oracle``, ``mpc``) are read from the content-keyed
-cache of ``cpf_commands.bench.cache`` when it holds them, and written to it. ``write_outputs``
+cache of ``cpf_commands.bench.cache`` when it holds them, and written to it
+when they ran whole episodes (a quick look with ``--steps`` is not kept). ``write_outputs``
 fills the output folder with ``episodes.csv``, ``summary.csv``, ``summary.md``
 and the figures; ``cpf_commands.bench.cli`` is the command around it.
 
@@ -355,7 +356,7 @@ def run_bench(
     else:
         ran = _run_here(missing, built, steps, progress)
     for job, cell in zip(missing, ran, strict=True):
-        if _cacheable(job):
+        if _cacheable(job) and steps in (None, job[2].max_steps):  # whole episodes only
             cache.store_cell(job[0], job[2], job[3], steps, cell.metrics)
         found[(job[0], job[2].name)] = cell
     cells = [found[(label, task.name)] for label, _, task, _ in jobs]

@@ -109,3 +109,16 @@ def test_telling_mpc_what_it_lacks_moves_its_cost_toward_the_oracle():
     }
     assert costs["told"] < costs["mpc"]
     assert abs(costs["told"] - costs["oracle"]) < 0.5 * abs(costs["mpc"] - costs["oracle"])
+
+
+def test_the_timing_example_reports_solve_times_and_real_time_factors():
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[2] / "examples" / "mpc_timing.py"
+    spec = importlib.util.spec_from_file_location("mpc_timing", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    rows = module.main(["--steps", "20"])
+    assert rows["revision_p95_ms"] >= rows["every_step_median_ms"] > 0
+    assert rows["oracle_seconds_per_1000_steps"] > 0
