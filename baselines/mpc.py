@@ -79,7 +79,9 @@ class RecedingHorizonGains:
             vessels (plus ``VESSEL_RATE_SHARE`` of it per vessel).
         K1: Kinematic gains (1/s), surge, sway, yaw.
         K2: Velocity-error gains (1/s).
-        k_sync: Gain of the synchronization error on the path rate (1/s).
+        k_sync: Gain of the synchronization error on the path rate (1/s), capped
+            per vessel at 1 / (dt d_i) (d_i its weighted degree) so the consensus is
+            stable on any graph.
         k_mu: Gain of the path-error gradient mu on the path rate (1/s).
         observer_time: Time constant of ``mpc``'s residual-force observer (s).
         k5: ``mpc``'s speed-estimator gain on neighbours' estimates (1/s).

@@ -20,13 +20,16 @@ The feedback (Wang et al. 2014's kinematic step with the analytic
 derivative of the virtual control, Remark 1, and a kinetic step that
 cancels the lumped force it is told)::
 
-    theta_dot = sat(v - k_sync s + k_mu mu),   mu = z1 . t1
+    theta_dot = sat(v - k s + k_mu mu),        mu = z1 . t1,  k = min(k_sync, 1 / (dt d))
     alpha     = -K1 z1 + t1 theta_dot
     alpha'    = -K1 z1' + t1' theta_dot
     z1'       = -r S z1 + nu - t1 theta_dot,   t1' = -r S t1 + t2 theta_dot
     tau       = M (alpha' - K2 (nu - alpha)) + f
 
-with f the lumped force (M nu' = tau - f). Plans are piecewise constant
+with f the lumped force (M nu' = tau - f) and d the vessel's weighted
+degree sum_j a_ij: capping the consensus gain at 1 / (dt d) keeps the
+discrete-time consensus theta+ = theta - dt k L theta stable on any graph
+(each row of I - dt K L is then non-negative and sums to one). Plans are piecewise constant
 over knots of ``knot`` control steps: offsets (n, 4) on the force (N, N,
 N m) and the path-variable rate (1/s) per knot; the command is clipped to
 the force limits and the rate limit before it is applied.
@@ -86,11 +89,13 @@ def tracking_feedback(
     t1: tuple,
     t2: tuple,
     sync: float,
+    degree: float,
     speed: float,
     lumped: np.ndarray,
     mass: np.ndarray,
     gains: np.ndarray,
     theta_dot_max: float,
+    dt: float,
 ) -> tuple:
     """The stateless tracking feedback of one vessel (module docstring).
 
@@ -100,18 +105,23 @@ def tracking_feedback(
         t1: J^T d eta_d / d theta.
         t2: J^T d2 eta_d / d theta2.
         sync: s_i = sum_j a_ij (theta_i - theta_j).
+        degree: d_i = sum_j a_ij.
         speed: The reference speed v (m/s).
         lumped: The lumped force f (3,) with M nu' = tau - f (N, N, N m).
         mass: The mass matrix M (3, 3).
         gains: ``GAINS_SIZE`` gains.
         theta_dot_max: The rate limit (1/s).
+        dt: The control period (s).
 
     Returns:
         (tau_u, tau_v, tau_r, theta_dot): force command (N, N, N m) before
         saturation and the path-variable rate within the limit.
     """
     mu = z1[0] * t1[0] + z1[1] * t1[1] + z1[2] * t1[2]
-    rate = speed - gains[G_SYNC] * sync + gains[G_MU] * mu
+    k_sync = gains[G_SYNC]
+    if degree > 0.0:
+        k_sync = min(k_sync, 1.0 / (dt * degree))
+    rate = speed - k_sync * sync + gains[G_MU] * mu
     rate = min(max(rate, -theta_dot_max), theta_dot_max)
     r = nu[2]
     z1_dot = (r * z1[1] + nu[0] - t1[0] * rate, -r * z1[0] + nu[1] - t1[1] * rate,
@@ -156,16 +166,28 @@ def oracle_actions(
     member = topology_index(c, step)
     v0 = leader_speed(c, step * c.dt)
     for i in range(a.eta.shape[1]):
-        sync = 0.0
+        sync, degree = 0.0, 0.0
         for k in range(c.slots.shape[1]):
             j = c.slots[i, k]
             weight = c.slot_weights[member, i, k]
             if j >= 0 and weight != 0.0:
                 sync += weight * (a.theta[b, i] - a.theta[b, j])
+                degree += weight
         point = path_values(c.path_kinds[i], c.path_params[i], a.theta[b, i])
         z1, t1, t2 = path_frame(a.eta[b, i, 0], a.eta[b, i, 1], a.eta[b, i, 2], point)
         command = tracking_feedback(
-            a.nu[b, i], z1, t1, t2, sync, v0, lumped[i], mass[i], gains, c.theta_dot_max
+            a.nu[b, i],
+            z1,
+            t1,
+            t2,
+            sync,
+            degree,
+            v0,
+            lumped[i],
+            mass[i],
+            gains,
+            c.theta_dot_max,
+            c.dt,
         )
         for q in range(3):
             out[i, q] = _clipped(command[q] + offsets[i, q], c.tau_min[i, q], c.tau_max[i, q])
@@ -242,6 +264,7 @@ def _local_command(
     i: int,
     state: np.ndarray,
     sync: float,
+    degree: float,
     speed: float,
     lumped: np.ndarray,
     mass: np.ndarray,
@@ -256,7 +279,7 @@ def _local_command(
     for q in range(3):
         lumped[q] = h[q] + offsets[4 + q]  # nominal C nu + D nu, plus the estimated residual
     command = tracking_feedback(
-        state[3:6], z1, t1, t2, sync, speed, lumped, mass, gains, c.theta_dot_max
+        state[3:6], z1, t1, t2, sync, degree, speed, lumped, mass, gains, c.theta_dot_max, c.dt
     )
     tau = (
         _clipped(command[0] + offsets[0], c.tau_min[i, 0], c.tau_max[i, 0]),
@@ -307,12 +330,13 @@ def _local_rollouts(
         total = 0.0
         for step in range(plans.shape[1] * knot):
             offsets[:4] = plans[row, step // knot]
-            sync = 0.0
+            sync, degree = 0.0, 0.0
             for k in range(neighbours.shape[1]):  # weight, theta_j now, rate_j
                 theta_j = neighbours[row, k, 1] + step * dt * neighbours[row, k, 2]
                 sync += neighbours[row, k, 0] * (state[6] - theta_j)
+                degree += neighbours[row, k, 0]
             tau, rate = _local_command(
-                c, i, state, sync, speed[row], lumped, mass, gains, offsets, p
+                c, i, state, sync, degree, speed[row], lumped, mass, gains, offsets, p
             )
             state[6] += dt * rate
             load = (tau[0] - residual[row, 0], tau[1] - residual[row, 1],
@@ -445,14 +469,15 @@ def local_commands(
     lumped = np.empty(3)
     for b in range(start.shape[0]):
         for i in range(start.shape[1]):
-            sync = 0.0
+            sync, degree = 0.0, 0.0
             for k in range(neighbours.shape[2]):
                 sync += neighbours[b, i, k, 0] * (start[b, i, 6] - neighbours[b, i, k, 1])
+                degree += neighbours[b, i, k, 0]
             merged[:4] = offsets[b, i]
             merged[4:] = residual[b, i]
             p = nominal[b, i]
             tau, rate = _local_command(
-                c, i, start[b, i], sync, speed[b, i], lumped, _mass(p), gains, merged, p
+                c, i, start[b, i], sync, degree, speed[b, i], lumped, _mass(p), gains, merged, p
             )
             for q in range(3):
                 out[b, i, q] = tau[q]
