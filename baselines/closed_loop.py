@@ -40,6 +40,7 @@ import numpy as np
 from numba import prange
 from numpy.typing import NDArray
 
+from baselines.interface import PolicyInterface
 from baselines.kernel_types import (
     KINETICS_PYTHON,
     NO_KNOWLEDGE,
@@ -199,11 +200,13 @@ class ClosedLoop:
             a number of fleets that is not a multiple of P.
     """
 
-    def __init__(self, policies: Policy | Sequence[Policy], sim: FleetSim) -> None:
-        members = [policies] if isinstance(policies, Policy) else list(policies)
-        if not members:
+    def __init__(
+        self, policies: PolicyInterface | Sequence[PolicyInterface], sim: FleetSim
+    ) -> None:
+        given = [policies] if isinstance(policies, PolicyInterface) else list(policies)
+        if not given:
             raise ValueError("ClosedLoop needs at least one policy.")
-        for policy in members:
+        for policy in given:
             if not self.supports(policy):
                 raise ValueError(
                     "ClosedLoop runs analytic policies whose whole step is compiled; "
@@ -211,6 +214,8 @@ class ClosedLoop:
                     "privileged reference or another kind of policy): step it with "
                     "sim.step(policy.act_batch(obs))."
                 )
+        members = [policy for policy in given if isinstance(policy, Policy)]  # all, by supports
+        for policy in members:
             if policy.scenario.n != sim.n or policy.obs_dim != sim.obs_dim:
                 raise ValueError(
                     f"policy {policy.name!r} was built for scenario {policy.scenario.name!r}, "
