@@ -82,3 +82,24 @@ def test_headroom_is_measured_against_the_best_deployable_analytic_design():
     text = "\n".join(headroom_table(cells))
     assert "| a | 10 | mpc | 8 | 6 | 25.0% |" in text
     assert "Lower mean cost than oracle: nn_dsc_privileged on a" in text
+
+
+def test_a_score_above_one_is_flagged_in_the_summary():
+    from cpf_commands.bench.episodes import METRICS
+    from cpf_commands.bench.report import summarize
+    from cpf_commands.bench.views import gap_table
+
+    def cell(policy, costs):
+        metrics = {name: np.array([1.0, 1.1, 0.9]) for name in METRICS}
+        metrics["cost"] = metrics["cost_window"] = np.array(costs)
+        return CellResult(policy, "a", (0, 1, 2), False, metrics)
+
+    cells = [
+        cell("nn_dsc", [10.0, 10.5, 9.5]),
+        cell("oracle", [6.0, 6.5, 5.5]),
+        cell("mpc", [8.0, 8.5, 7.5]),
+        cell("agent", [5.0, 5.4, 4.8]),
+    ]
+    lines = "\n".join(gap_table(summarize(cells), cells, "cost", "nn_dsc"))
+    assert "| mpc | 0.50 [0.50, 0.50] |" in lines  # (10 - 8) / (10 - 6), not flagged
+    assert "| agent | 1.23 [1.18, 1.27] (above 1: beats the bound) |" in lines
