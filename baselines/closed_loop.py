@@ -51,6 +51,7 @@ from baselines.kernel_types import (
 from baselines.kernels import WORK_ROWS, _act_fleet
 from baselines.policy import DIAGNOSTICS, AnalyticPolicy
 from baselines.privileged import PrivilegedPolicy
+from cpf_env.envs.policy import FleetPolicy
 from cpf_env.evaluation.privileged import fleet_ideal_observations, fleet_lumped_uncertainty
 from cpf_env.evaluation.recording import CHUNK, StepRecord, new_record, record_fleet
 from cpf_env.sim.arrays import FleetArrays, KernelConstants
@@ -199,11 +200,11 @@ class ClosedLoop:
             a number of fleets that is not a multiple of P.
     """
 
-    def __init__(self, policies: AnalyticPolicy | Sequence[AnalyticPolicy], sim: FleetSim) -> None:
-        members = [policies] if isinstance(policies, AnalyticPolicy) else list(policies)
-        if not members:
+    def __init__(self, policies: FleetPolicy | Sequence[FleetPolicy], sim: FleetSim) -> None:
+        given = [policies] if isinstance(policies, FleetPolicy) else list(policies)
+        if not given:
             raise ValueError("ClosedLoop needs at least one policy.")
-        for policy in members:
+        for policy in given:
             if not self.supports(policy):
                 raise ValueError(
                     "ClosedLoop runs analytic policies whose whole step is compiled; "
@@ -211,6 +212,10 @@ class ClosedLoop:
                     "privileged reference or another kind of policy): step it with "
                     "sim.step(policy.act_batch(obs))."
                 )
+        members = [
+            policy for policy in given if isinstance(policy, AnalyticPolicy)
+        ]  # all, by supports
+        for policy in members:
             if policy.scenario.n != sim.n or policy.obs_dim != sim.obs_dim:
                 raise ValueError(
                     f"policy {policy.name!r} was built for scenario {policy.scenario.name!r}, "

@@ -66,13 +66,13 @@ __all__ = [
     "cooperative_rows",
 ]
 
-# The cached kernels of this package (here and in closed_loop.py) inline cpf_env's helpers
-# and read the types of kernel_types.py: key them on those sources and on these files.
+# The cached kernels of this package (here, in closed_loop.py and mpc_kernels.py) inline
+# cpf_env's helpers and read the types of kernel_types.py: key them on those sources and files.
 kernel_cache.stamp_package(
     Path(__file__).parent,
     tuple(
         Path(__file__).with_name(name)
-        for name in ("kernels.py", "kernel_types.py", "closed_loop.py")
+        for name in ("kernels.py", "kernel_types.py", "closed_loop.py", "mpc_kernels.py")
     ),
 )
 

@@ -12,7 +12,12 @@ from cpf_env import scenarios
 from cpf_env.evaluation.recording import CHUNK, new_record
 from cpf_env.sim.fleet import PARALLEL_MIN_FLEETS, FleetSim
 
-EVERY_POLICY = (*baselines.POLICIES, *baselines.PRIVILEGED)
+#: The compiled analytic policies (``baselines.Policy``); the receding-horizon ones step in Python.
+EVERY_POLICY = tuple(
+    name
+    for name, cls in {**baselines.POLICIES, **baselines.PRIVILEGED}.items()
+    if issubclass(cls, baselines.Policy)
+)
 
 
 def _pair(names, scenario, per_policy):
@@ -118,6 +123,7 @@ def test_policies_that_read_the_simulator_through_python_are_refused():
     assert ClosedLoop.supports(baselines.make_policy("nn_dsc_privileged", task))
     assert not ClosedLoop.supports(PythonKinetics(task))
     assert not ClosedLoop.supports(object())
+    assert not ClosedLoop.supports(baselines.make_policy("mpc", task))
     with pytest.raises(ValueError, match="whole step is compiled"):
         ClosedLoop(PythonKinetics(task), sim)
 
