@@ -37,10 +37,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from baselines import mpc, mpc_kernels
+from cpf_env.evaluation import fleet_metrics
 from cpf_env.infra import atomic
 from cpf_env.infra.kernel_cache import kernel_sources_digest
 from cpf_env.scenarios import Scenario
-from cpf_env.sim import fleet_metrics
 
 __all__ = ["CACHED_POLICIES", "CACHE_DIRECTORY", "cell_key", "load_cell", "store_cell"]
 
