@@ -12,11 +12,11 @@ from cpf_env import scenarios
 from cpf_env.evaluation.recording import CHUNK, new_record
 from cpf_env.sim.fleet import PARALLEL_MIN_FLEETS, FleetSim
 
-#: The compiled analytic policies (``baselines.Policy``); the receding-horizon ones step in Python.
+#: The compiled analytic policies (``AnalyticPolicy``); the receding-horizon ones step in Python.
 EVERY_POLICY = tuple(
     name
     for name, cls in {**baselines.POLICIES, **baselines.PRIVILEGED}.items()
-    if issubclass(cls, baselines.Policy)
+    if issubclass(cls, baselines.AnalyticPolicy)
 )
 
 

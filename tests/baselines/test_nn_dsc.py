@@ -126,7 +126,8 @@ def test_first_step_initial_states_and_diagnostics():
 
 
 @pytest.mark.parametrize(
-    "name", sorted(n for n, cls in baselines.POLICIES.items() if issubclass(cls, baselines.Policy))
+    "name",
+    sorted(n for n, cls in baselines.POLICIES.items() if issubclass(cls, baselines.AnalyticPolicy)),
 )
 def test_ablation_switches(name):
     s = scenarios.get("saturation_heavy")
