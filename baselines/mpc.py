@@ -55,6 +55,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from baselines import mpc_kernels as kernels
 from baselines.policy import resolve_scenario
+from baselines.privileged import fleet_rows, simulator_of
 from cpf_env.envs.policy import FleetPolicy
 from cpf_env.evaluation.privileged import ideal_link_observations, true_dynamics
 from cpf_env.sim.fleet import FleetSim, observation_layout
@@ -250,7 +251,7 @@ class _ReadsSimulator(RecedingHorizon):
         super().__init__(env, **options)
         self._sim: FleetSim | None = None
         self._fleets = np.zeros(0, dtype=np.int64)
-        sim = _simulator_of(env)
+        sim = simulator_of(env)
         if sim is not None:
             self.bind_simulator(sim)
 
@@ -265,17 +266,7 @@ class _ReadsSimulator(RecedingHorizon):
                 f"policy {self.name!r} was built for scenario {self.scenario.name!r} but the "
                 f"simulator runs {sim.scenario.name!r}; build it for that scenario."
             )
-        rows = np.arange(sim.num_fleets) if fleets is None else np.asarray(fleets)
-        if (
-            rows.ndim != 1
-            or not np.issubdtype(rows.dtype, np.integer)
-            or np.any((rows < 0) | (rows >= sim.num_fleets))
-        ):
-            raise ValueError(
-                f"fleets must be indices in [0, {sim.num_fleets}) of the simulator, got "
-                f"{np.asarray(fleets).tolist()!r}."
-            )
-        self._sim, self._fleets = sim, np.ascontiguousarray(rows, dtype=np.int64)
+        self._sim, self._fleets = sim, fleet_rows(sim, fleets)
 
     def _bound(self) -> FleetSim:
         """The bound simulator; RuntimeError if there is none."""
@@ -475,14 +466,3 @@ class MPCPrivileged(_ReadsSimulator, MPCPolicy):
         kernels.hydrodynamics(self._params, np.ascontiguousarray(obs[..., NU : NU + 3]), hydro)
         self._residual[:] = lumped - hydro
         self._speed[:] = sim.v0_at(float(sim.arrays.step[self._fleets[0]]) * self.scenario.dt)
-
-
-def _simulator_of(env: object) -> FleetSim | None:
-    """The FleetSim of ``env`` (itself, ``env.sim`` or ``env.unwrapped.sim``), or None."""
-    for candidate in (env, getattr(env, "sim", None), getattr(env, "unwrapped", None)):
-        if isinstance(candidate, FleetSim):
-            return candidate
-        sim = getattr(candidate, "sim", None)
-        if isinstance(sim, FleetSim):
-            return sim
-    return None

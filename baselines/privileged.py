@@ -48,10 +48,35 @@ from cpf_env.evaluation.privileged import ideal_link_observations, true_dynamics
 from cpf_env.sim.fleet import FleetSim
 from cpf_env.sim.observation import SLOTS
 
-__all__ = ["BacksteppingPrivileged", "NNDSCPrivileged", "PrivilegedPolicy"]
+__all__ = [
+    "BacksteppingPrivileged",
+    "NNDSCPrivileged",
+    "PrivilegedPolicy",
+    "fleet_rows",
+    "simulator_of",
+]
 
 
-def _simulator_of(env: object) -> FleetSim | None:
+def fleet_rows(sim: FleetSim, fleets: ArrayLike | None) -> NDArray[np.int64]:
+    """The fleet indices (F,) of ``sim`` a policy reads, checked: default every fleet.
+
+    Raises:
+        ValueError: ``fleets`` is not a 1-D array of indices in [0, ``sim.num_fleets``).
+    """
+    rows = np.arange(sim.num_fleets) if fleets is None else np.asarray(fleets)
+    if (
+        rows.ndim != 1
+        or not np.issubdtype(rows.dtype, np.integer)
+        or np.any((rows < 0) | (rows >= sim.num_fleets))
+    ):
+        raise ValueError(
+            f"fleets must be indices in [0, {sim.num_fleets}) of the simulator, got "
+            f"{np.asarray(fleets).tolist()!r}."
+        )
+    return np.ascontiguousarray(rows, dtype=np.int64)
+
+
+def simulator_of(env: object) -> FleetSim | None:
     """The FleetSim of ``env`` (itself, ``env.sim`` or ``env.unwrapped.sim``), or None."""
     for candidate in (env, getattr(env, "sim", None), getattr(env, "unwrapped", None)):
         if isinstance(candidate, FleetSim):
@@ -77,7 +102,7 @@ class PrivilegedPolicy(AnalyticPolicy):
         super().__init__(env, **options)
         self._sim: FleetSim | None = None
         self._rows = np.zeros(0, dtype=np.int64)
-        sim = _simulator_of(env)
+        sim = simulator_of(env)
         if sim is not None:
             self.bind_simulator(sim)
 
@@ -95,17 +120,7 @@ class PrivilegedPolicy(AnalyticPolicy):
                 f"policy {self.name!r} was built for scenario {self.scenario.name!r} but the "
                 f"simulator runs {sim.scenario.name!r}; build it for that scenario."
             )
-        rows = np.arange(sim.num_fleets) if fleets is None else np.asarray(fleets)
-        if (
-            rows.ndim != 1
-            or not np.issubdtype(rows.dtype, np.integer)
-            or np.any((rows < 0) | (rows >= sim.num_fleets))
-        ):
-            raise ValueError(
-                f"fleets must be indices in [0, {sim.num_fleets}) of the simulator, got "
-                f"{np.asarray(fleets).tolist()!r}."
-            )
-        self._sim, self._rows = sim, rows.astype(np.int64)
+        self._sim, self._rows = sim, fleet_rows(sim, fleets)
 
     def _bound(self) -> FleetSim:
         if self._sim is None:
