@@ -29,7 +29,8 @@ import cpf_env  # noqa: F401
 if TYPE_CHECKING:
     from agents.loading import TrainedPolicy, load_policy
     from agents.mixture_env import MixtureVecEnv
-    from agents.training import TrainConfig, train
+    from agents.train_config import TrainConfig
+    from agents.training import train
     from agents.vec_env import FleetVecEnv
 
 __all__ = ["FleetVecEnv", "MixtureVecEnv", "TrainConfig", "TrainedPolicy", "load_policy", "train"]
@@ -38,7 +39,7 @@ __all__ = ["FleetVecEnv", "MixtureVecEnv", "TrainConfig", "TrainedPolicy", "load
 _HOMES = {
     "FleetVecEnv": "agents.vec_env",
     "MixtureVecEnv": "agents.mixture_env",
-    "TrainConfig": "agents.training",
+    "TrainConfig": "agents.train_config",
     "TrainedPolicy": "agents.loading",
     "load_policy": "agents.loading",
     "train": "agents.training",

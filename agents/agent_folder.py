@@ -56,8 +56,8 @@ from agents.folder_files import (
     statistics_arrays,
 )
 from agents.train_config import TrainConfig
-from cpf_env import atomic
 from cpf_env.envs.input_statistics import InputStatistics
+from cpf_env.infra import atomic
 
 __all__ = [
     "FORMAT",
@@ -171,7 +171,7 @@ def write_with_manifest(
 ) -> None:
     """Write ``files`` and the manifest of their hashes into ``folder``, each atomically.
 
-    The caller makes the folder as a whole appear at once (``cpf_env.atomic.staged_folder``).
+    The caller makes the folder as a whole appear at once (``cpf_env.infra.atomic.staged_folder``).
     """
     import cpf_env
 
@@ -197,7 +197,7 @@ def write_agent(
     """Write the agent files and their manifest into ``folder`` (a staging folder).
 
     Each file is written atomically; the caller makes the folder as a whole
-    appear at once (``cpf_env.atomic.staged_folder``).
+    appear at once (``cpf_env.infra.atomic.staged_folder``).
 
     Args:
         folder: Existing folder to write into.

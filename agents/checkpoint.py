@@ -37,7 +37,7 @@ from safetensors.torch import save as save_tensors
 from stable_baselines3.common.base_class import BaseAlgorithm
 
 from agents.snapshot import SnapshotError, capture, decode_value, encode_value, restore
-from cpf_env import atomic
+from cpf_env.infra import atomic
 
 __all__ = ["CHECKPOINT_FILES", "checkpoint_timesteps", "load_checkpoint", "save_checkpoint"]
 

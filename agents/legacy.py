@@ -25,7 +25,7 @@ from agents.agent_folder import (
     write_agent,
 )
 from agents.folder_files import MAX_JSON_BYTES, AgentFolderError, field, parse_json, read_file
-from cpf_env import atomic
+from cpf_env.infra import atomic
 
 __all__ = ["PICKLE_WARNING", "convert_sb3_folder", "is_sb3_folder", "read_sb3_folder"]
 

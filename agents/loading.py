@@ -49,12 +49,11 @@ from agents.marl.policy_folder import (
     marl_config,
     read_marl_agent,
 )
+from agents.resolve import resolve_base_policy
 from agents.train_config import TrainConfig
-from baselines import make_policy
-from baselines.interface import PolicyInterface
-from cpf_env.envs.parallel import make_scenario
-from cpf_env.envs.residual import ResidualConfig, ResidualController
-from cpf_env.scenarios import Scenario
+from cpf_env.envs.policy import FleetPolicy
+from cpf_env.envs.residual import ResidualController, learner_config
+from cpf_env.scenarios import Scenario, make_scenario
 from cpf_env.sim.fleet import observation_layout
 
 __all__ = ["Actor", "TorchActor", "TrainedPolicy", "load_policy", "read_config"]
@@ -202,7 +201,7 @@ class TorchActor:
             torch.set_num_threads(threads)
 
 
-class TrainedPolicy(PolicyInterface):
+class TrainedPolicy(FleetPolicy):
     """Base policy plus a trained network, with the analytic policies' interface.
 
     Args:
@@ -228,13 +227,8 @@ class TrainedPolicy(PolicyInterface):
         self.act_dim = 4 + scenario.message_size
         self.agents = [f"vessel_{i}" for i in range(self.n)]
         self.diagnostics: dict[str, Array] = {}
-        base = None if config.base == "none" else config.base
-        self._base = None if base is None else make_policy(base, scenario)
-        self._residual = (
-            ResidualConfig(mode="force_and_rate", scale=1.0)
-            if base is None
-            else config.residual_config()
-        )
+        self._base = resolve_base_policy(config.base, scenario)
+        self._residual = learner_config(self._base, config.residual_config())
         self._controller: ResidualController | None = None
         size = self._residual.input_size(self.layout)
         expected = (actor.input_size,)

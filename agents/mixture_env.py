@@ -42,10 +42,10 @@ from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper
 from stable_baselines3.common.vec_env.base_vec_env import VecEnvIndices, VecEnvStepReturn
 
 from agents.vec_env import FleetVecEnv
-from cpf_env.envs.parallel import make_scenario
+from cpf_env.envs.core import DEFAULT_INFO_LEVEL, check_num_fleets, check_seed, checked_actions
 from cpf_env.envs.policy import FleetPolicy
 from cpf_env.envs.residual import ResidualConfig
-from cpf_env.scenarios import Scenario
+from cpf_env.scenarios import Scenario, make_scenario
 from cpf_env.sim.fleet import observation_layout
 
 __all__ = ["BalancedRewards", "MixtureVecEnv", "split_fleets"]
@@ -76,7 +76,8 @@ class MixtureVecEnv(VecEnv):
             or one object per scenario (a sequence of them).
         residual: As ``FleetVecEnv``; ``neighbour_slots`` None becomes the largest
             degree of the mixture.
-        stagger: Spread each group's first horizons over its fleets.
+        stagger: Spread each group's horizons over its fleets (``EpisodeCore``).
+        info_level: ``"none"`` (default), ``"minimal"`` or ``"full"`` (``FleetVecEnv``).
         policy_options: Options (gains) for a base policy given by name.
         scenario_overrides: Per-scenario ``Scenario`` overrides (same order), or None.
 
@@ -95,6 +96,7 @@ class MixtureVecEnv(VecEnv):
         base_policy: str | Sequence[FleetPolicy] | None = "nn_dsc",
         residual: ResidualConfig | None = None,
         stagger: bool = True,
+        info_level: str = DEFAULT_INFO_LEVEL,
         policy_options: dict[str, Any] | None = None,
         scenario_overrides: Sequence[dict[str, Any]] | None = None,
     ) -> None:
@@ -111,19 +113,14 @@ class MixtureVecEnv(VecEnv):
                 f"a mixture needs two or more distinct scenarios, got {names}; for one "
                 "scenario use FleetVecEnv."
             )
-        if isinstance(num_fleets, bool) or int(num_fleets) != num_fleets:
-            raise ValueError(f"num_fleets must be an integer, got {num_fleets!r}.")
+        num_fleets = check_num_fleets(num_fleets)
         layouts = [observation_layout(s) for s in resolved]
         messages = sorted({layout.msg_size for layout in layouts})
         if len(messages) > 1:
             raise ValueError(
                 f"the scenarios of a mixture must share a message size, got {messages} for {names}."
             )
-        base_residual = residual
-        if base_policy is None:
-            base_residual = ResidualConfig(mode="force_and_rate", scale=1.0)
-        elif base_residual is None:
-            base_residual = ResidualConfig()
+        base_residual = ResidualConfig() if residual is None else residual
         if base_residual.neighbour_slots is None:
             slots = max(layout.n_slots for layout in layouts)
             base_residual = replace(base_residual, neighbour_slots=slots)
@@ -135,6 +132,7 @@ class MixtureVecEnv(VecEnv):
                 base_policy=base,
                 residual=base_residual,
                 stagger=stagger,
+                info_level=info_level,
                 policy_options=policy_options,
             )
             for scenario, fleets, base in zip(
@@ -158,6 +156,7 @@ class MixtureVecEnv(VecEnv):
         Returns:
             Every fleet's seed, group by group (length ``num_fleets``).
         """
+        seed = check_seed(seed)
         if seed is None:
             seed = int(np.random.default_rng().integers(np.iinfo(np.uint32).max))
         seeds: list[int | None] = []
@@ -172,15 +171,11 @@ class MixtureVecEnv(VecEnv):
         return np.concatenate(observations)
 
     def step_async(self, actions: NDArray[np.floating]) -> None:
-        """Split the actions (num_envs, k) among the groups (checked by each group)."""
-        raw = np.asarray(actions)
-        if raw.ndim != 2 or raw.shape[0] != self.num_envs:
-            raise ValueError(
-                f"actions must have shape (num_envs, k) = ({self.num_envs}, "
-                f"{self.groups[0].controller.action_size}), got {raw.shape}."
-            )
+        """Split the actions (num_envs, k) among the groups, all checked before any is stored."""
+        shape = (self.num_envs, self.groups[0].core.action_size)
+        checked = checked_actions(actions, shape, "(num_envs, k)", ("slot {}", "component {}"))
         for group, (start, stop) in zip(self.groups, self._group_bounds(), strict=True):
-            group.step_async(raw[start:stop])
+            group.step_async(checked[start:stop])
 
     def step_wait(self) -> VecEnvStepReturn:
         """Step every group; ending slots' infos also name their scenario."""

@@ -55,9 +55,8 @@ from agents.folder_files import (
 )
 from agents.loading import TrainedPolicy
 from agents.train_config import TrainConfig
-from cpf_env import atomic
-from cpf_env.envs.parallel import make_scenario
-from cpf_env.scenarios import Scenario
+from cpf_env.infra import atomic
+from cpf_env.scenarios import Scenario, make_scenario
 
 __all__ = ["OnnxActor", "export_onnx", "load_onnx_policy", "residual_range", "seal_onnx"]
 
@@ -77,12 +76,11 @@ def residual_range(config: TrainConfig, scenario: Scenario) -> NDArray[np.float3
     ``force_and_rate`` mode, the rate in 1/s (``scale`` x theta_dot_max); in
     ``kinematic`` mode the offsets in m, m, rad.
     """
-    from cpf_env.envs.residual import ResidualConfig, ResidualController
+    from cpf_env.envs.residual import ResidualController, learner_config
 
-    if config.base == "none":
-        residual = ResidualConfig(mode="force_and_rate", scale=1.0)
-    else:
-        residual = config.residual_config()
+    residual = config.residual_config()
+    if config.base == "none":  # the learner's own composition, without the base object
+        residual = learner_config(None, residual)
     if residual.mode == "kinematic":
         offsets = np.asarray(residual.kinematic_scale, dtype=np.float64)
         return np.tile(offsets, (scenario.n, 1)).astype(np.float32)

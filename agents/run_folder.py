@@ -14,7 +14,7 @@ The folder during and after a run (``docs/residual_rl.md`` has the user's view):
 
 The agent and ``model.zip`` are written whole: a copy of the run folder
 (hard links, so no data is copied) gets them and replaces the folder
-(``cpf_env.atomic.staged_folder``), so a run killed while saving leaves the
+(``cpf_env.infra.atomic.staged_folder``), so a run killed while saving leaves the
 folder as it was before the save, never a folder failing its manifest check.
 A run killed while training or saving leaves its last checkpoint;
 ``--resume`` continues from it, and a checkpoint that already reached the
@@ -75,7 +75,7 @@ from agents.schedule import (
 )
 from agents.slot_statistics import SlotSharedVecNormalize
 from agents.train_config import TrainConfig
-from cpf_env import atomic
+from cpf_env.infra import atomic
 
 __all__ = ["RUN_RECORD", "TrainingRun", "prepare_resume", "read_run_record", "write_run_record"]
 
@@ -180,7 +180,7 @@ def _holds_agent(folder: Path, timesteps: int) -> bool:
 def _link_tree(source: Path, target: Path) -> None:
     """Copy the folder ``source`` into ``target`` as hard links (copies where links fail).
 
-    Every writer replaces files (``cpf_env.atomic``) rather than writing into
+    Every writer replaces files (``cpf_env.infra.atomic``) rather than writing into
     them, so the two folders never change each other's files.
     """
 

@@ -46,7 +46,7 @@ from stable_baselines3.common.callbacks import BaseCallback
 from tqdm.auto import tqdm
 
 from agents.checkpoint import save_checkpoint
-from cpf_env import atomic
+from cpf_env.infra import atomic
 
 __all__ = [
     "BEST",

@@ -44,11 +44,10 @@ from stable_baselines3.common.callbacks import BaseCallback
 from agents.run_folder import TrainingRun, prepare_resume, write_run_record
 from agents.schedule import Evaluator, RunSchedule
 from agents.train_config import TrainConfig
-from cpf_env import atomic
+from cpf_env.infra import atomic
 from cpf_env.scenarios.splits import check_training
 
-# TrainConfig lives in agents.train_config; it is exported here too, where callers found it.
-__all__ = ["TrainConfig", "train"]
+__all__ = ["train"]
 
 
 def train(
@@ -93,7 +92,7 @@ def train(
             (``splits.check_training``), nothing to resume, or a configuration that
             differs from the run's own.
         TrainingInterrupted: Ctrl-C; the checkpoint and the agent so far are written.
-        cpf_env.atomic.FolderLockedError: Another run is writing ``out``.
+        cpf_env.infra.atomic.FolderLockedError: Another run is writing ``out``.
     """
     for name in config.scenarios:
         check_training(name, range(config.seed, config.seed + config.fleets))

@@ -19,17 +19,20 @@ Episode end       a fleet ends when it terminates (a vessel left its path) or
                   ``TimeLimit.truncated`` (SB3's convention)
 ================  ==============================================================
 
-Seeding follows SB3: ``seed(s)`` makes fleet k start from seed ``s + k`` at
-the next ``reset()`` (every vessel of a fleet shares the fleet's episode, so
-the seed is per fleet, not per slot); later auto-resets continue each fleet's
-generator. ``stagger=True`` (default) ends the first episode of fleet k after
-``max_steps - k * max_steps // B`` steps (truncation, bootstrapped by SB3), so
-fleets do not end in lockstep and a rollout sees every phase of an episode.
+Seeding, horizons, stagger, per-fleet resets and the residual are the
+``EpisodeCore``'s (``cpf_env.envs.core``), as on every route: fleet k starts
+from seed ``s + k``; later auto-resets continue each fleet's generator;
+``stagger=True`` (default) ends fleet k's episode after ``max_steps - k *
+max_steps // B`` steps at each reset of all fleets (truncation, bootstrapped
+by SB3), so fleets do not end in lockstep. Differences SB3 forces: ``seed(s)``
+takes effect at the next ``reset()`` (every vessel of a fleet shares the
+fleet's episode, so the seed is per fleet, not per slot), and an ending fleet
+is reset in the same step, its last observation in ``terminal_observation``.
 
-Infos are cheap on purpose (this is the hot path at thousands of slots):
-an empty dict per slot, except for the slots of ending fleets. The last
-step's base actions, residuals, rewards by term and errors are attributes
-(``last_base_actions``, ``last_residual``, ``last_reward_terms``, ``last_errors``).
+Infos follow ``info_level`` (``"none"``, the default of every route: an empty
+dict per slot, the hot path at thousands of slots; ``"minimal"``/``"full"``:
+each slot's ``EpisodeCore.vessel_infos``), plus SB3's entries of ending
+slots. The arrays are always in ``env.core`` (``core.info_arrays("full")``).
 
 Example:
     >>> env = FleetVecEnv("wang2014", num_fleets=4, max_steps=50)
@@ -52,38 +55,14 @@ from numpy.typing import NDArray
 from stable_baselines3.common.vec_env import VecEnv
 from stable_baselines3.common.vec_env.base_vec_env import VecEnvIndices, VecEnvStepReturn
 
-from baselines import POLICIES, make_policy
-from cpf_env.envs.parallel import make_scenario
+from agents.resolve import make_core
+from cpf_env.envs.core import DEFAULT_INFO_LEVEL, check_info_level, check_seed, checked_actions
 from cpf_env.envs.policy import FleetPolicy
-from cpf_env.envs.residual import ResidualConfig, ResidualController
+from cpf_env.envs.residual import ResidualConfig
 from cpf_env.scenarios import Scenario
-from cpf_env.sim.fleet import FleetSim
 from cpf_env.sim.observation import observation_box
 
-__all__ = ["FleetVecEnv", "resolve_base_policy"]
-
-
-def resolve_base_policy(
-    base_policy: str | FleetPolicy | None,
-    scenario: Scenario,
-    policy_options: dict[str, Any] | None = None,
-) -> FleetPolicy | None:
-    """A base policy from a name of ``baselines.POLICIES``, an object, or None (none)."""
-    if base_policy is None or base_policy == "none":
-        return None
-    if isinstance(base_policy, str):
-        if base_policy not in POLICIES:
-            raise ValueError(
-                f"unknown base policy {base_policy!r}; choose one of {sorted(POLICIES)} "
-                "or None (the agent commands everything)."
-            )
-        return make_policy(base_policy, scenario, **(policy_options or {}))
-    if not hasattr(base_policy, "act_batch"):
-        raise TypeError(
-            "base_policy must be a name, None, or an object with act_batch(obs) and "
-            f"reset_fleets(mask); got {type(base_policy).__name__}."
-        )
-    return base_policy
+__all__ = ["FleetVecEnv"]
 
 
 class FleetVecEnv(VecEnv):
@@ -99,14 +78,16 @@ class FleetVecEnv(VecEnv):
         residual: How the correction enters (``ResidualConfig``); default: forces,
             scale 0.2, no extras. With ``base_policy=None`` only its
             ``neighbour_slots`` is used.
-        stagger: Spread the first episode's horizons over the fleets.
+        stagger: Spread the horizons over the fleets at each reset of all fleets.
+        info_level: ``"none"`` (default), ``"minimal"`` or ``"full"``.
         policy_options: Options (gains) for a base policy given by name.
         **overrides: ``Scenario`` field overrides, as in ``cpf_env.parallel_env``.
 
     Attributes:
+        core: The ``EpisodeCore``.
         scenario: The task.
-        sim: The ``FleetSim``.
-        controller: The ``ResidualController``.
+        sim: The ``FleetSim`` (``core.sim``).
+        controller: The ``ResidualController`` (``core.controller``).
     """
 
     render_mode = None
@@ -118,36 +99,23 @@ class FleetVecEnv(VecEnv):
         base_policy: str | FleetPolicy | None = "nn_dsc",
         residual: ResidualConfig | None = None,
         stagger: bool = True,
+        info_level: str = DEFAULT_INFO_LEVEL,
         policy_options: dict[str, Any] | None = None,
         **overrides: Any,
     ) -> None:
-        if not isinstance(stagger, bool | np.bool_):
-            raise ValueError(f"stagger must be True or False, got {stagger!r}.")
-        self.scenario = make_scenario(scenario, **overrides)
-        if isinstance(num_fleets, bool) or int(num_fleets) != num_fleets or num_fleets < 1:
-            raise ValueError(f"num_fleets must be an integer >= 1, got {num_fleets!r}.")
-        self.num_fleets = B = int(num_fleets)
-        self.n = n = self.scenario.n
-        base = resolve_base_policy(base_policy, self.scenario, policy_options)
-        if base is None:
-            slots = None if residual is None else residual.neighbour_slots
-            residual = ResidualConfig(mode="force_and_rate", scale=1.0, neighbour_slots=slots)
-        self.sim = FleetSim(self.scenario, num_fleets=B)
-        self.controller = ResidualController(self.scenario, base, B, residual)
-        self.stagger = bool(stagger)
-        size, k = self.controller.input_size, self.controller.action_size
-        observation_space = observation_box(size)
-        action_space = spaces.Box(-1.0, 1.0, (k,), dtype=np.float32)
-        super().__init__(B * n, observation_space, action_space)
+        self.info_level = check_info_level(info_level)
+        core = make_core(
+            scenario, num_fleets, base_policy, residual, stagger, policy_options, **overrides
+        )
+        self.core, self.scenario, self.sim = core, core.scenario, core.sim
+        assert core.controller is not None  # make_core: always the residual form
+        self.controller = core.controller
+        self.num_fleets, self.n, self.stagger = core.num_fleets, core.n, core.stagger
+        observation_space = observation_box(core.input_size)
+        action_space = spaces.Box(-1.0, 1.0, (core.action_size,), dtype=np.float32)
+        super().__init__(core.num_fleets * core.n, observation_space, action_space)
         self._fleet_seeds: list[int | None] = []
-        self._horizon = np.full(B, self.scenario.max_steps, dtype=np.int64)
-        self._first_reset = True
-        self._actions = np.zeros((B, n, k))
-        self._inputs = np.zeros((B, n, size), dtype=np.float32)
-        self.last_base_actions = np.zeros((B, n, self.controller.act_dim))
-        self.last_residual = np.zeros((B, n, k))
-        self.last_reward_terms = np.zeros_like(self.sim.arrays.reward_terms)
-        self.last_errors = np.zeros_like(self.sim.arrays.errors)
+        self._actions = np.zeros((core.num_fleets, core.n, core.action_size))
 
     # --- SB3 VecEnv interface -------------------------------------------------------------
 
@@ -161,13 +129,10 @@ class FleetVecEnv(VecEnv):
         Raises:
             ValueError: ``seed`` is not a non-negative integer (the seeds are unchanged).
         """
-        if seed is None:
-            seed = int(np.random.default_rng().integers(np.iinfo(np.uint32).max))
-        elif (
-            isinstance(seed, bool | np.bool_) or not isinstance(seed, int | np.integer) or seed < 0
-        ):
-            raise ValueError(f"seed must be an integer >= 0 or None, got {seed!r}.")
-        self._fleet_seeds = [int(seed) + k for k in range(self.num_fleets)]
+        checked = check_seed(seed)
+        if checked is None:
+            checked = int(np.random.default_rng().integers(np.iinfo(np.uint32).max))
+        self._fleet_seeds = self.core.fleet_seeds(checked, np.arange(self.num_fleets))
         return list(self._fleet_seeds)
 
     def reset(self) -> NDArray[np.float32]:
@@ -176,44 +141,23 @@ class FleetVecEnv(VecEnv):
         Returns:
             (num_envs, input_size) float32.
         """
-        seeds = self._fleet_seeds or [None] * self.num_fleets
+        seeds = self._fleet_seeds or None
         self._fleet_seeds = []
-        obs = self.sim.reset(seeds=seeds)
-        self.controller.reset()
-        self._horizon[:] = self.scenario.max_steps
-        if self.stagger and self._first_reset:
-            spread = np.arange(self.num_fleets) * self.scenario.max_steps // self.num_fleets
-            self._horizon -= spread
-        self._first_reset = False
-        self._inputs[:] = self.controller.observe(obs)
+        inputs = self.core.reset(seeds=seeds)
         self.reset_infos = [{} for _ in range(self.num_envs)]
-        return self._flat(self._inputs).copy()
+        return self._flat(inputs).copy()
 
     def step_async(self, actions: NDArray[np.floating]) -> None:
         """Store the actions (num_envs, k) for ``step_wait``.
 
         Raises:
-            ValueError: Another shape (a transposed array is not reshaped), complex
-                or non-numeric values, or NaN/inf; nothing is stored.
+            ValueError: Another shape (a transposed array is not reshaped), not real
+                numbers, or NaN/inf; nothing is stored.
         """
-        raw = np.asarray(actions)
-        expected = (self.num_envs, self.controller.action_size)
-        if raw.shape != expected:
-            raise ValueError(
-                f"actions must have shape (num_envs, k) = {expected}, got {raw.shape}; "
-                "one row per slot (slot = fleet * n + vessel)."
-            )
-        real = raw.dtype.kind in "fiu" or any(  # the kinds first: cheaper, same answer
-            np.issubdtype(raw.dtype, kind) for kind in (np.floating, np.integer)
-        )
-        if not real:
-            raise ValueError(f"actions must be real numbers, got dtype {raw.dtype}.")
-        array = raw.astype(np.float64)
-        if not np.isfinite(array).all():
-            raise ValueError(
-                "actions must be finite (no NaN or +-inf); they are clipped to [-1, 1]."
-            )
-        self._actions = array.reshape(self.num_fleets, self.n, -1)
+        shape = (self.num_envs, self.core.action_size)
+        form = "(num_envs, k), one row per slot = fleet * n + vessel,"
+        checked = checked_actions(actions, shape, form, ("slot {}", "component {}"))
+        self._actions = checked.reshape(self.num_fleets, self.n, -1)
 
     def step_wait(self) -> VecEnvStepReturn:
         """Step every fleet; reset the fleets that ended, in the same step.
@@ -222,22 +166,23 @@ class FleetVecEnv(VecEnv):
             (observations (num_envs, input_size) float32, rewards (num_envs,) float32,
             dones (num_envs,) bool, infos (list of num_envs dicts)).
         """
-        command = self.controller.compose(self._actions)
-        self.last_base_actions = self.controller.base_actions.copy()
-        self.last_residual = self.controller.residual.copy()
-        obs = self.sim.step(command)
-        a = self.sim.arrays
-        rewards = a.reward.astype(np.float32).reshape(-1)
-        self.last_reward_terms = a.reward_terms.copy()
-        self.last_errors = a.errors.copy()
-        terminated = a.terminated.copy()
-        ended = terminated | (a.step >= self._horizon)
-        self._inputs[:] = self.controller.observe(obs)
-        infos: list[dict[str, Any]] = [{} for _ in range(self.num_envs)]
-        if ended.any():
-            self._restart(np.flatnonzero(ended), terminated, infos)
-        dones = np.repeat(ended, self.n)
-        return self._flat(self._inputs).copy(), rewards, dones, infos
+        self.core.step(self._actions, checked=True)
+        rewards = self.core.reward.astype(np.float32).reshape(-1)
+        terminated, ended = self.core.terminated, self.core.ended
+        infos = self.core.vessel_infos(self.info_level)
+        if not ended.any():  # the hot path
+            obs = self._flat(self.core.inputs).copy()
+            return obs, rewards, np.zeros(self.num_envs, dtype=bool), infos
+        fleets, terminal = self.core.reset_ended()
+        for row, b in enumerate(fleets):
+            truncated = not terminated[b]
+            for i in range(self.n):
+                slot = infos[b * self.n + i]
+                slot["terminal_observation"] = terminal[row, i]
+                slot["TimeLimit.truncated"] = truncated
+        dones = np.zeros(self.num_fleets, dtype=bool)
+        dones[fleets] = True
+        return self._flat(self.core.inputs).copy(), rewards, np.repeat(dones, self.n), infos
 
     def close(self) -> None:
         """Nothing to release (the simulator holds only arrays)."""
@@ -269,23 +214,6 @@ class FleetVecEnv(VecEnv):
         return [False] * len(self._slots(indices))
 
     # --- helpers --------------------------------------------------------------------------
-
-    def _restart(
-        self, fleets: NDArray[np.int64], terminated: NDArray[np.bool_], infos: list[dict]
-    ) -> None:
-        """Record terminal observations of the ending fleets, then reset them and their base."""
-        for b in fleets:
-            truncated = not terminated[b]
-            for i in range(self.n):
-                slot = infos[b * self.n + i]
-                slot["terminal_observation"] = self._inputs[b, i].copy()
-                slot["TimeLimit.truncated"] = truncated
-        obs = self.sim.reset(fleets=fleets)
-        mask = np.zeros(self.num_fleets, dtype=bool)
-        mask[fleets] = True
-        self.controller.reset_fleets(mask)
-        self._horizon[fleets] = self.scenario.max_steps
-        self._inputs[fleets] = self.controller.observe(obs[fleets], fleets=fleets)
 
     def _flat(self, array: NDArray[np.float32]) -> NDArray[np.float32]:
         """(B, n, d) -> (B * n, d), slot k * n + i = vessel i of fleet k."""

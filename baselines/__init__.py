@@ -12,11 +12,17 @@ name                        policy
 ``backstepping``            analytic derivative of alpha, nominal-model cancellation
 ``nn_dsc_delay_comp``       ``nn_dsc`` with neighbour theta advanced by packet age x dt x vhat_j
 ``backstepping_delay_comp`` ``backstepping`` with the same delay compensation
+``mpc``                     receding-horizon control per vessel on the benchmark's
+                            stage cost, from its local observation (``baselines.mpc``)
 ==========================  ===========================================================
 
-Headroom references, not deployable (``PRIVILEGED``, ``baselines.privileged``):
-``nn_dsc_privileged`` and ``backstepping_privileged``, told the true lumped
-uncertainty and given ideal links; ``make_policy`` builds them too.
+Privileged references, not deployable (``PRIVILEGED``): ``oracle``, the same
+receding-horizon control told everything (true model and future disturbances
+via copies of the simulator, ideal links, true v0, centralized), the
+benchmark's headroom bound (``HEADROOM_REFERENCE``); ``mpc_privileged``,
+``mpc`` told what it lacks; ``nn_dsc_privileged`` and
+``backstepping_privileged`` (``baselines.privileged``), told the true lumped
+uncertainty and given ideal links, an ablation. ``make_policy`` builds them too.
 
 Example:
     >>> import cpf_env, baselines
@@ -34,15 +40,18 @@ from typing import Any
 from baselines.backstepping import BacksteppingPolicy
 from baselines.delay_compensated import BacksteppingDelayCompensated, NNDSCDelayCompensated
 from baselines.gains import BacksteppingGains, CooperativeGains, NNDSCGains
+from baselines.mpc import MPCPolicy, MPCPrivileged, OraclePolicy, RecedingHorizonGains
 from baselines.nn_dsc import DSCPolicy, GlobalSpeedPolicy, NNDSCPolicy, NoAuxPolicy
-from baselines.policy import DIAGNOSTICS, Policy
+from baselines.policy import DIAGNOSTICS, AnalyticPolicy
 from baselines.privileged import BacksteppingPrivileged, NNDSCPrivileged, PrivilegedPolicy
+from cpf_env.envs.policy import FleetPolicy
 
 __all__ = [
     "DIAGNOSTICS",
     "HEADROOM_REFERENCE",
     "POLICIES",
     "PRIVILEGED",
+    "AnalyticPolicy",
     "BacksteppingDelayCompensated",
     "BacksteppingGains",
     "BacksteppingPolicy",
@@ -50,18 +59,21 @@ __all__ = [
     "CooperativeGains",
     "DSCPolicy",
     "GlobalSpeedPolicy",
+    "MPCPolicy",
+    "MPCPrivileged",
     "NNDSCDelayCompensated",
     "NNDSCGains",
     "NNDSCPolicy",
     "NNDSCPrivileged",
     "NoAuxPolicy",
-    "Policy",
+    "OraclePolicy",
     "PrivilegedPolicy",
+    "RecedingHorizonGains",
     "make_policy",
 ]
 
 #: Deployable policy classes by name (local observation only).
-POLICIES: dict[str, type[Policy]] = {
+POLICIES: dict[str, type[FleetPolicy]] = {
     policy.name: policy
     for policy in (
         NNDSCPolicy,
@@ -71,18 +83,20 @@ POLICIES: dict[str, type[Policy]] = {
         BacksteppingPolicy,
         NNDSCDelayCompensated,
         BacksteppingDelayCompensated,
+        MPCPolicy,
     )
 }
 
 #: Privileged references by name: not deployable, they read the simulator (headroom).
-PRIVILEGED: dict[str, type[PrivilegedPolicy]] = {
-    policy.name: policy for policy in (NNDSCPrivileged, BacksteppingPrivileged)
+PRIVILEGED: dict[str, type[FleetPolicy]] = {
+    policy.name: policy
+    for policy in (OraclePolicy, MPCPrivileged, NNDSCPrivileged, BacksteppingPrivileged)
 }
-#: The privileged reference the benchmark's share of the gap closed is measured against.
-HEADROOM_REFERENCE = NNDSCPrivileged.name
+#: The headroom bound the benchmark's normalized score is measured against.
+HEADROOM_REFERENCE = OraclePolicy.name
 
 
-def make_policy(name: str, env: object, **options: Any) -> Policy:
+def make_policy(name: str, env: object, **options: Any) -> FleetPolicy:
     """Build the policy ``name`` for the scenario of ``env``.
 
     Args:
@@ -95,7 +109,9 @@ def make_policy(name: str, env: object, **options: Any) -> Policy:
     Raises:
         ValueError: Unknown name or option (the message lists the valid ones).
     """
-    known: dict[str, type[Policy]] = {**POLICIES, **PRIVILEGED}
+    known: dict[str, type[FleetPolicy]] = {**POLICIES, **PRIVILEGED}
     if name not in known:
         raise ValueError(f"unknown policy {name!r}; choose one of {sorted(known)}.")
-    return known[name](env, **options)
+    builder: Any = known[name]  # every member takes (env, **options)
+    policy: FleetPolicy = builder(env, **options)
+    return policy

@@ -27,12 +27,12 @@ import numpy as np
 
 from baselines.gains import BacksteppingGains
 from baselines.kernel_types import KINETICS_BACKSTEPPING
-from baselines.policy import Policy
+from baselines.policy import AnalyticPolicy
 
 __all__ = ["BacksteppingPolicy"]
 
 
-class BacksteppingPolicy(Policy):
+class BacksteppingPolicy(AnalyticPolicy):
     """Backstepping with the analytic alpha_dot and nominal-model cancellation (Remark 1).
 
     The equations above run compiled (``baselines.kernels``); the

@@ -20,14 +20,14 @@ also
 
 * hold a fleet that has left its path (``terminated``) at zero actions from
   the step after, noting the step it left at (``ended``), and
-* write every step into a ``cpf_env.sim.recording.StepRecord``, row k for
+* write every step into a ``cpf_env.evaluation.recording.StepRecord``, row k for
   step k of the call, as ``FleetMetrics.record`` does from Python.
 
 Only policies whose whole step is compiled qualify (``supports``): those with
 a compiled kinetic part that act on their observation alone, and the
 privileged references of ``baselines.privileged``, whose ideal-link
 observations and true lumped uncertainty the loop reads from the simulator
-with the compiled functions of ``cpf_env.sim.privileged``. A kinetic part
+with the compiled functions of ``cpf_env.evaluation.privileged``. A kinetic part
 written in Python or a trained agent take the per-step path.
 """
 
@@ -49,13 +49,14 @@ from baselines.kernel_types import (
     PolicyStates,
 )
 from baselines.kernels import WORK_ROWS, _act_fleet
-from baselines.policy import DIAGNOSTICS, Policy
+from baselines.policy import DIAGNOSTICS, AnalyticPolicy
 from baselines.privileged import PrivilegedPolicy
+from cpf_env.envs.policy import FleetPolicy
+from cpf_env.evaluation.privileged import fleet_ideal_observations, fleet_lumped_uncertainty
+from cpf_env.evaluation.recording import CHUNK, StepRecord, new_record, record_fleet
 from cpf_env.sim.arrays import FleetArrays, KernelConstants
 from cpf_env.sim.fleet import FleetSim
 from cpf_env.sim.kernels import step_fleet
-from cpf_env.sim.privileged import fleet_ideal_observations, fleet_lumped_uncertainty
-from cpf_env.sim.recording import CHUNK, StepRecord, new_record, record_fleet
 from cpf_env.sim.threads import PARALLEL_MIN_FLEETS
 
 __all__ = ["ClosedLoop"]
@@ -199,11 +200,11 @@ class ClosedLoop:
             a number of fleets that is not a multiple of P.
     """
 
-    def __init__(self, policies: Policy | Sequence[Policy], sim: FleetSim) -> None:
-        members = [policies] if isinstance(policies, Policy) else list(policies)
-        if not members:
+    def __init__(self, policies: FleetPolicy | Sequence[FleetPolicy], sim: FleetSim) -> None:
+        given = [policies] if isinstance(policies, FleetPolicy) else list(policies)
+        if not given:
             raise ValueError("ClosedLoop needs at least one policy.")
-        for policy in members:
+        for policy in given:
             if not self.supports(policy):
                 raise ValueError(
                     "ClosedLoop runs analytic policies whose whole step is compiled; "
@@ -211,6 +212,10 @@ class ClosedLoop:
                     "privileged reference or another kind of policy): step it with "
                     "sim.step(policy.act_batch(obs))."
                 )
+        members = [
+            policy for policy in given if isinstance(policy, AnalyticPolicy)
+        ]  # all, by supports
+        for policy in members:
             if policy.scenario.n != sim.n or policy.obs_dim != sim.obs_dim:
                 raise ValueError(
                     f"policy {policy.name!r} was built for scenario {policy.scenario.name!r}, "
@@ -243,15 +248,15 @@ class ClosedLoop:
 
     @staticmethod
     def supports(policy: object) -> bool:
-        """True for a compiled ``Policy`` acting on its observation alone, or a privileged one."""
-        if not isinstance(policy, Policy) or policy.kinetics == KINETICS_PYTHON:
+        """True for a compiled ``AnalyticPolicy`` acting on its observation alone, or privileged."""
+        if not isinstance(policy, AnalyticPolicy) or policy.kinetics == KINETICS_PYTHON:
             return False
         if isinstance(policy, PrivilegedPolicy):  # the kernel reads what it is told itself
             return True
         return (
             not policy.privileged
-            and type(policy)._observations is Policy._observations
-            and type(policy)._knowledge is Policy._knowledge
+            and type(policy)._observations is AnalyticPolicy._observations
+            and type(policy)._knowledge is AnalyticPolicy._knowledge
         )
 
     @property

@@ -10,7 +10,7 @@ same packet (its message, eq. [35]),
     (theta_j - theta_i)_compensated = (theta_j - theta_i)_received + age_ij dt vhat_j,
 
 and otherwise run the unchanged controller (the compiled cooperative layer,
-``baselines.kernels``, applies it when ``Policy.delay_compensation`` is set).
+``baselines.kernels``, applies it when ``AnalyticPolicy.delay_compensation`` is set).
 The information is the same
 local observation (weight, theta difference, age and message of each slot);
 nothing is learned. With no delay and no loss every age is 0 and the

@@ -81,7 +81,7 @@ class PolicyStates(NamedTuple):
 
 
 class KnownDynamics(NamedTuple):
-    """What a privileged reference is told per acting row (``cpf_env.sim.privileged``).
+    """What a privileged reference is told per acting row (``cpf_env.evaluation.privileged``).
 
     Read only when ``PolicyConstants.privileged``; the deployable policies get
     ``NO_KNOWLEDGE`` (no rows).
@@ -113,7 +113,7 @@ class CooperativeOutputs(NamedTuple):
     """The cooperative layer's signals of one step, (R, n) each.
 
     What ``cooperative_rows`` writes, and what a kinetic part written in Python
-    (``Policy._kinetics``) receives as ``cooperation``.
+    (``AnalyticPolicy._kinetics``) receives as ``cooperation``.
     """
 
     vhat: np.ndarray  # speed estimate vhat_i used at this step (m/s)

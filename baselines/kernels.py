@@ -20,7 +20,7 @@ docstrings, so that:
   step with the inputs held over the control period.
 
 ``cooperative_rows`` runs the cooperative layer alone, for policies whose
-kinetic part is written in Python (``Policy._kinetics``, see
+kinetic part is written in Python (``AnalyticPolicy._kinetics``, see
 ``docs/extending.md``).
 """
 
@@ -41,7 +41,7 @@ from baselines.kernel_types import (
     PolicyOutputs,
     PolicyStates,
 )
-from cpf_env.model import kernel_cache
+from cpf_env.infra import kernel_cache
 from cpf_env.model.vessel import coriolis_coefficients, damping_coefficients
 from cpf_env.sim.observation import (
     LEADER,
@@ -66,13 +66,13 @@ __all__ = [
     "cooperative_rows",
 ]
 
-# The cached kernels of this package (here and in closed_loop.py) inline cpf_env's helpers
-# and read the types of kernel_types.py: key them on those sources and on these files.
+# The cached kernels of this package (here, in closed_loop.py and mpc_kernels.py) inline
+# cpf_env's helpers and read the types of kernel_types.py: key them on those sources and files.
 kernel_cache.stamp_package(
     Path(__file__).parent,
     tuple(
         Path(__file__).with_name(name)
-        for name in ("kernels.py", "kernel_types.py", "closed_loop.py")
+        for name in ("kernels.py", "kernel_types.py", "closed_loop.py", "mpc_kernels.py")
     ),
 )
 

@@ -57,12 +57,12 @@ import numpy as np
 from baselines.cooperative import exponential_euler
 from baselines.gains import NNDSCGains
 from baselines.kernel_types import KINETICS_NN_DSC
-from baselines.policy import Policy
+from baselines.policy import AnalyticPolicy
 
 __all__ = ["DSCPolicy", "GlobalSpeedPolicy", "NNDSCPolicy", "NoAuxPolicy"]
 
 
-class NNDSCPolicy(Policy):
+class NNDSCPolicy(AnalyticPolicy):
     """NN-based adaptive DSC with saturation auxiliary system (the paper's controller).
 
     The equations above run compiled (``baselines.kernels``); this class turns

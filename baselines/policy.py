@@ -6,7 +6,7 @@ fleets. It reads nothing but the observation and the scenario's known
 constants (nominal model, saturation limits, dt, message size) and never
 touches a simulator.
 
-Interface (``baselines.interface.PolicyInterface``, shared with trained agents):
+Interface (``cpf_env.envs.policy.FleetPolicy``, shared with trained agents):
 
 - ``act_batch(obs (B, n, obs_dim), fleets=None) -> (B, n, 4 + m)``: the core, float64;
 - ``act(observations: dict) -> dict`` for the PettingZoo ``ParallelEnv`` (B = 1, float32);
@@ -35,7 +35,6 @@ from numpy.typing import ArrayLike, NDArray
 
 from baselines.cooperative import LocalObservation, exponential_euler
 from baselines.gains import CooperativeGains
-from baselines.interface import PolicyInterface
 from baselines.kernel_types import (
     KINETICS_PYTHON,
     NO_KNOWLEDGE,
@@ -47,16 +46,17 @@ from baselines.kernel_types import (
 )
 from baselines.kernels import act_rows, cooperative_rows
 from cpf_env import scenarios
+from cpf_env.envs.policy import FleetPolicy
 from cpf_env.model.vessel import PARAM_SIZE
 from cpf_env.scenarios import Scenario
 from cpf_env.sim.fleet import observation_layout
 from cpf_env.sim.threads import PARALLEL_MIN_FLEETS
 
-__all__ = ["DIAGNOSTICS", "Policy", "resolve_scenario", "virtual_control"]
+__all__ = ["DIAGNOSTICS", "AnalyticPolicy", "resolve_scenario", "virtual_control"]
 
 Array = NDArray[np.float64]
 
-#: Names of ``Policy.diagnostics`` and their trailing shapes after (B, n).
+#: Names of ``AnalyticPolicy.diagnostics`` and their trailing shapes after (B, n).
 DIAGNOSTICS: dict[str, tuple[int, ...]] = {
     "nn_output": (3,),
     "nubar_dot": (3,),
@@ -104,7 +104,7 @@ def virtual_control(k1: Array, z1: Array, t1: Array, vhat: Array) -> Array:
     return -k1 * z1 + t1 * vhat[..., None]
 
 
-class Policy(PolicyInterface):
+class AnalyticPolicy(FleetPolicy):
     """Base class: gains in kernel form, the internal states and their bookkeeping.
 
     A subclass sets ``kinetics`` to a compiled kinetic part of

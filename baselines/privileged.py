@@ -3,7 +3,7 @@
 Not deployable: they show how much better a controller of the same
 structure could do with perfect information, so that "how much of the gap
 did a policy close" has a top. Each is its deployable parent with two
-pieces of knowledge from the simulator (``cpf_env.sim.privileged``):
+pieces of knowledge from the simulator (``cpf_env.evaluation.privileged``):
 
 1. **the true lumped uncertainty**: per vessel the force f with
    M nu' = tau - f (true model, the paper's unmodeled dynamics and
@@ -43,15 +43,40 @@ from numpy.typing import ArrayLike, NDArray
 from baselines.backstepping import BacksteppingPolicy
 from baselines.kernel_types import KnownDynamics
 from baselines.nn_dsc import NNDSCPolicy
-from baselines.policy import Policy
+from baselines.policy import AnalyticPolicy
+from cpf_env.evaluation.privileged import ideal_link_observations, true_dynamics
 from cpf_env.sim.fleet import FleetSim
 from cpf_env.sim.observation import SLOTS
-from cpf_env.sim.privileged import ideal_link_observations, true_dynamics
 
-__all__ = ["BacksteppingPrivileged", "NNDSCPrivileged", "PrivilegedPolicy"]
+__all__ = [
+    "BacksteppingPrivileged",
+    "NNDSCPrivileged",
+    "PrivilegedPolicy",
+    "fleet_rows",
+    "simulator_of",
+]
 
 
-def _simulator_of(env: object) -> FleetSim | None:
+def fleet_rows(sim: FleetSim, fleets: ArrayLike | None) -> NDArray[np.int64]:
+    """The fleet indices (F,) of ``sim`` a policy reads, checked: default every fleet.
+
+    Raises:
+        ValueError: ``fleets`` is not a 1-D array of indices in [0, ``sim.num_fleets``).
+    """
+    rows = np.arange(sim.num_fleets) if fleets is None else np.asarray(fleets)
+    if (
+        rows.ndim != 1
+        or not np.issubdtype(rows.dtype, np.integer)
+        or np.any((rows < 0) | (rows >= sim.num_fleets))
+    ):
+        raise ValueError(
+            f"fleets must be indices in [0, {sim.num_fleets}) of the simulator, got "
+            f"{np.asarray(fleets).tolist()!r}."
+        )
+    return np.ascontiguousarray(rows, dtype=np.int64)
+
+
+def simulator_of(env: object) -> FleetSim | None:
     """The FleetSim of ``env`` (itself, ``env.sim`` or ``env.unwrapped.sim``), or None."""
     for candidate in (env, getattr(env, "sim", None), getattr(env, "unwrapped", None)):
         if isinstance(candidate, FleetSim):
@@ -62,12 +87,12 @@ def _simulator_of(env: object) -> FleetSim | None:
     return None
 
 
-class PrivilegedPolicy(Policy):
+class PrivilegedPolicy(AnalyticPolicy):
     """Mixin of the privileged references: observations and knowledge read from a FleetSim.
 
     Args:
         env: A FleetSim or an env with one (bound at once), or anything
-            ``Policy`` accepts (then ``bind_simulator`` before acting).
+            ``AnalyticPolicy`` accepts (then ``bind_simulator`` before acting).
         **options: The parent's gains.
     """
 
@@ -77,7 +102,7 @@ class PrivilegedPolicy(Policy):
         super().__init__(env, **options)
         self._sim: FleetSim | None = None
         self._rows = np.zeros(0, dtype=np.int64)
-        sim = _simulator_of(env)
+        sim = simulator_of(env)
         if sim is not None:
             self.bind_simulator(sim)
 
@@ -95,17 +120,7 @@ class PrivilegedPolicy(Policy):
                 f"policy {self.name!r} was built for scenario {self.scenario.name!r} but the "
                 f"simulator runs {sim.scenario.name!r}; build it for that scenario."
             )
-        rows = np.arange(sim.num_fleets) if fleets is None else np.asarray(fleets)
-        if (
-            rows.ndim != 1
-            or not np.issubdtype(rows.dtype, np.integer)
-            or np.any((rows < 0) | (rows >= sim.num_fleets))
-        ):
-            raise ValueError(
-                f"fleets must be indices in [0, {sim.num_fleets}) of the simulator, got "
-                f"{np.asarray(fleets).tolist()!r}."
-            )
-        self._sim, self._rows = sim, rows.astype(np.int64)
+        self._sim, self._rows = sim, fleet_rows(sim, fleets)
 
     def _bound(self) -> FleetSim:
         if self._sim is None:

@@ -49,7 +49,7 @@ from numpy.typing import NDArray
 
 from cpf_commands.bench.run import run_bench
 from cpf_commands.bench.stats import bootstrap_interval, iqm
-from cpf_env import atomic
+from cpf_env.infra import atomic
 
 __all__ = [
     "Curve",

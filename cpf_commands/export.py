@@ -16,7 +16,7 @@ import shlex
 from collections.abc import Sequence
 from pathlib import Path
 
-from cpf_env import atomic
+from cpf_env.infra import atomic
 
 __all__ = ["export_main"]
 

@@ -35,7 +35,7 @@ SCHEDULE_KEYS = ("eval_every", "eval_seeds", "checkpoint_every")
 
 
 def _valid_keys() -> list[str]:
-    from agents.training import TrainConfig
+    from agents.train_config import TrainConfig
 
     return [field.name for field in dataclasses.fields(TrainConfig)] + list(SCHEDULE_KEYS)
 

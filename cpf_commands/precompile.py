@@ -62,7 +62,7 @@ def _warm_policy_kernels() -> float:
     from baselines import make_policy
     from baselines.closed_loop import ClosedLoop
     from cpf_env import FleetSim, scenarios
-    from cpf_env.sim.recording import new_record
+    from cpf_env.evaluation.recording import new_record
     from cpf_env.sim.threads import PARALLEL_MIN_FLEETS
 
     start = time.perf_counter()

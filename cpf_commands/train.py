@@ -40,7 +40,7 @@ from cpf_env.scenarios.suite import SUITE
 
 if TYPE_CHECKING:
     from agents.schedule import RunSchedule
-    from agents.training import TrainConfig
+    from agents.train_config import TrainConfig
 
 __all__ = ["DEFAULT_CHECKPOINT_EVERY", "DEFAULT_EVAL_EVERY", "train_main"]
 
@@ -82,7 +82,7 @@ def _reward_overrides(items: list[str]) -> dict[str, float]:
 
 
 def _parser() -> argparse.ArgumentParser:
-    from agents.training import TrainConfig
+    from agents.train_config import TrainConfig
     from baselines import POLICIES
     from cpf_env.envs.residual import EXTRAS, RESIDUAL_MODES
     from cpf_env.scenarios.reward_weights import REWARD_FORMS
@@ -257,7 +257,7 @@ def _resolve(args: argparse.Namespace, given: set[str]) -> tuple[TrainConfig, Ru
         ValueError: A bad hyperparameter file or value.
     """
     from agents.schedule import RunSchedule
-    from agents.training import TrainConfig
+    from agents.train_config import TrainConfig
 
     values = {} if args.config is None else read_hyperparameters(args.config)
     for dest in sorted(given - NOT_HYPERPARAMETERS):
@@ -322,7 +322,7 @@ def train_main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     from agents.schedule import TrainingInterrupted
     from agents.training import train
-    from cpf_env.atomic import FolderLockedError
+    from cpf_env.infra.atomic import FolderLockedError
 
     given = _given(parser, argv)
     try:

@@ -26,7 +26,7 @@ from typing import Any
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 # First: numba picks a kernel's cache key when it compiles the decorator (kernel_cache).
-from cpf_env.model import kernel_cache  # noqa: F401  # isort: skip
+from cpf_env.infra import kernel_cache  # noqa: F401  # isort: skip
 
 from pettingzoo.utils.env import AECEnv
 from pettingzoo.utils.wrappers import OrderEnforcingWrapper
@@ -67,8 +67,10 @@ def parallel_env(
         **kwargs: ``render_mode`` (``"human"``, ``"rgb_array"`` or None);
             ``max_cycles`` (PettingZoo's name for the episode length in control
             steps, the same as ``max_steps``; give one of the two);
-            ``info_level`` (``"full"``, ``"minimal"`` or ``"none"``: how much the
-            per-step infos carry, see ``docs/environment.md``); and any
+            ``info_level`` (``"none"``, the default of every route, ``"minimal"`` or
+            ``"full"``: how much the per-step infos carry, see ``docs/environment.md``);
+            ``base_policy`` and ``residual`` (the residual form: agents act through a
+            bounded correction of a base policy object); and any
             ``Scenario`` field as an override, e.g. ``max_steps=500``, ``v0=0.2``,
             ``dt=0.02``, ``substeps=2``, ``links=LinkImpairments(0.1, 2)``,
             ``reward=RewardWeights(team=True)``. Unknown names raise ``ValueError``

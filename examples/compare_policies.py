@@ -23,14 +23,14 @@ from pathlib import Path
 from baselines import NNDSCGains, make_policy
 from cpf_commands.bench.report import CellResult
 from cpf_commands.bench.run import run_bench
-from cpf_commands.common.policies import BenchPolicy
 from cpf_env import scenarios
+from cpf_env.envs.policy import FleetPolicy
 from cpf_env.scenarios import Scenario
 
 SOFT_K2 = tuple(0.5 * k for k in NNDSCGains().K2)
 
 
-def soft_nn_dsc(scenario: Scenario) -> BenchPolicy:
+def soft_nn_dsc(scenario: Scenario) -> FleetPolicy:
     """The candidate: ``nn_dsc`` with half its kinetic gains, built for ``scenario``."""
     return make_policy("nn_dsc", scenario, K2=SOFT_K2)
 

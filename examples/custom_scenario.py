@@ -77,7 +77,7 @@ def main(steps: int = 200) -> dict[str, Any]:
         vessel-steps with a saturated axis.
     """
     scenario = build_scenario()
-    env = cpf_env.parallel_env(scenario)
+    env = cpf_env.parallel_env(scenario, info_level="full")
     observations, infos = env.reset(seed=0)
     layout = env.layout
     print(f"{scenario.name}: {scenario.description}")

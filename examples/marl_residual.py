@@ -37,7 +37,7 @@ import torch
 from agents.marl.policy_folder import save_marl_policy
 from agents.marl.tasks import CpfTask  # imports BenchMARL (with the TorchRL 0.14 alias)
 from benchmarl.experiment.callback import Callback  # isort: skip
-from cpf_env import atomic
+from cpf_env.infra import atomic
 
 FLEETS = 64
 STEPS_PER_BATCH = 100

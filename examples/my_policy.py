@@ -31,15 +31,15 @@ from baselines import make_policy
 from baselines.cooperative import LocalObservation
 from baselines.gains import BacksteppingGains
 from baselines.kernel_types import CooperativeOutputs
-from baselines.policy import Policy, virtual_control
+from baselines.policy import AnalyticPolicy, virtual_control
 
 Array = NDArray[np.float64]
 
 
-class ProportionalPolicy(Policy):
+class ProportionalPolicy(AnalyticPolicy):
     """tau0 = -K2 (nu - alpha) - z1: backstepping without the model terms.
 
-    ``baselines.policy.Policy`` gives the cooperative layer (path-variable
+    ``baselines.policy.AnalyticPolicy`` gives the cooperative layer (path-variable
     consensus, the distributed speed estimator, the commanded theta rate and
     the message), the per-fleet states, ``act``, ``act_batch``, ``predict``,
     ``reset`` and ``diagnostics``; a subclass gives the force command.
@@ -74,7 +74,7 @@ class ProportionalPolicy(Policy):
         return tau0, {"nn_output": zeros, "nubar_dot": zeros, "alpha": alpha, "aux_state": zeros}
 
 
-def tuned_backstepping(scenario: Any, **options: Any) -> Policy:
+def tuned_backstepping(scenario: Any, **options: Any) -> AnalyticPolicy:
     """``backstepping`` with other velocity gains K2 (N s/m, N s/m, N m s/rad) unless given."""
     options.setdefault("K2", (80.0, 90.0, 10.0))
     return make_policy("backstepping", scenario, **options)

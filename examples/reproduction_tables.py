@@ -35,7 +35,7 @@ from cpf_commands.run.reproduce import (
     settling_time,
 )
 from cpf_env import scenarios
-from cpf_env.sim.metrics import episode_metrics
+from cpf_env.evaluation.metrics import episode_metrics
 
 #: (scenario, leakage) columns of the claims table.
 READINGS = (

@@ -48,7 +48,7 @@ except ImportError as error:  # an optional stack: say which extra brings it
 
 import cpf_env
 from cpf_commands.common.arguments import positive_int
-from cpf_env.envs.parallel import INFO_LEVELS
+from cpf_env.envs.core import INFO_LEVELS
 
 #: Name the env is registered under (``config.environment(ENV_NAME, env_config=...)``).
 ENV_NAME = "cpf_env_parallel"

@@ -7,7 +7,7 @@ warm-up rollout:
 1. ``FleetVecEnv``: residual on ``nn_dsc``, one batched ``FleetSim`` (the package's route);
 2. a zero-cost ``VecEnv`` of the same sizes (returns zeros): SB3's own ceiling
    on this machine, the most any env could reach;
-3. SuperSuit: ``ResidualWrapper`` ParallelEnvs concatenated by
+3. SuperSuit: residual ParallelEnvs concatenated by
    ``pettingzoo_env_to_vec_env_v1`` + ``concat_vec_envs_v1`` (the route a user
    would reach for; needs ``pip install supersuit``), with fewer fleets since
    it is one Python env per fleet.
@@ -87,7 +87,7 @@ def timed_ppo(
     ``seed=None`` for SuperSuit's vector env, which has no ``seed()``; ``n_epochs`` and
     ``batch_size`` override the defaults.
     """
-    from agents.training import TrainConfig
+    from agents.train_config import TrainConfig
 
     config = TrainConfig()
     env = make_env()
@@ -109,16 +109,15 @@ def timed_ppo(
 
 
 def supersuit_env(fleets: int) -> VecEnv:
-    """``fleets`` ResidualWrapper ParallelEnvs as one SB3 VecEnv through SuperSuit."""
+    """``fleets`` residual ParallelEnvs as one SB3 VecEnv through SuperSuit."""
     import supersuit
 
     import cpf_env
     from baselines import make_policy
-    from cpf_env.envs.wrappers import ResidualWrapper
 
     def one() -> Any:
-        env = cpf_env.parallel_env("bench_saturation")
-        return ResidualWrapper(env, make_policy("nn_dsc", env))
+        base = make_policy("nn_dsc", "bench_saturation")
+        return cpf_env.parallel_env("bench_saturation", base_policy=base)
 
     vec = supersuit.pettingzoo_env_to_vec_env_v1(one())
     return supersuit.concat_vec_envs_v1(vec, fleets, num_cpus=0, base_class="stable_baselines3")
@@ -159,7 +158,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         import supersuit  # noqa: F401
 
-        routes["SuperSuit + ResidualWrapper"] = (
+        routes["SuperSuit + residual ParallelEnv"] = (
             lambda: supersuit_env(args.supersuit_fleets),
             args.supersuit_fleets,
             None,

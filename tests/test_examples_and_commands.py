@@ -10,7 +10,7 @@ from baselines import POLICIES
 from cpf_commands.run.experiment import run_episode
 from cpf_commands.speed import busy_competitor, measure, speed_main
 from cpf_env import scenarios
-from cpf_env.sim.metrics import episode_metrics
+from cpf_env.evaluation.metrics import episode_metrics
 
 ROOT = Path(__file__).resolve().parents[1]
 

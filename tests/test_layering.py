@@ -22,10 +22,24 @@ PACKAGES = ("cpf_env", "baselines", "agents", "cpf_commands")
 #: Layer of a module: the longest prefix listed here wins.
 #: Value: the prefixes (of the project's modules) that layer may import.
 ALLOWED: dict[str, tuple[str, ...]] = {
-    "cpf_env.model": ("cpf_env.model",),
-    "cpf_env.scenarios": ("cpf_env.model", "cpf_env.scenarios"),
-    "cpf_env.sim": ("cpf_env.model", "cpf_env.scenarios", "cpf_env.sim"),
-    "cpf_env.envs": ("cpf_env.model", "cpf_env.scenarios", "cpf_env.sim", "cpf_env.envs"),
+    "cpf_env.infra": ("cpf_env.infra",),
+    "cpf_env.model": ("cpf_env.infra", "cpf_env.model"),
+    "cpf_env.scenarios": ("cpf_env.infra", "cpf_env.model", "cpf_env.scenarios"),
+    "cpf_env.sim": ("cpf_env.infra", "cpf_env.model", "cpf_env.scenarios", "cpf_env.sim"),
+    "cpf_env.evaluation": (
+        "cpf_env.infra",
+        "cpf_env.model",
+        "cpf_env.scenarios",
+        "cpf_env.sim",
+        "cpf_env.evaluation",
+    ),
+    "cpf_env.envs": (
+        "cpf_env.infra",
+        "cpf_env.model",
+        "cpf_env.scenarios",
+        "cpf_env.sim",
+        "cpf_env.envs",
+    ),
     "cpf_env": ("cpf_env",),
     "baselines": ("cpf_env", "baselines"),
     "agents": ("cpf_env", "baselines", "agents"),

@@ -4,8 +4,8 @@ BenchMARL's own ``PettingZooClass`` cannot load this package (it looks tasks
 up by PettingZoo module name) and builds every ``SerialEnv`` worker with the
 same seed, so all workers play identical episodes. ``CpfPettingZooTask``
 has the members and configs of ``CpfTask`` on the same residual composition,
-one ``cpf_env.parallel_env`` per worker (``ResidualWrapper`` over the named
-base policy, ``info_level="none"``), and seeds the i-th env its maker builds
+one residual ``cpf_env.parallel_env`` per worker (over the named base policy,
+resolved by ``agents.resolve``), and seeds the i-th env its maker builds
 with seed + i: distinct, reproducible episodes in every worker (TorchRL's
 ``SerialEnv`` may build one more env first, for its specs; it takes seed + 0).
 With ``parallel_collection=True`` the maker is copied into each process and
@@ -31,12 +31,11 @@ import torch
 
 import cpf_env
 from agents.marl.tasks import CpfTask, CpfTaskClass, CpfTaskEnum, checked_config
-from agents.vec_env import resolve_base_policy
+from agents.resolve import resolve_base_policy
 from cpf_env.envs.input_statistics import estimate_input_statistics
-from cpf_env.envs.parallel import make_scenario
-from cpf_env.envs.residual import ResidualConfig, ZeroPolicy
+from cpf_env.envs.residual import learner_config
 from cpf_env.envs.torchrl_env import GROUP
-from cpf_env.envs.wrappers import ResidualWrapper
+from cpf_env.scenarios import make_scenario
 
 from benchmarl.environments import TaskClass  # isort: skip  (after agents.marl.tasks)
 from torchrl.envs import ClipTransform, EnvBase, ObservationNorm, PettingZooWrapper, Transform
@@ -58,26 +57,14 @@ class CpfPettingZooTaskClass(CpfTaskClass):
             ValueError: Discrete actions, a held-out scenario or evaluation seeds.
         """
         config, first = self.training_config(continuous_actions, seed, int(num_envs) + 1)
-        if config.stagger:
-            raise ValueError(
-                "stagger spreads the fleets of one batched env; the PettingZoo route has "
-                "one fleet per worker. Set stagger=false."
-            )
         scenario = make_scenario(config.scenario, max_steps=config.max_steps, **config.overrides)
         built = itertools.count()
 
         def make() -> EnvBase:
-            base = resolve_base_policy(None if config.base == "none" else config.base, scenario)
-            residual = _residual(config.residual(), base is None)
-            wrapped = ResidualWrapper(
-                cpf_env.parallel_env(scenario, info_level="none"),
-                ZeroPolicy(4 + scenario.message_size) if base is None else base,
-                scale=residual.scale,
-                mode=residual.mode,
-                extras=residual.extras,
-            )
+            base = resolve_base_policy(config.base_policy, scenario)
+            env = cpf_env.parallel_env(scenario, base_policy=base, residual=config.residual())
             return PettingZooWrapper(
-                wrapped,
+                env,
                 seed=first + next(built),
                 return_state=config.state,
                 device=device,
@@ -91,11 +78,11 @@ class CpfPettingZooTaskClass(CpfTaskClass):
         if not config.normalize:
             return []
         scenario = make_scenario(config.scenario, max_steps=config.max_steps, **config.overrides)
-        base = resolve_base_policy(None if config.base == "none" else config.base, scenario)
+        base = resolve_base_policy(config.base_policy, scenario)
         stats = estimate_input_statistics(
             scenario,
             base,
-            _residual(config.residual(), base is None),
+            learner_config(base, config.residual()),
             steps=config.normalization_steps,
         )
         key = (GROUP, "observation")
@@ -110,11 +97,6 @@ class CpfPettingZooTaskClass(CpfTaskClass):
     def env_name() -> str:
         """``"cpf_pettingzoo"``."""
         return ENV_NAME
-
-
-def _residual(config: ResidualConfig, from_scratch: bool) -> ResidualConfig:
-    """The task's composition; without a base, forces and rate as fractions (``make_env``'s)."""
-    return ResidualConfig(mode="force_and_rate", scale=1.0) if from_scratch else config
 
 
 class _PettingZooTaskEnum(CpfTaskEnum):

@@ -48,8 +48,8 @@ from agents.agent_folder import (
 )
 from agents.folder_files import AgentFolderError, check_fields, field, read_manifest
 from agents.train_config import TrainConfig
-from cpf_env import atomic
 from cpf_env.envs.input_statistics import InputStatistics
+from cpf_env.infra import atomic
 
 __all__ = ["MARL_FORMAT", "marl_config", "read_marl_agent", "save_marl_policy"]
 

@@ -68,27 +68,29 @@ class CpfTaskConfig:
     Attributes:
         scenario: The registered scenario (a training scenario, not a ``_shift``).
         max_steps: Episode length in control periods (the scenario's ``max_steps``).
-        base: Base policy name (``baselines.POLICIES``), or ``"none"``.
+        base_policy: Base policy name (``baselines.POLICIES``), or ``"none"``.
         mode: Residual mode (``RESIDUAL_MODES``).
         scale: Residual range as a fraction of the limits.
         extras: Local extras of the learner's input (``EXTRAS``).
         normalize: Scale inputs with statistics of the base policy alone.
         normalization_steps: Control periods those statistics pool.
         state: Give centralized critics the global state.
-        stagger: End the fleets' first episodes at spread horizons (native route).
+        stagger: Spread the fleets' horizons (``EpisodeCore``; on, as on every
+            batched route; one fleet per worker on the PettingZoo route has nothing
+            to spread).
         overrides: Other ``Scenario`` field overrides.
     """
 
     scenario: str
     max_steps: int = 200
-    base: str = "nn_dsc"
+    base_policy: str = "nn_dsc"
     mode: str = "force"
     scale: float = 0.2
     extras: list[str] = dataclasses.field(default_factory=list)
     normalize: bool = True
     normalization_steps: int = 200
     state: bool = True
-    stagger: bool = False
+    stagger: bool = True
     overrides: dict[str, Any] = dataclasses.field(default_factory=dict)
 
     def residual(self) -> ResidualConfig:
@@ -144,15 +146,15 @@ class CpfTaskClass(TaskClass):
         def make() -> EnvBase:
             return make_env(
                 config.scenario,
-                num_fleets=num_envs,
-                base=config.base,
-                residual=config.residual(),
+                num_envs,
+                config.base_policy,
+                config.residual(),
+                config.stagger,
                 seed=first,
                 device=device,
                 normalize=config.normalize,
                 normalization_steps=config.normalization_steps,
                 state=config.state,
-                stagger=config.stagger,
                 max_steps=config.max_steps,
                 **config.overrides,
             )

@@ -34,8 +34,8 @@ from cpf_commands.common.arguments import add_scenarios_argument, non_negative_i
 from cpf_commands.common.outputs import claim_output_folder
 from cpf_commands.common.policies import policy_argument, trusting_pickles
 from cpf_commands.common.ray_runtime import add_address_argument
-from cpf_env import atomic
-from cpf_env.envs.parallel import make_scenario
+from cpf_env.infra import atomic
+from cpf_env.scenarios import make_scenario
 from cpf_env.scenarios.splits import SPLITS
 from cpf_env.scenarios.suite import is_deterministic, list_suite
 

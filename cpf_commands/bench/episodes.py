@@ -2,7 +2,7 @@
 
 ``run_episodes`` runs one policy on one scenario for S paired seeds through
 the commands' one rollout (``cpf_commands.common.rollout``) and returns the
-metrics of ``cpf_env.sim.fleet_metrics`` (``METRICS``), the same numbers
+metrics of ``cpf_env.evaluation.fleet_metrics`` (``METRICS``), the same numbers
 ``cpf-run`` reports. ``docs/benchmark.md`` defines every metric.
 """
 
@@ -14,16 +14,16 @@ import numpy as np
 from numpy.typing import NDArray
 from tqdm.auto import tqdm
 
-from cpf_commands.common.policies import BenchPolicy
 from cpf_commands.common.rollout import rollout
+from cpf_env.envs.policy import FleetPolicy
+from cpf_env.evaluation.fleet_metrics import METRICS, WINDOW_FRACTION
 from cpf_env.scenarios import Scenario
-from cpf_env.sim.fleet_metrics import METRICS, WINDOW_FRACTION
 
 __all__ = ["METRICS", "WINDOW_FRACTION", "run_episodes"]
 
 
 def run_episodes(
-    policy: BenchPolicy,
+    policy: FleetPolicy,
     scenario: Scenario,
     seeds: Sequence[int],
     steps: int | None = None,

@@ -20,7 +20,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from cpf_commands.bench.report import CellResult
-from cpf_env import atomic
+from cpf_env.infra import atomic
 
 __all__ = ["ENV_NAME", "marl_eval_dict", "write_marl_eval"]
 
@@ -44,5 +44,5 @@ def marl_eval_dict(cells: Sequence[CellResult]) -> dict[str, object]:
 
 
 def write_marl_eval(cells: Sequence[CellResult], path: str | Path) -> None:
-    """Write ``marl_eval_dict(cells)`` as JSON to ``path``, atomically (``cpf_env.atomic``)."""
+    """Write ``marl_eval_dict(cells)`` as JSON to ``path`` atomically (``cpf_env.infra.atomic``)."""
     atomic.write_text(path, json.dumps(marl_eval_dict(cells), indent=1, sort_keys=True) + "\n")

@@ -1,7 +1,7 @@
 """Regenerate docs/results.md's benchmark tables: ``python -m cpf_commands.bench.results_page``.
 
 Runs cpf-bench's default policies (every deployable baseline and the
-headroom reference ``nn_dsc_privileged``) and the committed trained agent on
+headroom bound ``oracle``) and the committed trained agent on
 the suite's ``test`` split (20 seeds) and ``shift`` split (10 seeds) with
 ``run_bench``, writes
 both results folders (``results/bench_test/``, ``results/bench_shift/``),
@@ -131,16 +131,16 @@ def _section(test: Sequence[CellResult], shift: Sequence[CellResult], note: str)
         "",
         *_suite_table(test),
         "",
-        "Share of the gap to the headroom reference `nn_dsc_privileged` (told the true model "
-        "error and disturbances, ideal links; not deployable) that each policy closes, "
-        "`test` split: (nn_dsc - policy) / (nn_dsc - nn_dsc_privileged) of the mean "
-        "final-window cost, with its paired 95 % bootstrap interval (0 = `nn_dsc`, 1 = the "
-        "headroom reference):",
+        "Normalized score against the headroom bound `oracle` (receding-horizon control "
+        "told the true model, the future disturbances, ideal links and v0; not deployable), "
+        "`test` split: (nn_dsc - policy) / (nn_dsc - oracle) of the mean final-window cost, "
+        "with its paired 95 % bootstrap interval (0 = `nn_dsc`, 1 = the bound; above 1 "
+        "flagged):",
         "",
         *_gap_lines(test, "cost_window"),
         "",
         "The same for the whole-episode cost, which the start-up transient dominates; n/a "
-        "where `nn_dsc_privileged` is not better than `nn_dsc`:",
+        "where `oracle` is not better than `nn_dsc`:",
         "",
         *_gap_lines(test, "cost"),
         "",

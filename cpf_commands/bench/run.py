@@ -8,7 +8,10 @@ batched simulator (``cpf_commands.common.rollout.rollout_group``: one large
 batch per scenario, the same numbers as a batch per cell); a Ray run sends
 one (policy, scenario) cell per task (``cpf_commands.bench.episodes``). A
 scenario in which nothing is random (``cpf_env.scenarios.suite.is_deterministic``)
-runs one episode: its seeds would all give the same one. ``write_outputs``
+runs one episode: its seeds would all give the same one. The cells of the
+receding-horizon policies (``oracle``, ``mpc``) are read from the content-keyed
+cache of ``cpf_commands.bench.cache`` when it holds them, and written to it
+when they ran whole episodes (a quick look with ``--steps`` is not kept). ``write_outputs``
 fills the output folder with ``episodes.csv``, ``summary.csv``, ``summary.md``,
 the figures and ``report.html`` (the ranked tables and the figures in one
 page); ``cpf_commands.bench.cli`` is the command around it.
@@ -28,14 +31,13 @@ from pathlib import Path
 
 from tqdm.auto import tqdm
 
-from cpf_commands.bench import profiles, ranking, views
+from cpf_commands.bench import cache, profiles, ranking, views
 from cpf_commands.bench.episodes import run_episodes
 from cpf_commands.bench.html_report import html_report
 from cpf_commands.bench.report import HEADLINE, CellResult, episodes_csv, summarize, summary_csv
 from cpf_commands.bench.verdict import COST_MARGIN, check_margin
 from cpf_commands.common.outputs import foreign_files
 from cpf_commands.common.policies import (
-    BenchPolicy,
     PolicySpec,
     TrustedAgentFolder,
     policy_label,
@@ -44,9 +46,9 @@ from cpf_commands.common.policies import (
 )
 from cpf_commands.common.ray_runtime import start_ray
 from cpf_commands.common.rollout import rollout_group
-from cpf_env import atomic
-from cpf_env.envs.parallel import make_scenario
-from cpf_env.scenarios import Scenario
+from cpf_env.envs.policy import FleetPolicy
+from cpf_env.infra import atomic
+from cpf_env.scenarios import Scenario, make_scenario
 from cpf_env.scenarios.splits import EVALUATION_SEED, SPLITS, split_scenario
 from cpf_env.scenarios.suite import is_deterministic
 
@@ -82,10 +84,10 @@ DEFAULT_REFERENCE = "nn_dsc"
 
 
 def default_policies() -> list[str]:
-    """``cpf-bench``'s default policy set: every deployable baseline and the headroom reference.
+    """``cpf-bench``'s default policy set: every deployable baseline and the headroom bound.
 
-    The headroom reference (``baselines.HEADROOM_REFERENCE``, privileged, not
-    deployable) is what the share of the gap closed is measured against.
+    The headroom bound (``baselines.HEADROOM_REFERENCE``, ``oracle``, privileged,
+    not deployable) is what the normalized score is measured against.
     """
     from baselines import HEADROOM_REFERENCE, POLICIES
 
@@ -128,7 +130,7 @@ def write_outputs(
 
     report.html holds the ranked tables (``ranking``) and every figure inline.
 
-    The folder is built beside ``out`` and replaces it whole (``cpf_env.atomic``):
+    The folder is built beside ``out`` and replaces it whole (``cpf_env.infra.atomic``):
     a run killed while writing leaves the previous results.
 
     Args:
@@ -189,13 +191,13 @@ def _figures(
 
 def _build(
     labelled: dict[str, PolicySpec], tasks: Sequence[Scenario]
-) -> tuple[dict[tuple[str, str], BenchPolicy], dict[tuple[str, str], str]]:
+) -> tuple[dict[tuple[str, str], FleetPolicy], dict[tuple[str, str], str]]:
     """Each policy built for each scenario, and the (label, scenario) pairs that did not fit.
 
     Raises:
         ValueError: A policy that fits none of the scenarios (the first reason).
     """
-    built: dict[tuple[str, str], BenchPolicy] = {}
+    built: dict[tuple[str, str], FleetPolicy] = {}
     skipped: dict[tuple[str, str], str] = {}
     for label, spec in labelled.items():
         reasons = []
@@ -229,7 +231,7 @@ def run_cell(
 
 def _run_here(
     jobs: Sequence[_Job],
-    built: dict[tuple[str, str], BenchPolicy],
+    built: dict[tuple[str, str], FleetPolicy],
     steps: int | None,
     progress: bool,
 ) -> list[CellResult]:
@@ -372,10 +374,19 @@ def run_bench(
         for task in tasks
         if (label, task.name) in built
     ]
-    if distribute:
-        cells = _run_on_ray(jobs, steps, address, progress)
+    found = _cached(jobs, steps)
+    missing = [job for job in jobs if (job[0], job[2].name) not in found]
+    if not missing:
+        ran = []
+    elif distribute:
+        ran = _run_on_ray(missing, steps, address, progress)
     else:
-        cells = _run_here(jobs, built, steps, progress)
+        ran = _run_here(missing, built, steps, progress)
+    for job, cell in zip(missing, ran, strict=True):
+        if _cacheable(job) and steps in (None, job[2].max_steps):  # whole episodes only
+            cache.store_cell(job[0], job[2], job[3], steps, cell.metrics)
+        found[(job[0], job[2].name)] = cell
+    cells = [found[(label, task.name)] for label, _, task, _ in jobs]
     if out is not None:
         write_outputs(
             cells,
@@ -387,6 +398,25 @@ def run_bench(
             cost_margin=cost_margin,
         )
     return cells
+
+
+def _cacheable(job: _Job) -> bool:
+    """A cell of a receding-horizon policy given by name (``cpf_commands.bench.cache``)."""
+    return isinstance(job[1], str) and job[1] in cache.CACHED_POLICIES and job[0] == job[1]
+
+
+def _cached(jobs: Sequence[_Job], steps: int | None) -> dict[tuple[str, str], CellResult]:
+    """The cells found in the content-keyed cache, by (label, scenario name)."""
+    found = {}
+    for label, spec, task, seeds in jobs:
+        if not _cacheable((label, spec, task, seeds)):
+            continue
+        metrics = cache.load_cell(label, task, seeds, steps)
+        if metrics is not None:
+            found[(label, task.name)] = CellResult(
+                label, task.name, seeds, is_deterministic(task), metrics
+            )
+    return found
 
 
 def reference_label(reference: str | None, labelled: Mapping[str, PolicySpec]) -> str:

@@ -10,7 +10,7 @@ takes the folder's lock first: a second writer is refused, and a folder whose
 replacement was killed between its two renames is put back before the
 ``--force`` decision is made on it. The returned lock refuses a second
 writer until the command ends. The outputs are then written with
-``cpf_env.atomic.staged_folder``: the folder is replaced by a complete new
+``cpf_env.infra.atomic.staged_folder``: the folder is replaced by a complete new
 one, so stale files of an earlier run (figures a ``--no-figures`` run does not
 draw) disappear and a symbolic link in the old folder is never followed.
 """
@@ -21,7 +21,7 @@ from collections.abc import Collection
 from fnmatch import fnmatchcase
 from pathlib import Path
 
-from cpf_env import atomic
+from cpf_env.infra import atomic
 
 __all__ = ["claim_output_folder", "foreign_files"]
 

@@ -41,13 +41,11 @@ from importlib import metadata
 from pathlib import Path
 from typing import Any
 
-from cpf_env.envs.parallel import make_scenario
 from cpf_env.envs.policy import FleetPolicy
-from cpf_env.scenarios import Scenario
+from cpf_env.scenarios import Scenario, make_scenario
 
 __all__ = [
     "ENTRY_POINT_GROUP",
-    "BenchPolicy",
     "FleetPolicy",
     "PolicySpec",
     "TrustedAgentFolder",
@@ -61,10 +59,6 @@ __all__ = [
     "user_policy",
 ]
 
-
-#: The policy contract (``cpf_env.envs.policy.FleetPolicy``) under the name the commands used
-#: before it was defined once; kept for existing callers.
-BenchPolicy = FleetPolicy
 
 PolicySpec = str | Path | FleetPolicy | Callable[[Scenario], FleetPolicy]
 

@@ -24,7 +24,7 @@ terminate: a fleet that leaves its path is masked from then on (its later
 steps do not count, its actions are replaced by zeros so the simulator
 stays finite) and its failure flag and step are recorded. A simulator stops
 once all its fleets have failed. Every step is measured by
-``cpf_env.sim.fleet_metrics.FleetMetrics`` after the step; an optional
+``cpf_env.evaluation.fleet_metrics.FleetMetrics`` after the step; an optional
 ``observer`` sees the simulator before and after each step (``cpf-run``
 records its trajectory that way). ``cpf-bench`` and ``cpf-run`` both step
 through here, so their metrics are the same numbers.
@@ -40,12 +40,12 @@ from numpy.typing import NDArray
 from tqdm.auto import tqdm
 
 from baselines.closed_loop import ClosedLoop
-from baselines.policy import Policy
-from cpf_commands.common.policies import BenchPolicy
+from baselines.policy import AnalyticPolicy
+from cpf_env.envs.policy import FleetPolicy
+from cpf_env.evaluation.fleet_metrics import FleetMetrics
+from cpf_env.evaluation.recording import CHUNK
 from cpf_env.scenarios import Scenario
 from cpf_env.sim.fleet import FleetSim
-from cpf_env.sim.fleet_metrics import FleetMetrics
-from cpf_env.sim.recording import CHUNK
 
 __all__ = ["StepObserver", "rollout", "rollout_group"]
 
@@ -53,7 +53,7 @@ __all__ = ["StepObserver", "rollout", "rollout_group"]
 class StepObserver(Protocol):
     """Sees every step of a rollout (e.g. to record a trajectory)."""
 
-    def before(self, sim: FleetSim, actions: NDArray[np.float64], policy: BenchPolicy) -> None:
+    def before(self, sim: FleetSim, actions: NDArray[np.float64], policy: FleetPolicy) -> None:
         """Called with the state at t_k and the actions the policy chose for it."""
 
     def after(self, sim: FleetSim) -> None:
@@ -61,7 +61,7 @@ class StepObserver(Protocol):
 
 
 def rollout(
-    policy: BenchPolicy,
+    policy: FleetPolicy,
     scenario: Scenario,
     seeds: Sequence[int | None],
     steps: int | None = None,
@@ -92,7 +92,7 @@ def rollout(
 
 
 def rollout_group(
-    policies: Sequence[BenchPolicy],
+    policies: Sequence[FleetPolicy],
     scenario: Scenario,
     seeds: Sequence[int | None],
     steps: int | None = None,
@@ -149,14 +149,14 @@ def rollout_group(
 class _Batch:
     """P policies on S fleets each in one simulator, measured step by step.
 
-    Policy p acts on fleets p S .. (p + 1) S - 1; fleet p S + k is reset with
+    AnalyticPolicy p acts on fleets p S .. (p + 1) S - 1; fleet p S + k is reset with
     seed k. ``ended`` holds the step at which each fleet left its path, -1
     while it has not.
     """
 
     def __init__(
         self,
-        policies: Sequence[BenchPolicy],
+        policies: Sequence[FleetPolicy],
         scenario: Scenario,
         seeds: Sequence[int | None],
         horizon: int,
@@ -230,7 +230,7 @@ class _CompiledBatch(_Batch):
     """Compiled analytic policies (``ClosedLoop.supports``): ``rows`` steps of all in one call."""
 
     def _prepare(self) -> None:
-        self.loop = ClosedLoop(cast("list[Policy]", self.policies), self.sim)
+        self.loop = ClosedLoop(cast("list[AnalyticPolicy]", self.policies), self.sim)
         self.ended = self.loop.ended
 
     def advance(self, t: int, rows: int, observer: StepObserver | None) -> None:

@@ -158,7 +158,7 @@ def _default_scenario(policy: str) -> str:
 def _video_recorder(args: argparse.Namespace) -> VideoRecorder:
     """The recorder of ``--video``, its file checked before the episode runs."""
     from cpf_commands.run.video import VideoRecorder, check_video_path, frame_period
-    from cpf_env.envs.parallel import make_scenario
+    from cpf_env.scenarios import make_scenario
 
     check_video_path(args.video)
     scenario = make_scenario(args.scenario)

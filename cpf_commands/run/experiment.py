@@ -9,7 +9,7 @@ uncertainty the paper's NN is meant to learn (eq. [26]; docs/model.md, section 7
     f_i = C(nu) nu + D(nu) nu + Delta(nu) - tau_w(t, nu) + M nubar_d'
         = f_lumped + M nubar_d',
 
-with f_lumped = -M a_free from ``cpf_env.sim.privileged.lumped_uncertainty``
+with f_lumped = -M a_free from ``cpf_env.evaluation.privileged.lumped_uncertainty``
 (a_free the plant's true acceleration with zero applied force): it covers
 current, waves and wind too and uses the simulator's own right-hand side, so
 the physics stays written once (the privileged references are told the same
@@ -29,14 +29,14 @@ from typing import Any
 import numpy as np
 from tqdm.auto import tqdm
 
-from cpf_commands.common.policies import BenchPolicy, resolve_policy
+from cpf_commands.common.policies import resolve_policy
 from cpf_commands.common.rollout import StepObserver, rollout
-from cpf_env.envs.parallel import make_scenario
+from cpf_env.envs.policy import FleetPolicy
+from cpf_env.evaluation.metrics import Trajectory
+from cpf_env.evaluation.privileged import lumped_uncertainty
 from cpf_env.model.paths import encode_paths, evaluate_paths
-from cpf_env.scenarios import Scenario
+from cpf_env.scenarios import Scenario, make_scenario
 from cpf_env.sim.fleet import FleetSim
-from cpf_env.sim.metrics import Trajectory
-from cpf_env.sim.privileged import lumped_uncertainty
 
 __all__ = ["run_episode"]
 
@@ -66,7 +66,7 @@ def run_episode(
     Returns:
         The recorded trajectory (T = number of steps taken); its
         ``fleet_metrics`` are the benchmark's metrics of this episode
-        (``cpf_env.sim.fleet_metrics``), from the same rollout ``cpf-bench`` uses.
+        (``cpf_env.evaluation.fleet_metrics``), from the same rollout ``cpf-bench`` uses.
     """
     resolved = make_scenario(scenario)
     controller = resolve_policy(policy, resolved, **(policy_options or {}))
@@ -115,7 +115,7 @@ class _TrajectoryRecorder:
         self.extras: dict[str, list[np.ndarray]] = {"lumped_true": []}
         self._mass: np.ndarray | None = None
 
-    def before(self, sim: FleetSim, actions: np.ndarray, policy: BenchPolicy) -> None:
+    def before(self, sim: FleetSim, actions: np.ndarray, policy: FleetPolicy) -> None:
         """Record the state at t_k and the policy's diagnostics."""
         a = sim.arrays
         time = float(sim.time[0])

@@ -15,7 +15,7 @@ from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 from numpy.typing import NDArray
 
-from cpf_env.sim.metrics import Trajectory, final_window
+from cpf_env.evaluation.metrics import Trajectory, final_window
 
 __all__ = [
     "coordination_figure",

@@ -30,12 +30,11 @@ from cpf_commands.common.outputs import claim_output_folder
 from cpf_commands.common.rollout import StepObserver
 from cpf_commands.run.experiment import run_episode
 from cpf_commands.run.figures import write_figures
-from cpf_env import atomic
-from cpf_env.envs.parallel import make_scenario
-from cpf_env.scenarios import Scenario
+from cpf_env.evaluation.metrics import Trajectory, episode_metrics, final_window
+from cpf_env.infra import atomic
+from cpf_env.scenarios import Scenario, make_scenario
 from cpf_env.scenarios.fine import FINE_SCENARIOS
 from cpf_env.sim.fleet import FleetSim
-from cpf_env.sim.metrics import Trajectory, episode_metrics, final_window
 
 __all__ = [
     "COMMAND_BOUND",
@@ -381,7 +380,7 @@ def reproduce(
         steps: Control steps (default: the scenario's episode length).
         out: Output directory; its subdirectory ``<scenario>_<policy>`` (``run_folder``)
             is checked and locked before the episode runs and written whole at the
-            end (``cpf_env.atomic.staged_folder``). None writes nothing.
+            end (``cpf_env.infra.atomic.staged_folder``). None writes nothing.
         figures: Write the PNG figures.
         progress: Show a progress bar (after compiling the kernels, so that its
             time estimate is that of the run).

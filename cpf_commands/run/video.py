@@ -11,7 +11,7 @@ frames at ``fps`` frames per second:
   ffmpeg``, ``brew install ffmpeg``, ...); without it ``check_video_path``
   says so before the episode runs and suggests a ``.gif``.
 
-The file is written atomically (``cpf_env.atomic``).
+The file is written atomically (``cpf_env.infra.atomic``).
 """
 
 from __future__ import annotations
@@ -25,9 +25,9 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from cpf_commands.common.policies import BenchPolicy
-from cpf_env import atomic
+from cpf_env.envs.policy import FleetPolicy
 from cpf_env.envs.render import FleetRenderer
+from cpf_env.infra import atomic
 from cpf_env.scenarios import Scenario
 from cpf_env.sim.fleet import FleetSim
 
@@ -90,7 +90,7 @@ class VideoRecorder:
         self._renderer = FleetRenderer(scenario, "rgb_array")
         self._drawn_start = False
 
-    def before(self, sim: FleetSim, actions: NDArray[np.float64], policy: BenchPolicy) -> None:
+    def before(self, sim: FleetSim, actions: NDArray[np.float64], policy: FleetPolicy) -> None:
         """Draw the initial state once."""
         del actions, policy
         if not self._drawn_start:

@@ -38,7 +38,7 @@ from cpf_commands.common.ray_runtime import (
     resolve_address,
     start_ray,
 )
-from cpf_env import atomic
+from cpf_env.infra import atomic
 
 if TYPE_CHECKING:  # the learning extra is imported only when a sweep runs
     from cpf_commands.sweep.spec import SweepSpec
@@ -283,9 +283,11 @@ def sweep_main(argv: Sequence[str] | None = None) -> int:
     """``cpf-sweep``: see ``cpf-sweep --help``."""
     parser = _parser()
     args = parser.parse_args(argv)
-    try:
+    try:  # the trials train with Stable-Baselines3; Ray itself is checked after the arguments
+        import stable_baselines3  # noqa: F401
+
         from cpf_commands.sweep.spec import SweepSpec
-    except ImportError as error:  # Ray itself is checked after the arguments
+    except ImportError as error:
         parser.error(
             f"cpf-sweep trains agents, which needs {error.name} (not installed); install "
             'the learning and Ray extras: pip install -e ".[rl,ray]".'

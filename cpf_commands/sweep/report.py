@@ -22,11 +22,11 @@ from typing import Any
 
 import numpy as np
 
-from agents.training import TrainConfig
+from agents.train_config import TrainConfig
 from cpf_commands.bench.run import BASE_SEED
 from cpf_commands.bench.views import markdown_table
 from cpf_commands.sweep.spec import SweepSpec, trial_name
-from cpf_env import atomic
+from cpf_env.infra import atomic
 
 __all__ = [
     "EVALUATION_FILE",

@@ -30,8 +30,8 @@ from pathlib import Path
 from typing import Any
 
 import cpf_env
-from agents.training import TrainConfig
-from cpf_env import atomic
+from agents.train_config import TrainConfig
+from cpf_env.infra import atomic
 
 __all__ = ["SweepSpec", "parse_setting", "trial_name"]
 

@@ -21,11 +21,12 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 from numpy.typing import ArrayLike, NDArray
 
-from cpf_env.envs.parallel import as_seed, check_reset_options, make_scenario
+from cpf_env.envs.core import DEFAULT_INFO_LEVEL, EpisodeCore, check_info_level
+from cpf_env.envs.parallel import check_reset_options
+from cpf_env.envs.policy import FleetPolicy
+from cpf_env.envs.residual import ResidualConfig
 from cpf_env.envs.views import FleetViews, check_render_mode
-from cpf_env.scenarios import Scenario, list_scenarios
-from cpf_env.sim import arrays
-from cpf_env.sim.fleet import FleetSim, as_real_actions
+from cpf_env.scenarios import Scenario, list_scenarios, make_scenario
 from cpf_env.sim.observation import observation_box
 
 __all__ = [
@@ -42,32 +43,27 @@ PETTINGZOO_ID = "cpf_env/cooperative_path_following-v0"
 _RENDER_FPS = 20  # default; instances use 1 / dt
 
 
-def _fleet_spaces(
-    scenario: Scenario, obs_dim: int
-) -> tuple[spaces.Box[np.float32], spaces.Box[np.float32]]:
+def _fleet_spaces(core: EpisodeCore) -> tuple[spaces.Box[np.float32], spaces.Box[np.float32]]:
     """Observation and action space of one fleet (the ParallelEnv's, vessel after vessel)."""
-    n, m = scenario.n, scenario.message_size
-    tau_min, tau_max = scenario.tau_limits
-    rate = np.full((n, 1), scenario.theta_dot_max)
-    message = np.full((n, m), scenario.message_max)
-    low = np.hstack([tau_min, -rate, -message]).reshape(-1)
-    high = np.hstack([tau_max, rate, message]).reshape(-1)
+    low, high = core.action_bounds()
     return (
-        observation_box(n * obs_dim),
-        spaces.Box(low.astype(np.float32), high.astype(np.float32), dtype=np.float32),
+        observation_box(core.n * core.input_size),
+        spaces.Box(low.reshape(-1), high.reshape(-1), dtype=np.float32),
     )
 
 
-def _as_actions(sim: FleetSim, actions: ArrayLike, batched: bool) -> NDArray[np.float64]:
-    """Check flat actions, (n act_dim,) or (B, n act_dim), and return (B, n, act_dim) float64."""
-    array = as_real_actions(actions)  # a copy: callers may edit the batch
-    shape = (sim.num_fleets, sim.n * sim.act_dim) if batched else (sim.n * sim.act_dim,)
+def _as_actions(core: EpisodeCore, actions: ArrayLike, batched: bool) -> NDArray[Any]:
+    """Flat actions, (n a,) or (B, n a), checked whole and returned as (B, n, a) float64."""
+    array = np.asarray(actions)
+    per_fleet = core.n * core.action_size
+    shape = (core.num_fleets, per_fleet) if batched else (per_fleet,)
     if array.shape != shape:
         raise ValueError(
-            f"action must have shape {shape} (n vessels x [tau_u, tau_v, tau_r, theta_dot, "
-            f"message x {sim.act_dim - 4}] = {sim.n} x {sim.act_dim}), got {array.shape}."
+            f"action must have shape {shape} (n vessels x {core.action_size} = {core.n} x "
+            f"{core.action_size}: [tau_u, tau_v, tau_r, theta_dot, message...] raw, the "
+            f"correction in [-1, 1] residual), got {array.shape}."
         )
-    return sim.validate_actions(array.reshape(sim.num_fleets, sim.n, sim.act_dim))
+    return core.check_actions(array.reshape(core.num_fleets, core.n, core.action_size))
 
 
 class CentralizedFleetEnv(gymnasium.Env[NDArray[np.float32], NDArray[np.float32]]):
@@ -133,20 +129,26 @@ class CentralizedFleetEnv(gymnasium.Env[NDArray[np.float32], NDArray[np.float32]
 
     ## Info
 
-    ``path_error``, ``heading_error``, ``sync_error``, ``speed_error``: arrays (n,)
-    after the step (or at reset), in m, rad, ~m and m/s.
+    At ``info_level="none"`` (the default) an empty dict; ``"minimal"``: ``path_error``,
+    ``heading_error``, ``sync_error``, ``speed_error``, arrays (n,) after the step
+    (or at reset), in m, rad, ~m and m/s; ``"full"``: every array of
+    ``EpisodeCore.info_arrays`` for this fleet, (n, ...).
 
     ## Arguments
 
-    ``scenario`` (a name from ``cpf_env.scenarios.list_scenarios()`` or a
-    ``Scenario``), ``render_mode`` (``"human"`` or ``"rgb_array"``) and any
-    ``Scenario`` field as an override, e.g.
-    ``gymnasium.make("cpf_env/CentralizedFleet-v0", scenario="lossy_links", max_steps=500)``.
+    The routes' shared arguments (``cpf_env.envs.core``): ``scenario`` (a name from
+    ``cpf_env.scenarios.list_scenarios()`` or a ``Scenario``), ``info_level``,
+    ``base_policy`` and ``residual`` (the residual form: the action is every
+    vessel's correction in [-1, 1], the observation every vessel's learner
+    input) and any ``Scenario`` field as an override, e.g.
+    ``gymnasium.make("cpf_env/CentralizedFleet-v0", scenario="lossy_links", max_steps=500)``;
+    plus Gymnasium's ``render_mode`` (``"human"`` or ``"rgb_array"``). One fleet:
+    no ``num_fleets`` and no stagger.
 
     ## Example
 
     >>> import gymnasium, cpf_env
-    >>> env = gymnasium.make("cpf_env/CentralizedFleet-v0", max_steps=10)
+    >>> env = gymnasium.make("cpf_env/CentralizedFleet-v0", max_steps=10, info_level="minimal")
     >>> obs, info = env.reset(seed=0)
     >>> obs.shape, env.action_space.shape
     ((130,), (25,))
@@ -168,55 +170,59 @@ class CentralizedFleetEnv(gymnasium.Env[NDArray[np.float32], NDArray[np.float32]
         self,
         scenario: str | Scenario = "wang2014",
         render_mode: str | None = None,
+        info_level: str = DEFAULT_INFO_LEVEL,
+        base_policy: FleetPolicy | None = None,
+        residual: ResidualConfig | None = None,
         **overrides: Any,
     ) -> None:
         check_render_mode(render_mode, self.metadata["render_modes"])
+        self.info_level = check_info_level(info_level)
         self.scenario = make_scenario(scenario, **overrides)
         self.render_mode = render_mode
         self.metadata = {**self.metadata, "render_fps": 1.0 / self.scenario.dt}
-        self.sim = FleetSim(self.scenario, num_fleets=1)
-        self.observation_space, self.action_space = _fleet_spaces(self.scenario, self.sim.obs_dim)
+        self.core = EpisodeCore(self.scenario, 1, base_policy, residual, stagger=False)
+        self.sim = self.core.sim
+        self.observation_space, self.action_space = _fleet_spaces(self.core)
         self._views = FleetViews(self.scenario, render_mode)
         self._done = True
 
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[NDArray[np.float32], dict[str, Any]]:
-        """Start an episode; ``seed`` fixes initial state, models and all noise. No options."""
+        """Start an episode; ``seed`` (an integer >= 0) fixes everything drawn. No options."""
         check_reset_options(options)
-        super().reset(seed=as_seed(seed))
+        checked = self.core.fleet_seeds(seed, np.zeros(1, dtype=np.int64))[0]  # refuse first
+        super().reset(seed=checked)
         self.sim.rngs[0] = self.np_random  # one generator: the simulator draws from np_random
-        obs = self.sim.reset(seeds=[None])
+        inputs = self.core.reset()
         self._done = False
         if self.render_mode == "human":
             self.render()
-        return obs[0].reshape(-1).copy(), self._info()
+        return inputs[0].reshape(-1).copy(), self._info()
 
     def step(
         self, action: ArrayLike
     ) -> tuple[NDArray[np.float32], float, bool, bool, dict[str, Any]]:
-        """Apply every vessel's command for one control period ``dt``.
+        """Apply every vessel's command (or correction) for one control period ``dt``.
 
         Raises:
-            ValueError: Wrong shape or a non-finite entry; nothing is changed.
+            ValueError: Wrong shape, not real numbers or a non-finite entry; nothing changes.
             RuntimeError: Step before reset or after the episode ended.
         """
         if self._done:
             raise RuntimeError("the episode is over (or never started); call reset().")
-        batch = _as_actions(self.sim, action, batched=False)
-        obs = self.sim.step(batch)
-        a = self.sim.arrays
-        terminated = bool(a.terminated[0])
-        truncated = bool(self.sim.truncated[0])
+        self.core.step(_as_actions(self.core, action, batched=False), checked=True)
+        terminated = bool(self.core.terminated[0])
+        truncated = bool(self.core.truncated[0])
         self._done = terminated or truncated
         if self.render_mode == "human":
             self.render()
-        reward = float(a.reward[0].mean())
-        return obs[0].reshape(-1).copy(), reward, terminated, truncated, self._info()
+        reward = float(self.core.reward[0].mean())
+        obs = self.core.inputs[0].reshape(-1).copy()
+        return obs, reward, terminated, truncated, self._info()
 
     def _info(self) -> dict[str, Any]:
-        errors = self.sim.arrays.errors[0]
-        return {name: errors[:, k].copy() for name, k in arrays.ERROR_KEYS}
+        return {key: value[0] for key, value in self.core.info_arrays(self.info_level).items()}
 
     def render(self) -> NDArray[np.uint8] | None:
         """Top-down view of the fleet (see ``cpf_env.envs.render``); None in human mode."""
@@ -232,8 +238,15 @@ class CentralizedFleetVectorEnv(VectorEnv[NDArray[np.float32], NDArray[np.float3
 
     Spaces, rewards and episode ends are those of ``CentralizedFleetEnv``; fleet k
     of the simulator is sub-environment k (error messages say "fleet k").
-    ``reset(seed=s)`` seeds sub-environment k with s + k, so it reproduces
-    ``CentralizedFleetEnv`` reset with seed s + k bit for bit, as ``SyncVectorEnv``.
+    ``reset(seed=s)`` seeds sub-environment k with s + k (``EpisodeCore``), so it
+    reproduces ``CentralizedFleetEnv`` reset with seed s + k bit for bit, as
+    ``SyncVectorEnv``, up to the stagger: with ``stagger=True`` (the default of
+    every batched route) each reset of all sub-environments truncates env k's
+    episode after ``max_steps - k * max_steps // num_envs`` steps.
+
+    Arguments: those of every route, ``(scenario, num_envs, ..., info_level,
+    base_policy, residual, stagger, **overrides)``. Gymnasium forces the name
+    ``num_envs`` for the number of fleets (``gymnasium.make_vec`` passes it).
 
     Autoreset is ``AutoresetMode.NEXT_STEP`` (Gymnasium's default): the step that
     ends an episode returns its last observation; on the next ``step`` that
@@ -243,8 +256,8 @@ class CentralizedFleetVectorEnv(VectorEnv[NDArray[np.float32], NDArray[np.float3
     Underneath, the finished fleet takes one zero-action step with the others,
     then is reset.
 
-    Infos hold the four error arrays of ``CentralizedFleetEnv`` stacked to
-    (num_envs, n), each with its ``_name`` mask (all True).
+    Infos hold the arrays of ``CentralizedFleetEnv``'s ``info_level`` stacked to
+    (num_envs, n, ...), each with its ``_name`` mask (all True).
 
     Example:
         >>> import gymnasium, cpf_env
@@ -263,18 +276,24 @@ class CentralizedFleetVectorEnv(VectorEnv[NDArray[np.float32], NDArray[np.float3
 
     def __init__(
         self,
-        num_envs: int = 1,
         scenario: str | Scenario = "wang2014",
+        num_envs: int = 1,
         render_mode: str | None = None,
+        info_level: str = DEFAULT_INFO_LEVEL,
+        base_policy: FleetPolicy | None = None,
+        residual: ResidualConfig | None = None,
+        stagger: bool = True,
         **overrides: Any,
     ) -> None:
         check_render_mode(render_mode, self.metadata["render_modes"])
+        self.info_level = check_info_level(info_level)
         self.scenario = make_scenario(scenario, **overrides)
         self.render_mode = render_mode
         self.metadata = {**self.metadata, "render_fps": 1.0 / self.scenario.dt}
-        self.sim = FleetSim(self.scenario, num_fleets=num_envs)
-        self.num_envs = self.sim.num_fleets
-        single_obs, single_act = _fleet_spaces(self.scenario, self.sim.obs_dim)
+        self.core = EpisodeCore(self.scenario, num_envs, base_policy, residual, stagger)
+        self.sim = self.core.sim
+        self.num_envs = self.core.num_fleets
+        single_obs, single_act = _fleet_spaces(self.core)
         self.single_observation_space, self.single_action_space = single_obs, single_act
         self.observation_space = batch_space(single_obs, self.num_envs)
         self.action_space = batch_space(single_act, self.num_envs)
@@ -291,16 +310,16 @@ class CentralizedFleetVectorEnv(VectorEnv[NDArray[np.float32], NDArray[np.float3
 
         Args:
             seed: None (generators continue), an int s (env k gets s + k) or one
-                seed (or None) per sub-environment.
+                seed (or None) per sub-environment; checked whole before any is reset.
             options: None (no options are supported).
         """
         check_reset_options(options)
-        if isinstance(seed, (int, np.integer)):
+        seeds = self.core.fleet_seeds(seed, np.arange(self.num_envs))  # refuse before changes
+        if isinstance(seed, int | np.integer):
             super().reset(seed=int(seed))
-            seed = [int(seed) + k for k in range(self.num_envs)]
-        obs = self.sim.reset(seeds=seed)  # checks one seed per fleet
+        inputs = self.core.reset(seeds=seeds)
         self._autoreset[:] = False
-        return obs.reshape(self.num_envs, -1).copy(), self._infos()
+        return inputs.reshape(self.num_envs, -1).copy(), self._infos()
 
     def step(
         self, actions: ArrayLike
@@ -308,31 +327,30 @@ class CentralizedFleetVectorEnv(VectorEnv[NDArray[np.float32], NDArray[np.float3
         """Step every fleet; fleets that ended on the previous step are reset instead.
 
         Raises:
-            ValueError: Wrong shape or a non-finite entry; nothing is changed.
+            ValueError: Wrong shape, not real numbers or a non-finite entry; nothing changes.
             RuntimeError: Step before reset, or the plant diverged (see ``FleetSim.step``).
         """
-        batch = _as_actions(self.sim, actions, batched=True)
+        batch = _as_actions(self.core, actions, batched=True)
         restart = self._autoreset.copy()
-        batch[restart] = 0.0
-        obs = self.sim.step(batch)
-        a = self.sim.arrays
-        terminated = a.terminated.copy()
-        truncated = self.sim.truncated.copy()
-        rewards = a.reward.mean(axis=1)
         if restart.any():
-            obs = self.sim.reset(fleets=np.flatnonzero(restart))
+            batch = batch.copy()  # not the caller's array
+            batch[restart] = 0.0
+        self.core.step(batch, checked=True)
+        terminated, truncated = self.core.terminated, self.core.truncated
+        rewards = self.core.reward.mean(axis=1)
+        if restart.any():
+            self.core.reset(fleets=np.flatnonzero(restart))
             rewards[restart] = 0.0
             terminated[restart] = False
             truncated[restart] = False
         self._autoreset = terminated | truncated
-        infos = self._infos()
-        return obs.reshape(self.num_envs, -1).copy(), rewards, terminated, truncated, infos
+        obs = self.core.inputs.reshape(self.num_envs, -1).copy()
+        return obs, rewards, terminated, truncated, self._infos()
 
     def _infos(self) -> dict[str, Any]:
-        errors = self.sim.arrays.errors
         infos: dict[str, Any] = {}
-        for name, k in arrays.ERROR_KEYS:
-            infos[name] = errors[:, :, k].copy()
+        for name, value in self.core.info_arrays(self.info_level).items():
+            infos[name] = value
             infos[f"_{name}"] = np.ones(self.num_envs, dtype=bool)
         return infos
 

@@ -17,44 +17,17 @@ from typing import Any
 
 import numpy as np
 from gymnasium import spaces
-from gymnasium.utils import seeding
 from numpy.typing import NDArray
 from pettingzoo import ParallelEnv
 
-from cpf_env import scenarios
+from cpf_env.envs.core import DEFAULT_INFO_LEVEL, EpisodeCore, check_info_level, check_seed
+from cpf_env.envs.policy import FleetPolicy
+from cpf_env.envs.residual import ResidualConfig
 from cpf_env.envs.views import FleetViews, check_render_mode
-from cpf_env.scenarios import Scenario
-from cpf_env.sim import arrays
-from cpf_env.sim.fleet import FleetSim, as_real_actions
+from cpf_env.scenarios import Scenario, make_scenario
 from cpf_env.sim.observation import ObsLayout, observation_box
 
-__all__ = [
-    "INFO_LEVELS",
-    "CooperativePathFollowingEnv",
-    "as_seed",
-    "check_reset_options",
-    "make_scenario",
-    "warn_reset_options",
-]
-
-
-#: Detail levels of the per-step infos, most to least: every diagnostic, the
-#: four errors, nothing. Wrappers that convert every info entry to a tensor each
-#: step (TorchRL's, RLlib's) spend much of their time there; take less for speed.
-INFO_LEVELS = ("full", "minimal", "none")
-
-
-def make_scenario(scenario: str | Scenario = "wang2014", **overrides: Any) -> Scenario:
-    """Resolve a scenario name or object and apply field overrides (``Scenario.replace``)."""
-    if isinstance(scenario, str):
-        scenario = scenarios.get(scenario)
-    elif not isinstance(scenario, Scenario):
-        raise TypeError(
-            f"scenario must be a name from {scenarios.list_scenarios()} or a Scenario, "
-            f"got {type(scenario).__name__}."
-        )
-    return scenario.replace(**overrides) if overrides else scenario
-
+__all__ = ["CooperativePathFollowingEnv", "check_reset_options", "warn_reset_options"]
 
 _NO_OPTIONS = (
     "this env takes no reset options (the scenario fixes the task); change the scenario "
@@ -79,13 +52,6 @@ def warn_reset_options(options: dict[str, Any] | None) -> None:
         warnings.warn(
             f"reset ignores options {sorted(options)}: {_NO_OPTIONS}.", UserWarning, stacklevel=3
         )
-
-
-def as_seed(seed: object) -> int | None:
-    """A reset seed as Gymnasium's seeding wants it: None or a python int (numpy ints welcome)."""
-    if isinstance(seed, np.integer):
-        return int(seed)
-    return seed  # type: ignore[return-value]  # anything else: Gymnasium's own check raises
 
 
 class CooperativePathFollowingEnv(ParallelEnv):
@@ -143,15 +109,19 @@ class CooperativePathFollowingEnv(ParallelEnv):
 
     ## Arguments
 
-    ``scenario`` (name or ``Scenario``), ``render_mode`` (``"human"`` or
-    ``"rgb_array"``), ``max_cycles`` (PettingZoo's name for the episode
-    length: sets ``max_steps``; give one of the two), ``info_level``
-    (``"full"``, the default: every diagnostic; ``"minimal"``: the four
-    errors; ``"none"``: empty dicts, for wrappers that convert infos to
-    tensors each step) and any ``Scenario`` field as an override. ``render``
-    also accepts RLlib's positional mode if it equals ``render_mode``.
-    ``reset`` takes a seed (python or numpy int); it has
-    no options and warns if given some.
+    The routes' shared arguments (``cpf_env.envs.core``): ``scenario`` (name or
+    ``Scenario``), ``info_level`` (``"none"``, the default of every route: empty
+    dicts; ``"minimal"``: the four errors; ``"full"``: every diagnostic),
+    ``base_policy`` and ``residual`` (a ``FleetPolicy`` object underneath and a
+    ``ResidualConfig``: the agents then act through the bounded correction
+    ``Box(-1, 1, (k,))`` and observe the learner's input, and the ``"full"``
+    infos add ``base_command`` and ``residual``; neither: the raw command), and
+    any ``Scenario`` field as an override. Differences PettingZoo forces: one
+    fleet (no ``num_fleets``; stagger, which spreads fleets, has nothing to
+    spread), ``render_mode``, and ``max_cycles`` (PettingZoo's name for the
+    episode length: sets ``max_steps``; give one of the two). ``render`` also
+    accepts RLlib's positional mode if it equals ``render_mode``. ``reset``
+    takes a seed (an integer >= 0); it has no options and warns if given some.
 
     ## Example
 
@@ -178,16 +148,13 @@ class CooperativePathFollowingEnv(ParallelEnv):
         scenario: str | Scenario = "wang2014",
         render_mode: str | None = None,
         max_cycles: int | None = None,
-        info_level: str = "full",
+        info_level: str = DEFAULT_INFO_LEVEL,
+        base_policy: FleetPolicy | None = None,
+        residual: ResidualConfig | None = None,
         **overrides: Any,
     ) -> None:
         check_render_mode(render_mode, self.metadata["render_modes"])
-        if info_level not in INFO_LEVELS:
-            raise ValueError(
-                f"info_level must be one of {INFO_LEVELS}, got {info_level!r}: 'full' "
-                "for all diagnostics, 'minimal' for the four errors, 'none' for empty infos."
-            )
-        self.info_level = info_level
+        self.info_level = check_info_level(info_level)
         if max_cycles is not None:
             if "max_steps" in overrides:
                 raise ValueError(
@@ -199,39 +166,32 @@ class CooperativePathFollowingEnv(ParallelEnv):
         self.scenario = make_scenario(scenario, **overrides)
         self.render_mode = render_mode
         self.metadata = {**self.metadata, "render_fps": 1.0 / self.scenario.dt}
-        self.sim = FleetSim(self.scenario, num_fleets=1)
+        self.core = EpisodeCore(self.scenario, 1, base_policy, residual, stagger=False)
+        self.sim = self.core.sim
         self.layout: ObsLayout = self.sim.layout
         self.possible_agents = [f"vessel_{i}" for i in range(self.scenario.n)]
         self.agents: list[str] = []
         self._index = {agent: i for i, agent in enumerate(self.possible_agents)}
         self._views = FleetViews(self.scenario, render_mode)
-        self.np_random, _ = seeding.np_random()
+        self.np_random = self.sim.rngs[0]
         # per-instance caches: a class-level functools.cache would keep every env alive
         self._observation_spaces: dict[str, spaces.Box] = {}
         self._action_spaces: dict[str, spaces.Box] = {}
 
     def observation_space(self, agent: str) -> spaces.Box:
-        """Local observation space of ``agent`` (the same object on every call)."""
+        """Local observation (or learner input) space of ``agent`` (the same object each call)."""
         if agent not in self._observation_spaces:
             self._check_agent(agent)
-            self._observation_spaces[agent] = observation_box(self.layout.size)
+            self._observation_spaces[agent] = observation_box(self.core.input_size)
         return self._observation_spaces[agent]
 
     def action_space(self, agent: str) -> spaces.Box:
-        """Action space of ``agent`` (the same object on every call): forces, rate, message."""
+        """Action space of ``agent`` (the same object each call): the command, or the correction."""
         if agent not in self._action_spaces:
-            self._action_spaces[agent] = self._make_action_space(agent)
+            i = self._check_agent(agent)
+            low, high = (bound[i] for bound in self.core.action_bounds())
+            self._action_spaces[agent] = spaces.Box(low, high, dtype=np.float32)
         return self._action_spaces[agent]
-
-    def _make_action_space(self, agent: str) -> spaces.Box:
-        """Action space of ``agent``: force limits, rate bound, message bound."""
-        i = self._check_agent(agent)
-        s = self.scenario
-        m = s.message_size
-        tau_min, tau_max = s.tau_limits
-        low = np.concatenate([tau_min[i], [-s.theta_dot_max], np.full(m, -s.message_max)])
-        high = np.concatenate([tau_max[i], [s.theta_dot_max], np.full(m, s.message_max)])
-        return spaces.Box(low.astype(np.float32), high.astype(np.float32), dtype=np.float32)
 
     @functools.cached_property
     def state_space(self) -> spaces.Box:
@@ -249,28 +209,25 @@ class CooperativePathFollowingEnv(ParallelEnv):
         """Start an episode; ``seed`` fixes initial state, models and all noise.
 
         Raises:
+            ValueError: ``seed`` is not an integer >= 0 or None (nothing is changed).
             UserWarning: (a warning) for any ``options``: this env takes none and
                 ignores them (PettingZoo's API test passes some, so it cannot raise).
         """
+        seed = check_seed(seed)
         warn_reset_options(options)
-        seed = as_seed(seed)
-        if seed is not None:
-            self.np_random, _ = seeding.np_random(seed)
-            self.sim.rngs[0] = self.np_random
-        else:
-            self.np_random = self.sim.rngs[0]
-        obs = self.sim.reset(seeds=[None])
+        inputs = self.core.reset(seeds=[seed])
+        self.np_random = self.sim.rngs[0]
         self.agents = list(self.possible_agents)
         if self.render_mode == "human":
             self.render()
-        return self._observations(obs), self._infos()
+        return self._observations(inputs), self._infos()
 
     def step(self, actions: dict[str, Any]) -> tuple[dict, dict, dict, dict, dict]:
         """Apply one action per live agent for one control period ``dt``.
 
         Raises:
-            ValueError: Missing or extra agent, wrong shape, complex or non-finite
-                action; nothing is changed.
+            ValueError: Missing or extra agent, wrong shape, a bool, complex or
+                non-finite action; nothing is changed.
             RuntimeError: Step after the episode ended, or the plant diverged (the
                 message says where and what to change; the episode is then over).
         """
@@ -278,15 +235,14 @@ class CooperativePathFollowingEnv(ParallelEnv):
             raise RuntimeError("the episode is over (or never started); call reset().")
         batch = self._action_batch(actions)
         try:
-            obs = self.sim.step(batch)
+            self.core.step(batch, checked=True)
         except RuntimeError:
             self.agents = []  # no live agents over a diverged (NaN) state
             raise
-        a = self.sim.arrays
-        terminated = bool(a.terminated[0])
-        truncated = bool(self.sim.truncated[0])
-        rewards = dict(zip(self.agents, a.reward[0].tolist(), strict=False))
-        observations = self._observations(obs)
+        terminated = bool(self.core.terminated[0])
+        truncated = bool(self.core.truncated[0])
+        rewards = dict(zip(self.agents, self.core.reward[0].tolist(), strict=False))
+        observations = self._observations(self.core.inputs)
         terminations = dict.fromkeys(self.agents, terminated)
         truncations = dict.fromkeys(self.agents, truncated)
         infos = self._infos()
@@ -297,7 +253,7 @@ class CooperativePathFollowingEnv(ParallelEnv):
         return observations, rewards, terminations, truncations, infos
 
     def _action_batch(self, actions: dict[str, Any]) -> NDArray[np.float64]:
-        """Validate the action dict and stack it as (1, n, 4 + m) before any state changes."""
+        """Validate the action dict and stack it as (1, n, a) before any state changes."""
         if not isinstance(actions, dict):
             raise ValueError(
                 f"actions must be a dict agent -> array, got {type(actions).__name__}."
@@ -309,11 +265,11 @@ class CooperativePathFollowingEnv(ParallelEnv):
                 f"actions must have exactly one entry per live agent: missing {missing}, "
                 f"unexpected {extra}."
             )
-        batch = np.empty((1, self.scenario.n, self.sim.act_dim))
-        shape = (self.sim.act_dim,)
+        batch = np.empty((1, self.scenario.n, self.core.action_size))
+        shape = (self.core.action_size,)
         for agent in self.agents:  # the cheap checks of check_action; the rest on the batch
             array = np.asarray(actions[agent])
-            if array.dtype.kind not in "biuf" or array.shape != shape:
+            if array.dtype.kind not in "iuf" or array.shape != shape:
                 return self._checked_batch(actions)
             batch[0, self._index[agent]] = array
         if not np.isfinite(batch).all():
@@ -322,71 +278,50 @@ class CooperativePathFollowingEnv(ParallelEnv):
 
     def _checked_batch(self, actions: dict[str, Any]) -> NDArray[np.float64]:
         """The batch built with ``check_action`` per agent, which raises on the first bad one."""
-        batch = np.empty((1, self.scenario.n, self.sim.act_dim))
+        batch = np.empty((1, self.scenario.n, self.core.action_size))
         for agent in self.agents:
             batch[0, self._index[agent]] = self.check_action(agent, actions[agent])
         return batch
 
     def check_action(self, agent: str, action: Any) -> NDArray[np.float64]:
-        """Validate one agent's action and return it as float64 (4 + m,); changes nothing.
+        """Validate one agent's action and return it as float64 (a,); changes nothing.
 
         Raises:
-            ValueError: Unknown agent, wrong shape, a complex or non-finite entry.
+            ValueError: Unknown agent, wrong shape, a bool, complex or non-finite entry.
         """
         self._check_agent(agent)
-        array = as_real_actions(action, f"action of {agent}")
-        if array.shape != (self.sim.act_dim,):
+        array = np.asarray(action)
+        if array.dtype.kind not in "iuf":
             raise ValueError(
-                f"action of {agent} has shape {array.shape}; expected ({self.sim.act_dim},) "
-                "= [tau_u, tau_v, tau_r, theta_dot, message...]."
+                f"action of {agent} must be real numbers, got dtype {array.dtype}"
+                + (" (bools are not commands)." if array.dtype.kind == "b" else ".")
             )
-        if not np.all(np.isfinite(array)):
-            raise ValueError(f"action of {agent} is not finite: {array.tolist()}.")
-        return array
+        shape = (self.core.action_size,)
+        if array.shape != shape:
+            form = "[tau_u, tau_v, tau_r, theta_dot, message...]"
+            form = form if self.core.controller is None else "the correction in [-1, 1]"
+            raise ValueError(
+                f"action of {agent} has shape {array.shape}; expected {shape} = {form}."
+            )
+        checked = array.astype(np.float64)
+        if not np.all(np.isfinite(checked)):
+            raise ValueError(f"action of {agent} is not finite: {checked.tolist()}.")
+        return checked
 
-    def _observations(self, obs: NDArray[np.float32]) -> dict[str, NDArray[np.float32]]:
-        """Each agent's row of one copy of ``obs[0]`` (no later step writes to it)."""
-        return dict(zip(self.possible_agents, obs[0].copy(), strict=True))
+    def _observations(self, inputs: NDArray[np.float32]) -> dict[str, NDArray[np.float32]]:
+        """Each agent's row of one copy of ``inputs[0]`` (no later step writes to it)."""
+        return dict(zip(self.possible_agents, inputs[0].copy(), strict=True))
 
     def _infos(self) -> dict[str, dict[str, Any]]:
-        """Per-agent infos at the detail level ``self.info_level``.
-
-        Array entries are rows of one copy per quantity and step, so no later step
-        writes to them.
-        """
-        if self.info_level == "none":
+        """Per-agent infos at ``self.info_level`` (``EpisodeCore.vessel_infos`` of fleet 0)."""
+        if self.info_level == "none":  # the hot path: no list to build and zip
             return {agent: {} for agent in self.possible_agents}
-        a = self.sim.arrays
-        errors = a.errors[0].tolist()
-        infos = {
-            agent: {key: row[k] for key, k in arrays.ERROR_KEYS}
-            for agent, row in zip(self.possible_agents, errors, strict=True)
-        }
-        if self.info_level == "minimal":
-            return infos
-        tau_command, tau_applied = a.tau_command[0].copy(), a.tau_applied[0].copy()
-        saturated = tau_command != tau_applied
-        eta, nu, theta = a.eta[0].copy(), a.nu[0].copy(), a.theta[0].tolist()
-        reward_terms = a.reward_terms[0].copy()
-        for i, agent in enumerate(self.possible_agents):
-            infos[agent] |= {
-                "tau_command": tau_command[i],
-                "tau_applied": tau_applied[i],
-                "saturated": saturated[i],
-                "eta": eta[i],
-                "nu": nu[i],
-                "theta": theta[i],
-                "reward_terms": reward_terms[i],
-            }
-        return infos
+        infos = self.core.vessel_infos(self.info_level, fleet=0)
+        return dict(zip(self.possible_agents, infos, strict=True))
 
     def state(self) -> NDArray[np.float32]:
         """Global state (n * 10,): per vessel eta (3), nu (3), theta, tau_applied (3)."""
-        a = self.sim.arrays
-        per_vessel = np.concatenate(
-            [a.eta[0], a.nu[0], a.theta[0][:, None], a.tau_applied[0]], axis=1
-        )
-        return per_vessel.reshape(-1).astype(np.float32)
+        return self.core.state()[0]
 
     def render(self, mode: str | None = None) -> NDArray[np.uint8] | None:
         """Top-down view: paths, vessels, virtual targets; see ``cpf_env.envs.render``.

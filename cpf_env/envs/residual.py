@@ -73,10 +73,10 @@ from cpf_env.sim.observation import ObsLayout
 __all__ = [
     "EXTRAS",
     "RESIDUAL_MODES",
-    "BasePolicy",
     "ResidualConfig",
     "ResidualController",
     "ZeroPolicy",
+    "learner_config",
 ]
 
 Array = NDArray[np.float64]
@@ -87,11 +87,6 @@ RESIDUAL_MODES = {"force": 3, "force_and_rate": 4, "kinematic": 3}
 EXTRAS = {"base_action": 4, "base_signals": 7, "multiscale_errors": 9}
 #: Scales (m, m, rad) of the squashed path errors of ``multiscale_errors``.
 MULTISCALE = (0.01, 0.1, 1.0)
-
-
-#: The base policy's contract, ``cpf_env.envs.policy.FleetPolicy`` (the name this module used
-#: before the contract was defined once; kept for existing callers).
-BasePolicy = FleetPolicy
 
 
 @dataclass(frozen=True)
@@ -188,7 +183,28 @@ class ResidualConfig:
         return self.learner_layout(layout).size + sum(EXTRAS[name] for name in self.extras)
 
 
-class ZeroPolicy:
+def learner_config(
+    base_policy: FleetPolicy | None, residual: ResidualConfig | None = None
+) -> ResidualConfig:
+    """The learner's composition: the one place of the rule for a learner without a base.
+
+    Args:
+        base_policy: The policy acting underneath, or None.
+        residual: The composition asked for, or None (the default ``ResidualConfig()``).
+
+    Returns:
+        ``residual`` over a base policy; with no base policy,
+        ``ResidualConfig(mode="force_and_rate", scale=1.0)``: the learner commands
+        forces and path-variable rate as fractions of their limits (messages are
+        zero), keeping the given ``neighbour_slots``.
+    """
+    if base_policy is None:
+        slots = None if residual is None else residual.neighbour_slots
+        return ResidualConfig(mode="force_and_rate", scale=1.0, neighbour_slots=slots)
+    return ResidualConfig() if residual is None else residual
+
+
+class ZeroPolicy(FleetPolicy):
     """The base of a learner that commands everything itself: all-zero actions.
 
     Args:

@@ -19,7 +19,7 @@ import them.
 """
 
 from cpf_env.scenarios import fine, paper, splits, suite
-from cpf_env.scenarios.registry import get, list_scenarios, register
+from cpf_env.scenarios.registry import get, list_scenarios, make_scenario, register
 from cpf_env.scenarios.scenario import InitialState, Scenario, SpeedSchedule
 
 __all__ = [
@@ -29,6 +29,7 @@ __all__ = [
     "fine",
     "get",
     "list_scenarios",
+    "make_scenario",
     "paper",
     "register",
     "splits",

@@ -11,10 +11,11 @@ on import; importing ``cpf_env.scenarios`` imports them all.
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import Any
 
 from cpf_env.scenarios.scenario import Scenario
 
-__all__ = ["get", "list_scenarios", "register"]
+__all__ = ["get", "list_scenarios", "make_scenario", "register"]
 
 _REGISTRY: dict[str, Callable[[], Scenario]] = {}
 
@@ -36,3 +37,22 @@ def get(name: str) -> Scenario:
 def list_scenarios() -> list[str]:
     """Names of the registered scenarios, in registration order."""
     return list(_REGISTRY)
+
+
+def make_scenario(scenario: str | Scenario = "wang2014", **overrides: Any) -> Scenario:
+    """Resolve a scenario name or object and apply field overrides (``Scenario.replace``).
+
+    The one place every route resolves its ``scenario`` argument.
+
+    Raises:
+        TypeError: ``scenario`` is neither a name nor a ``Scenario``.
+        ValueError: An unknown name or override (the message lists the valid ones).
+    """
+    if isinstance(scenario, str):
+        scenario = get(scenario)
+    elif not isinstance(scenario, Scenario):
+        raise TypeError(
+            f"scenario must be a name from {list_scenarios()} or a Scenario, "
+            f"got {type(scenario).__name__}."
+        )
+    return scenario.replace(**overrides) if overrides else scenario

@@ -11,7 +11,7 @@ container image, with the same ``NUMBA_CACHE_DIR`` the workers will see.
 
 The cache is specific to the CPU model and to the kernels' sources: nodes of
 another CPU type compile again once, and so does every process after an edit
-to any module a kernel compiles from (``cpf_env.model.kernel_cache`` keys the cache
+to any module a kernel compiles from (``cpf_env.infra.kernel_cache`` keys the cache
 on all of them, so no stale kernel is ever loaded).
 
 Example:
@@ -35,7 +35,7 @@ import numpy as np
 from numba.core.registry import CPUDispatcher
 
 from cpf_env import scenarios
-from cpf_env.model.kernel_cache import KERNEL_MODULES
+from cpf_env.infra.kernel_cache import KERNEL_MODULES
 from cpf_env.sim.fleet import FleetSim
 from cpf_env.sim.threads import PARALLEL_MIN_FLEETS
 

@@ -109,10 +109,10 @@ def test_the_task_env_is_the_residual_env_with_state_and_statistics() -> None:
 def test_make_env_resolves_names_and_refuses_unknown_ones() -> None:
     results = doctest.testmod(envs)
     assert results.attempted > 0 and results.failed == 0
-    env = envs.make_env("bench_mild", 2, base="none", max_steps=20)
+    env = envs.make_env("bench_mild", 2, base_policy="none", max_steps=20)
     assert env.full_action_spec["vessel", "action"].shape == (2, 5, 4)  # forces and rate
     with pytest.raises(ValueError, match="unknown base policy 'nn_dcs'"):
-        envs.make_env("bench_mild", 2, base="nn_dcs")
+        envs.make_env("bench_mild", 2, base_policy="nn_dcs")
 
 
 @pytest.mark.parametrize("algorithm", ["mappo", "ippo"])

@@ -295,7 +295,7 @@ def test_lone_vessel_without_neighbour_slots(name):
         initial=InitialState(eta=((5.5, 0.0, 1.6),)),
         max_steps=1200,
     )
-    env = cpf_env.parallel_env(scenario)
+    env = cpf_env.parallel_env(scenario, info_level="minimal")
     assert env.layout.n_slots == 0
     observations, _ = env.reset(seed=0)
     policy = baselines.make_policy(name, env)

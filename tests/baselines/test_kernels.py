@@ -113,7 +113,7 @@ def test_policy_kernels_are_keyed_on_the_simulator_sources_they_inline(monkeypat
     """An edit to cpf_env's kernel sources (vessel.py, observation.py, ...) or to
     baselines/kernels.py changes the cache stamp of the policy kernels."""
     from baselines import kernels
-    from cpf_env.model import kernel_cache
+    from cpf_env.infra import kernel_cache
 
     source = kernels.__file__
     stamp = kernel_cache._stamp_of(source)

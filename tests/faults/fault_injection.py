@@ -2,7 +2,7 @@
 
 A plain module (not a conftest: ``tests/conftest.py`` is imported by name), so the
 tests import what they use. ``killed_at(k, write)`` runs ``write`` in a forked child
-whose ``cpf_env.atomic``
+whose ``cpf_env.infra.atomic``
 sees a stand-in ``os`` module that SIGKILLs the process just before its k-th
 file-system stage (an ``fsync``, ``replace`` or ``rename``: a file written but
 not flushed, flushed but not renamed into place, a folder between the two
@@ -15,7 +15,7 @@ importable by a subprocess driver for the kills of a fresh process.
 16 MiB tmpfs mounted for the test where the machine allows it (root on Linux),
 whose ``fill()`` then takes all of its free space, so writes fail with a real
 ENOSPC; where mounting is not allowed, ``fill()`` makes
-``cpf_env.atomic.write_bytes`` raise ENOSPC instead (``FullDisk.real`` says which).
+``cpf_env.infra.atomic.write_bytes`` raise ENOSPC instead (``FullDisk.real`` says which).
 """
 
 from __future__ import annotations
@@ -34,14 +34,14 @@ from typing import Any
 
 import pytest
 
-from cpf_env import atomic
+from cpf_env.infra import atomic
 
-#: The calls of ``os`` in ``cpf_env.atomic`` that a kill is injected before.
+#: The calls of ``os`` in ``cpf_env.infra.atomic`` that a kill is injected before.
 STAGES = frozenset({"fsync", "replace", "rename"})
 
 
 class KillingOs:
-    """``os`` for ``cpf_env.atomic`` that SIGKILLs the process before its ``at``-th stage."""
+    """``os`` for ``cpf_env.infra.atomic`` that SIGKILLs the process before its ``at``-th stage."""
 
     def __init__(self, at: int) -> None:
         self.at, self.count = at, 0

@@ -10,7 +10,7 @@ from fault_injection import killed_at
 
 from cpf_commands.export import export_main
 from cpf_commands.sweep.cli import run_sweep
-from cpf_env import atomic
+from cpf_env.infra import atomic
 
 
 def _tree(folder: Path) -> dict[str, str]:

@@ -14,7 +14,7 @@ from fault_injection import killed_at, small_disk
 from cpf_commands.run import reproduce as reproduce_module
 from cpf_commands.run.cli import run_main
 from cpf_commands.run.reproduce import reproduce
-from cpf_env import atomic
+from cpf_env.infra import atomic
 
 QUICK = ["--scenario", "wang2014", "--steps", "3", "--quiet", "--no-figures"]
 FOLDER = "wang2014_nn_dsc"
@@ -70,7 +70,7 @@ def test_a_run_killed_at_any_stage_leaves_old_or_new_whole(tmp_path: Path) -> No
 
 _HOLD = """
 import sys, time
-from cpf_env import atomic
+from cpf_env.infra import atomic
 with atomic.FolderLock(sys.argv[1]):
     print("locked", flush=True)
     time.sleep(60)
@@ -184,7 +184,7 @@ import sys
 sys.path.insert(0, sys.argv[1])
 from fault_injection import KillingOs
 from cpf_commands.run.cli import run_main
-from cpf_env import atomic
+from cpf_env.infra import atomic
 atomic.os = KillingOs(int(sys.argv[2]))
 run_main(sys.argv[3:])
 """

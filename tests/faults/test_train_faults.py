@@ -126,7 +126,7 @@ def test_an_output_that_is_a_link_is_refused(tmp_path: Path) -> None:
 def test_too_little_space_is_refused_before_training(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    from cpf_env import atomic
+    from cpf_env.infra import atomic
 
     monkeypatch.setattr(atomic.shutil, "disk_usage", lambda path: type("U", (), {"free": 2**20}))
     learned: list[object] = []

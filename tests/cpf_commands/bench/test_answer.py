@@ -13,7 +13,7 @@ from baselines import HEADROOM_REFERENCE
 from cpf_commands.bench.cli import bench_main
 from cpf_commands.bench.ranking import ranked_tables, terminal_report
 from cpf_commands.bench.report import CellResult, normalized_score, summarize
-from cpf_env.sim.fleet_metrics import METRICS
+from cpf_env.evaluation.fleet_metrics import METRICS
 
 SEEDS = tuple(range(10))
 SPREAD = np.linspace(-1.0, 1.0, len(SEEDS))

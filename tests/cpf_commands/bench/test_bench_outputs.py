@@ -12,7 +12,7 @@ import pytest
 
 from cpf_commands.bench import cli
 from cpf_commands.bench.cli import bench_main
-from cpf_env import atomic
+from cpf_env.infra import atomic
 
 QUICK = ["--policies", "nn_dsc", "--scenarios", "wang2014", "--seeds", "1", "--steps", "3",
          "--quiet"]  # fmt: skip
@@ -104,7 +104,7 @@ def test_disk_full_while_writing_keeps_the_old_results(
 
 _HOLD = """
 import sys, time
-from cpf_env import atomic
+from cpf_env.infra import atomic
 with atomic.FolderLock(sys.argv[1]):
     print("locked", flush=True)
     time.sleep(60)

@@ -10,7 +10,7 @@ from conftest import ROOT
 
 from cpf_commands.bench import results_page
 from cpf_commands.bench.report import CellResult
-from cpf_env.sim.fleet_metrics import METRICS
+from cpf_env.evaluation.fleet_metrics import METRICS
 
 SEEDS = tuple(range(4))
 

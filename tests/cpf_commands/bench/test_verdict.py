@@ -12,7 +12,7 @@ from cpf_commands.bench.cli import bench_main
 from cpf_commands.bench.report import CellResult
 from cpf_commands.bench.run import run_bench
 from cpf_commands.bench.verdict import GUARDED, verdict
-from cpf_env.sim.fleet_metrics import METRICS
+from cpf_env.evaluation.fleet_metrics import METRICS
 
 SEEDS = tuple(range(10))
 

@@ -21,7 +21,7 @@ from cpf_commands.common.policies import (
     resolve_policy,
 )
 from cpf_commands.run.cli import run_main
-from cpf_env.sim.fleet_metrics import METRICS
+from cpf_env.evaluation.fleet_metrics import METRICS
 
 FACTORIES = """
 from baselines import make_policy

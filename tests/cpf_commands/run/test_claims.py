@@ -12,7 +12,7 @@ from baselines import NNDSCGains
 from cpf_commands.run import reproduce as reproduce_module
 from cpf_commands.run.experiment import run_episode
 from cpf_commands.run.reproduce import evaluate_claims
-from cpf_env.sim.metrics import episode_metrics
+from cpf_env.evaluation.metrics import episode_metrics
 
 # --- claim 4: what the controller commands, not what the plant lets through ---------------
 

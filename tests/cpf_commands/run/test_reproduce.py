@@ -23,9 +23,9 @@ from cpf_commands.run.reproduce import (
     settling_time,
 )
 from cpf_env import scenarios
+from cpf_env.evaluation.metrics import episode_metrics
 from cpf_env.model.vessel import coriolis_matrix, damping_matrix
 from cpf_env.sim.fleet import FleetSim
-from cpf_env.sim.metrics import episode_metrics
 
 
 def test_trajectory_shapes_and_alignment(short_run):

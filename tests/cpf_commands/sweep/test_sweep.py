@@ -33,7 +33,7 @@ from cpf_commands.sweep.report import (
 )
 from cpf_commands.sweep.spec import SweepSpec, parse_setting, trial_name
 from cpf_commands.sweep.trial import run_trial
-from cpf_env import atomic
+from cpf_env.infra import atomic
 from cpf_env.sim.precompile import KERNEL_MODULES, kernels_of_package, precompile
 
 # --- --set parsing ---------------------------------------------------------------------------
@@ -275,9 +275,9 @@ def test_without_ray_or_the_learning_extra_cpf_sweep_says_what_to_install(
         with pytest.raises(SystemExit):
             sweep_main(argv)
     assert 'pip install -e ".[ray]"' in capsys.readouterr().err
-    again = ("cpf_commands.sweep.spec", "agents.training", "agents.run_folder", "agents.algorithms")
-    for name in again:
-        monkeypatch.delitem(sys.modules, name, raising=False)  # imported again, without SB3
+    cached = [name for name in sys.modules if name == "agents" or name.startswith("agents.")]
+    for name in ["cpf_commands.sweep.spec", *cached]:
+        monkeypatch.delitem(sys.modules, name)  # imported again, without stable_baselines3
     monkeypatch.setitem(sys.modules, "stable_baselines3", None)
     with pytest.raises(SystemExit):
         sweep_main(argv)

@@ -38,10 +38,10 @@ def test_max_cycles_is_the_episode_length() -> None:
         cpf_env.env(max_cycles=7, max_steps=8)
 
 
-def test_the_aec_factory_survives_importing_cpf_env_wrappers() -> None:
-    # The submodule cpf_env.envs.wrappers becomes the package attribute ``wrappers``: the
-    # factory must not look PettingZoo's wrappers up under that name.
-    import cpf_env.envs.wrappers
+def test_the_aec_factory_survives_importing_cpf_env_submodules() -> None:
+    # A submodule such as cpf_env.envs.core becomes a package attribute: the factory must
+    # not look PettingZoo's wrappers up under such a name.
+    import cpf_env.envs.core
 
     assert cpf_env.env(max_cycles=2).unwrapped.scenario.max_steps == 2
 
@@ -49,7 +49,7 @@ def test_the_aec_factory_survives_importing_cpf_env_wrappers() -> None:
 def test_observation_bounds_are_one_finite_rule() -> None:
     par = cpf_env.parallel_env("large_fleet")
     gym_env = CentralizedFleetEnv("large_fleet")
-    vec = CentralizedFleetVectorEnv(2, "large_fleet")
+    vec = CentralizedFleetVectorEnv("large_fleet", 2)
     boxes = [par.observation_space("vessel_0"), par.state_space, gym_env.observation_space]
     boxes.append(vec.single_observation_space)
     for box in boxes:
@@ -106,7 +106,7 @@ def test_render_before_reset_raises() -> None:
         with pytest.raises(RuntimeError, match=r"render\(\) before reset\(\)"):
             env.render()
     with pytest.raises(RuntimeError, match=r"render\(\) before reset\(\)"):
-        CentralizedFleetVectorEnv(2, render_mode="rgb_array").render()
+        CentralizedFleetVectorEnv(num_envs=2, render_mode="rgb_array").render()
 
 
 def test_complex_actions_are_rejected() -> None:

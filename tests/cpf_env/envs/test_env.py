@@ -19,7 +19,8 @@ from pettingzoo.test import api_test, parallel_api_test, parallel_seed_test, see
 
 import cpf_env
 from cpf_env import scenarios
-from cpf_env.envs.parallel import INFO_LEVELS, CooperativePathFollowingEnv
+from cpf_env.envs.core import INFO_LEVELS
+from cpf_env.envs.parallel import CooperativePathFollowingEnv
 from cpf_env.model.links import LinkImpairments
 from cpf_env.scenarios import Scenario, SpeedSchedule
 from cpf_env.scenarios.reward_weights import REWARD_TERMS, RewardWeights
@@ -122,7 +123,7 @@ def test_spaces_are_cached_and_match_the_scenario() -> None:
 
 @pytest.mark.parametrize("name", SCENARIO_NAMES)
 def test_reset_state_and_infos(name: str) -> None:
-    env = cpf_env.parallel_env(name)
+    env = cpf_env.parallel_env(name, info_level="full")
     observations, infos = env.reset(seed=3)
     assert env.agents == env.possible_agents
     assert set(observations) == set(infos) == set(env.possible_agents)
@@ -148,7 +149,7 @@ def test_reset_state_and_infos(name: str) -> None:
 
 
 def test_infos_report_command_saturation_and_state() -> None:
-    env = cpf_env.parallel_env("wang2014", tau_max=TAU_MAX, tau_min=TAU_MIN)
+    env = cpf_env.parallel_env("wang2014", info_level="full", tau_max=TAU_MAX, tau_min=TAU_MIN)
     env.reset(seed=0)
     rng = np.random.default_rng(4)
     for _ in range(20):
@@ -200,7 +201,7 @@ def test_render_accepts_the_construction_mode_positionally() -> None:
 
 
 def test_termination_when_a_vessel_leaves_its_path() -> None:
-    env = cpf_env.parallel_env("wang2014", max_path_error=3.0)
+    env = cpf_env.parallel_env("wang2014", info_level="minimal", max_path_error=3.0)
     env.reset(seed=0)
     actions = {agent: np.zeros(5, dtype=np.float32) for agent in env.agents}
     actions["vessel_2"] = np.array([9.2, 0.0, 0.0, 0.0, 0.0], dtype=np.float32)  # full ahead
@@ -333,7 +334,7 @@ def test_the_first_bad_action_in_agent_order_is_reported(
 
 def test_observations_and_info_arrays_are_each_agents_own() -> None:
     """Rows of one copy per quantity: writing one agent's entry changes nothing else."""
-    env = cpf_env.parallel_env("wang2014")
+    env = cpf_env.parallel_env("wang2014", info_level="full")
     env.reset(seed=0)
     observations, *_, infos = env.step(
         as_dict(env, random_actions(np.random.default_rng(1), env.sim))
@@ -406,7 +407,7 @@ def test_reward_equals_the_documented_formula(name: str) -> None:
     w_tau |tau_i / tau_max|^2) (quadratic form), s_i on the true path variables of the active
     graph; the infos' reward_terms are the terms and sum to the reward."""
     scenario = reward_scenarios()[name].replace(max_path_error=1e6)
-    env = cpf_env.parallel_env(scenario)
+    env = cpf_env.parallel_env(scenario, info_level="full")
     env.reset(seed=2)
     w, dt, n = scenario.reward, scenario.dt, scenario.n
     tau_scale = np.maximum(np.abs(np.array(scenario.tau_min)), np.abs(np.array(scenario.tau_max)))
@@ -494,13 +495,14 @@ def test_closed_envs_are_freed_after_their_spaces_were_asked_for() -> None:
     import weakref
 
     from baselines import make_policy
-    from cpf_env.envs.wrappers import ResidualWrapper
 
     alive = []
     for _ in range(200):
         env = cpf_env.parallel_env("wang2014")
         inner = cpf_env.parallel_env("wang2014")
-        wrapped = ResidualWrapper(inner, make_policy("nn_dsc", inner.scenario))
+        wrapped = cpf_env.parallel_env(
+            "wang2014", base_policy=make_policy("nn_dsc", inner.scenario)
+        )
         for agent in env.possible_agents:
             assert env.observation_space(agent) is env.observation_space(agent)
             env.action_space(agent)

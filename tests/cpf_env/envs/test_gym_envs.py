@@ -64,7 +64,9 @@ def test_make_passes_kwargs_and_truncates_itself() -> None:
 
 @pytest.mark.parametrize("mode", [None, "vector_entry_point"])
 def test_make_vec_uses_the_native_vector_env(mode: str | None) -> None:
-    envs = gymnasium.make_vec(GYM_ID, num_envs=4, vectorization_mode=mode, scenario="lossy_links")
+    envs = gymnasium.make_vec(
+        GYM_ID, num_envs=4, vectorization_mode=mode, scenario="lossy_links", info_level="minimal"
+    )
     assert isinstance(envs, CentralizedFleetVectorEnv)
     assert envs.sim.num_fleets == 4 and envs.scenario.name == "lossy_links"
     assert envs.metadata["autoreset_mode"] is AutoresetMode.NEXT_STEP
@@ -93,8 +95,8 @@ def test_register_envs_is_idempotent_and_fills_pettingzoo_registry() -> None:
 def test_vector_env_matches_single_envs_bit_for_bit() -> None:
     """Env k (vector seed s) == CentralizedFleetEnv seeded s + k, through autoresets."""
     num_envs, seed, steps = 3, 10, 250
-    overrides = {"scenario": "heterogeneous", "max_steps": 60}  # random starts and models
-    envs = CentralizedFleetVectorEnv(num_envs, **overrides)
+    overrides = {"scenario": "heterogeneous", "max_steps": 60, "info_level": "minimal"}
+    envs = CentralizedFleetVectorEnv(num_envs=num_envs, stagger=False, **overrides)
     singles = [CentralizedFleetEnv(**overrides) for _ in range(num_envs)]
     obs, infos = envs.reset(seed=seed)
     done = np.zeros(num_envs, dtype=bool)
@@ -127,7 +129,10 @@ def test_vector_env_matches_single_envs_bit_for_bit() -> None:
 def test_native_vector_env_matches_sync_vector_env() -> None:
     """Same NEXT_STEP semantics as Gymnasium's own SyncVectorEnv over the single env."""
     kwargs = {"num_envs": 2, "scenario": "current_and_waves", "max_steps": 25}
-    native = gymnasium.make_vec(GYM_ID, vectorization_mode="vector_entry_point", **kwargs)
+    native_only = {"stagger": False}  # SyncVectorEnv has no stagger
+    native = gymnasium.make_vec(
+        GYM_ID, vectorization_mode="vector_entry_point", **kwargs, **native_only
+    )
     sync = gymnasium.make_vec(GYM_ID, vectorization_mode="sync", **kwargs)
     assert np.array_equal(native.reset(seed=5)[0], sync.reset(seed=5)[0])
     rng = np.random.default_rng(1)
@@ -138,7 +143,7 @@ def test_native_vector_env_matches_sync_vector_env() -> None:
 
 
 def test_autoreset_next_step_after_truncation_and_termination() -> None:
-    envs = CentralizedFleetVectorEnv(2, max_steps=3)
+    envs = CentralizedFleetVectorEnv(num_envs=2, max_steps=3, stagger=False)
     first, _ = envs.reset(seed=0)
     actions = np.zeros(envs.action_space.shape, dtype=np.float32)
     for step in range(1, 4):
@@ -149,7 +154,9 @@ def test_autoreset_next_step_after_truncation_and_termination() -> None:
     assert np.array_equal(obs, first) and not rewards.any()
     assert not terminated.any() and not truncated.any() and not envs.sim.arrays.step.any()
 
-    envs = CentralizedFleetVectorEnv(2, max_path_error=0.5)  # wang2014 starts ~1 m off the path
+    envs = CentralizedFleetVectorEnv(
+        num_envs=2, max_path_error=0.5
+    )  # wang2014 starts ~1 m off the path
     first, _ = envs.reset(seed=0)
     _, _, terminated, truncated, _ = envs.step(actions)
     assert terminated.all() and not truncated.any()
@@ -159,7 +166,7 @@ def test_autoreset_next_step_after_truncation_and_termination() -> None:
 
 
 def test_reset_seeds() -> None:
-    envs = CentralizedFleetVectorEnv(3, scenario="heterogeneous")
+    envs = CentralizedFleetVectorEnv("heterogeneous", 3)
     obs, _ = envs.reset(seed=[7, None, 9])
     single = CentralizedFleetEnv(scenario="heterogeneous")
     assert np.array_equal(obs[2], single.reset(seed=9)[0])
@@ -197,7 +204,9 @@ def test_bad_action_raises_and_leaves_state_untouched(
         env.step(make_bad(np.zeros(env.action_space.shape, dtype=np.float32)))
     assert_unchanged(before, env.sim)
 
-    envs = CentralizedFleetVectorEnv(2, scenario="lossy_links", max_steps=6)  # delay 5 < 6
+    envs = CentralizedFleetVectorEnv(  # link delay 5 < 6 steps
+        "lossy_links", 2, stagger=False, max_steps=6
+    )
     envs.reset(seed=0)
     for _ in range(6):
         envs.step(np.zeros(envs.action_space.shape))  # both truncated: the next step would reset
@@ -213,4 +222,4 @@ def test_step_before_reset_raises() -> None:
     with pytest.raises(RuntimeError, match="reset"):
         CentralizedFleetEnv().step(np.zeros(25))
     with pytest.raises(RuntimeError, match="reset"):
-        CentralizedFleetVectorEnv(2).step(np.zeros((2, 25)))
+        CentralizedFleetVectorEnv(num_envs=2).step(np.zeros((2, 25)))

@@ -15,7 +15,6 @@ import numpy as np
 import cpf_env
 from baselines import make_policy
 from cpf_env.envs.gym_envs import CentralizedFleetEnv, CentralizedFleetVectorEnv
-from cpf_env.envs.wrappers import ResidualWrapper
 
 SCENARIO = "wang2014"
 
@@ -96,7 +95,7 @@ def test_gymnasium_registered_env_observations_are_not_aliased() -> None:
 
 
 def test_gymnasium_vector_env_observations_and_infos_are_not_aliased() -> None:
-    env = CentralizedFleetVectorEnv(3, SCENARIO)
+    env = CentralizedFleetVectorEnv(SCENARIO, 3)
     observation, infos = env.reset(seed=0)
     kept, kept_infos = observation, infos
     snapshot, info_snapshot = kept.copy(), _snapshot(infos)
@@ -112,10 +111,10 @@ def test_gymnasium_vector_env_observations_and_infos_are_not_aliased() -> None:
 
 
 def test_residual_wrapper_observations_and_infos_are_not_aliased() -> None:
-    base = cpf_env.parallel_env(SCENARIO)
-    env = ResidualWrapper(base, make_policy("nn_dsc", base), mode="force")  # type: ignore[arg-type]
+    base = make_policy("nn_dsc", cpf_env.scenarios.get(SCENARIO))
+    env = cpf_env.parallel_env(SCENARIO, info_level="full", base_policy=base)
     observations, _ = env.reset(seed=0)
-    correction = {a: np.full(env.controller.action_size, 0.5, np.float32) for a in env.agents}
+    correction = {a: np.full(env.core.action_size, 0.5, np.float32) for a in env.agents}
     kept, kept_infos, snapshot, info_snapshot = None, None, None, None
     for step in range(3):
         observations, _r, _t, _u, infos = env.step(correction)

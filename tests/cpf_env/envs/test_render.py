@@ -100,7 +100,7 @@ def test_parallel_and_vector_envs_render() -> None:
     frame = parallel.render()
     assert isinstance(frame, np.ndarray) and frame.shape == (480, 640, 3)
     parallel.close()
-    envs = CentralizedFleetVectorEnv(2, render_mode="rgb_array")
+    envs = CentralizedFleetVectorEnv(num_envs=2, render_mode="rgb_array")
     envs.reset(seed=0)
     frames = envs.render()
     assert frames is not None and len(frames) == 2 and frames[0].shape == (480, 640, 3)

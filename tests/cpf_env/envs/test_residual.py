@@ -1,4 +1,4 @@
-"""Residual control: the composition rule, what the base is told, and the ParallelEnv wrapper."""
+"""Residual control: the composition rule, what the base is told, the ParallelEnv's form."""
 
 from __future__ import annotations
 
@@ -9,15 +9,20 @@ from pettingzoo.test import parallel_api_test
 import cpf_env
 from baselines import make_policy
 from cpf_env import FleetSim, scenarios
+from cpf_env.envs.parallel import CooperativePathFollowingEnv
 from cpf_env.envs.residual import EXTRAS, ResidualConfig, ResidualController
-from cpf_env.envs.wrappers import ResidualWrapper
 
 SCENARIO = "bench_lossy_links"  # random starts and packet loss: every seed differs
 
 
-def wrapped(steps: int = 300, **options: object) -> ResidualWrapper:
-    env = cpf_env.parallel_env(SCENARIO, max_steps=steps)
-    return ResidualWrapper(env, make_policy("nn_dsc", env), **options)  # type: ignore[arg-type]
+def wrapped(steps: int = 300, **options: object) -> CooperativePathFollowingEnv:
+    scenario = cpf_env.scenarios.make_scenario(SCENARIO, max_steps=steps)
+    return cpf_env.parallel_env(
+        scenario,
+        info_level="full",
+        base_policy=make_policy("nn_dsc", scenario),
+        residual=ResidualConfig(**options),  # type: ignore[arg-type]
+    )
 
 
 @pytest.mark.parametrize("mode", ["force", "force_and_rate", "kinematic"])
@@ -33,12 +38,12 @@ def test_zero_residual_reproduces_the_base_policy_bit_for_bit(mode: str) -> None
     while reference.agents:
         actions = policy.act(expected)
         expected, rewards, terms, truncs, _ = reference.step(actions)
-        zero = {agent: np.zeros(env.controller.action_size, np.float32) for agent in env.agents}
+        zero = {agent: np.zeros(env.core.action_size, np.float32) for agent in env.agents}
         observations, got_rewards, got_terms, got_truncs, infos = env.step(zero)
         for agent in expected:
             assert np.array_equal(observations[agent][:d], expected[agent])
             assert got_rewards[agent] == rewards[agent]
-            assert np.array_equal(infos[agent]["residual"], np.zeros(env.controller.action_size))
+            assert np.array_equal(infos[agent]["residual"], np.zeros(env.core.action_size))
         assert (got_terms, got_truncs) == (terms, truncs)
         steps += 1
     assert steps == 300 and not env.agents
@@ -155,7 +160,7 @@ def test_wrapper_rejects_bad_corrections_before_any_state_changes() -> None:
     before = env.unwrapped.sim.arrays.eta.copy()
     good = {agent: np.zeros(3, np.float32) for agent in env.agents}
     for bad, message in [
-        ({**good, "vessel_2": np.zeros(4)}, "correction of vessel_2"),
+        ({**good, "vessel_2": np.zeros(4)}, "action of vessel_2"),
         ({**good, "vessel_1": np.array([np.nan, 0, 0])}, "not finite"),
         ({**good, "vessel_0": np.array([1j, 0, 0])}, "real numbers"),
         ({k: v for k, v in good.items() if k != "vessel_4"}, "one entry per live agent"),

@@ -21,7 +21,8 @@ from torchrl.envs.utils import check_env_specs
 import cpf_env
 from cpf_env import FleetSim, scenarios
 from cpf_env.envs import torchrl_env
-from cpf_env.envs.torchrl_env import ERROR_KEYS, GROUP, TorchRLFleetEnv
+from cpf_env.envs.torchrl_env import GROUP, TorchRLFleetEnv
+from cpf_env.sim.arrays import ERROR_KEYS
 
 pytestmark = pytest.mark.torchrl
 
@@ -79,7 +80,7 @@ def test_specs_follow_the_scenario_and_the_parallel_env() -> None:
 def test_bit_identical_to_fleet_sim_through_per_fleet_resets() -> None:
     """300 steps of random actions, fleets ending at different times and reset alone."""
     B, seed = 4, 11
-    env = TorchRLFleetEnv(SCENARIO, num_fleets=B, info_level="minimal", **SHORT)
+    env = TorchRLFleetEnv(SCENARIO, B, stagger=False, info_level="minimal", **SHORT)
     sim = FleetSim(scenarios.get(SCENARIO).replace(**SHORT), num_fleets=B)
     env.set_seed(seed)
     td = env.reset()
@@ -190,8 +191,8 @@ def test_bad_actions_raise_and_leave_the_state_untouched() -> None:
     td = env.reset()
     before = env.sim.arrays.eta.copy(), env.sim.arrays.step.copy()
     cases = [
-        (torch.zeros(2, 5, 4), r"must have shape \[B, n, 4 \+ m\] = \[2, 5, 5\], got \[2, 5, 4\]"),
-        (torch.zeros(2, 5, 5, 1), r"got \[2, 5, 5, 1\]"),
+        (torch.zeros(2, 5, 4), r"must have shape \(B, n, 4 \+ m\) = \(2, 5, 5\), got \(2, 5, 4\)"),
+        (torch.zeros(2, 5, 5, 1), r"got \(2, 5, 5, 1\)"),
     ]
     nan = torch.zeros(2, 5, 5)
     nan[1, 3, 2] = float("nan")
@@ -206,7 +207,7 @@ def test_bad_actions_raise_and_leave_the_state_untouched() -> None:
     with pytest.raises(ValueError, match=r"no \('vessel', 'action'\) entry"):
         env.step(td.clone())
     with pytest.raises(ValueError, match="info_level must be one of"):
-        TorchRLFleetEnv(SCENARIO, num_fleets=2, info_level="full")
+        TorchRLFleetEnv(SCENARIO, num_fleets=2, info_level="verbose")
     with pytest.raises(ValueError, match="num_fleets must be an integer >= 1"):
         TorchRLFleetEnv(SCENARIO, num_fleets=0)
 

@@ -56,7 +56,7 @@ def base_alone(scenario_name: str, seed: int, steps: int, **overrides: object) -
 def test_zero_actions_reproduce_the_base_policy_fleet_for_fleet(name: str, overrides: dict) -> None:
     """300 steps through per-fleet resets: each fleet equals its own nn_dsc run bit for bit."""
     B, seed, steps = 4, 11, 300
-    env = residual_env(name, B, overrides=overrides, seed=seed)
+    env = residual_env(name, B, overrides=overrides, seed=seed, stagger=False)
     td = env.reset()
     references = [base_alone(name, seed + k, steps, **overrides) for k in range(B)]
     zero = torch.zeros((B, env.n, 3))
@@ -115,7 +115,7 @@ def test_normalized_inputs_are_the_statistics_applied_to_the_raw_inputs() -> Non
     )
     stats = scaled.input_statistics
     assert isinstance(stats, InputStatistics)
-    assert stats.size == raw.input_size and np.all(stats.var >= 0)
+    assert stats.size == raw.core.input_size and np.all(stats.var >= 0)
     torch.manual_seed(0)
     first = raw.rollout(10, break_when_any_done=False)
     torch.manual_seed(0)
@@ -174,13 +174,13 @@ def test_bad_residual_input_is_refused_and_leaves_the_state_alone() -> None:
     env = residual_env("bench_mild", 2, seed=0)
     td = env.reset()
     before = env.sim.arrays.eta.copy()
-    with pytest.raises(ValueError, match=r"must have shape \[B, n, k\] = \[2, 5, 3\]"):
+    with pytest.raises(ValueError, match=r"must have shape \(B, n, k\) = \(2, 5, 3\)"):
         env.step(td.clone().set((GROUP, "action"), torch.zeros(2, 5, 5)))
     nan = torch.zeros(2, 5, 3)
     nan[0, 1, 2] = float("nan")
     with pytest.raises(ValueError, match="must be finite"):
         env.step(td.clone().set((GROUP, "action"), nan))
-    with pytest.raises(ValueError, match="real floating-point"):
+    with pytest.raises(ValueError, match="real numbers"):
         env.step(td.clone().set((GROUP, "action"), torch.zeros(2, 5, 3, dtype=torch.complex64)))
     assert np.array_equal(env.sim.arrays.eta, before)
     with pytest.raises(TypeError, match=r"agents\.marl\.make_env"):
@@ -198,7 +198,7 @@ def test_bad_residual_input_is_refused_and_leaves_the_state_alone() -> None:
 def test_stagger_ends_the_first_episodes_at_spread_horizons_then_full_ones() -> None:
     B, max_steps = 4, 40
     staggered = residual_env("bench_mild", B, seed=1, stagger=True, overrides={"max_steps": 40})
-    plain = residual_env("bench_mild", B, seed=1, overrides={"max_steps": 40})
+    plain = residual_env("bench_mild", B, seed=1, stagger=False, overrides={"max_steps": 40})
     td, td_plain = staggered.reset(), plain.reset()
     zero = torch.zeros((B, 5, 3))
     ends: list[list[int]] = [[] for _ in range(B)]

@@ -133,7 +133,7 @@ def test_required_variant_is_registered(variant: str) -> None:
 def test_saturation_heavy_really_saturates() -> None:
     """Commands of a simple P controller toward the path exceed the limits most of the time."""
     name = next(n for n in SCENARIO_NAMES if VARIANTS["saturation-heavy"](scenarios.get(n)))
-    env = cpf_env.parallel_env(name)
+    env = cpf_env.parallel_env(name, info_level="full")
     _, infos = env.reset(seed=0)
     saturated = 0
     for _ in range(100):

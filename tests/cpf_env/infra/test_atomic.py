@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from cpf_env import atomic
+from cpf_env.infra import atomic
 
 
 def test_a_failed_write_leaves_the_old_file_and_no_temporary(
@@ -56,7 +56,7 @@ def test_a_failed_staged_folder_leaves_the_old_folder(tmp_path: Path) -> None:
 
 _KILLED_WHILE_STAGING = """
 import os, signal, sys
-from cpf_env import atomic
+from cpf_env.infra import atomic
 with atomic.FolderLock(sys.argv[1]), atomic.staged_folder(sys.argv[1]) as staging:
     (staging / "half.csv").write_text("half")
     os.kill(os.getpid(), signal.SIGKILL)
@@ -86,7 +86,7 @@ def test_a_folder_killed_between_the_two_renames_is_restored(tmp_path: Path) -> 
 
 _HOLD_LOCK = """
 import sys, time
-from cpf_env import atomic
+from cpf_env.infra import atomic
 with atomic.FolderLock(sys.argv[1]):
     print("locked", flush=True)
     time.sleep(60)

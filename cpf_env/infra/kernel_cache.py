@@ -19,8 +19,8 @@ machine code. Where the cache lives is numba's decision, unchanged:
 It must run before any kernel module is imported (numba chooses a
 function's cache locator when it decorates it), so ``cpf_env/__init__.py``
 imports it first; importing any kernel module imports ``cpf_env`` first, so
-the key is always in place. It lives in ``cpf_env.model``, the lowest layer,
-so that every layer with kernels may import it. Functions of other packages
+the key is always in place. It lives in ``cpf_env.infra``, which every layer
+may import and which imports nothing of the package. Functions of other packages
 keep numba's own stamp, unless their package asks for this key with
 ``stamp_package`` (the compiled analytic policies of ``baselines`` inline
 ``cpf_env.model.vessel`` and read ``cpf_env.sim.observation``'s layout): then
@@ -56,8 +56,8 @@ KERNEL_MODULES = (
     "model.vessel",
     "sim.kernels",
     "sim.observation",
-    "sim.privileged",
-    "sim.recording",
+    "evaluation.privileged",
+    "evaluation.recording",
     "sim.reward",
 )
 

@@ -36,11 +36,11 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
+from cpf_env.evaluation.recording import CHUNK, RECORDED, StepRecord, new_record
 from cpf_env.model.paths import encode_paths, evaluate_paths
 from cpf_env.scenarios.reward_weights import REWARD_TERMS
 from cpf_env.sim import arrays
 from cpf_env.sim.fleet import FleetSim
-from cpf_env.sim.recording import CHUNK, RECORDED, StepRecord, new_record
 
 __all__ = ["METRICS", "WINDOW_FRACTION", "FleetMetrics", "path_relative"]
 
@@ -215,7 +215,7 @@ class FleetMetrics:
         """Take steps t .. t + K - 1, written to rows 0 .. K - 1 of ``buffer()`` by a compiled loop.
 
         The loop (``baselines.closed_loop``) writes every fleet's row with
-        ``cpf_env.sim.recording.record_fleet``, speed estimates included, as
+        ``cpf_env.evaluation.recording.record_fleet``, speed estimates included, as
         ``record`` would have one step at a time.
 
         Args:

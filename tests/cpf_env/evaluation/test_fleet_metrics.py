@@ -14,9 +14,9 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
+from cpf_env.evaluation.fleet_metrics import METRICS, FleetMetrics, path_relative
 from cpf_env.model.paths import StraightLine
 from cpf_env.scenarios.reward_weights import REWARD_TERMS
-from cpf_env.sim.fleet_metrics import METRICS, FleetMetrics, path_relative
 
 DT, T, V0 = 0.1, 8, 0.5
 LINES = tuple(StraightLine(y0=5.0 * i) for i in range(3))

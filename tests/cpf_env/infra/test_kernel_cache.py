@@ -1,4 +1,4 @@
-"""numba's cache is keyed on every source a kernel compiles from (``model.kernel_cache``)."""
+"""numba's cache is keyed on every source a kernel compiles from (``infra.kernel_cache``)."""
 
 from __future__ import annotations
 
@@ -16,8 +16,8 @@ import pytest
 from conftest import ROOT
 
 from cpf_env import scenarios
-from cpf_env.model import kernel_cache
-from cpf_env.model.kernel_cache import KERNEL_MODULES, KERNEL_SOURCES, kernel_sources_digest
+from cpf_env.infra import kernel_cache
+from cpf_env.infra.kernel_cache import KERNEL_MODULES, KERNEL_SOURCES, kernel_sources_digest
 
 #: Run in a copy of the package: wang2014's true accelerations under a fixed
 #: force at the initial state (``plant_accelerations`` of sim/kernels.py

@@ -6,7 +6,7 @@ claims and the benchmark are stated in, over a final window of the episode
 (by default its last quarter, where the paper's claims are about steady
 state). These are per-vessel maxima for checking the paper's claims; the
 benchmark's metrics, which ``cpf-run`` also reports (``Trajectory.fleet_metrics``),
-are defined once in ``cpf_env.sim.fleet_metrics``.
+are defined once in ``cpf_env.evaluation.fleet_metrics``.
 """
 
 from __future__ import annotations
@@ -40,7 +40,7 @@ class Trajectory:
         tau_max: (n, 3) upper force limits.
         extras: Policy diagnostics and derived series, name -> (T, n, ...) array.
         fleet_metrics: The benchmark's metrics of the episode
-            (``cpf_env.sim.fleet_metrics.METRICS``), name -> value.
+            (``cpf_env.evaluation.fleet_metrics.METRICS``), name -> value.
     """
 
     time: NDArray[np.float64]

@@ -1,6 +1,6 @@
 """The per-step record the benchmark's metrics are computed from, and its compiled writer.
 
-``FleetMetrics`` (``cpf_env.sim.fleet_metrics``) keeps the simulator arrays
+``FleetMetrics`` (``cpf_env.evaluation.fleet_metrics``) keeps the simulator arrays
 of up to ``CHUNK`` steps in a ``StepRecord`` and turns them into its series
 together. The record is filled either from Python, one step at a time
 (``FleetMetrics.record``), or by a compiled loop that steps many control

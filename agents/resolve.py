@@ -1,0 +1,79 @@
+"""Name resolution for the learning routes, in one place: scenario, base policy, residual.
+
+Every route of ``agents`` (``FleetVecEnv`` and its mixture, the TorchRL env by
+name, the BenchMARL tasks, the PettingZoo task route, loaded policies) builds
+its episodes through ``make_core``:
+
+- the scenario: a registered name or a ``Scenario``, with field overrides
+  (``cpf_env.scenarios.make_scenario``);
+- the base policy: a name of ``baselines.POLICIES`` (built with
+  ``policy_options``), ``None`` or ``"none"`` (no base: the learner commands
+  everything), or a policy object;
+- the residual: ``ResidualConfig()`` unless given; with no base policy the
+  rule of ``cpf_env.envs.residual.learner_config`` (forces and rate as
+  fractions of their limits, ``mode="force_and_rate"``, ``scale=1``).
+
+The env layer (``cpf_env.envs``) imports no policy code and takes only
+objects; this is the layer that may import ``baselines``.
+
+Example:
+    >>> core = make_core("wang2014", 2, base_policy="none", max_steps=50)
+    >>> core.controller.config.mode, core.action_size
+    ('force_and_rate', 4)
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from baselines import POLICIES, make_policy
+from cpf_env.envs.core import EpisodeCore
+from cpf_env.envs.policy import FleetPolicy
+from cpf_env.envs.residual import ResidualConfig
+from cpf_env.scenarios import Scenario, make_scenario
+
+__all__ = ["make_core", "resolve_base_policy"]
+
+
+def resolve_base_policy(
+    base_policy: str | FleetPolicy | None,
+    scenario: Scenario,
+    policy_options: dict[str, Any] | None = None,
+) -> FleetPolicy | None:
+    """A base policy from a name of ``baselines.POLICIES``, an object, or None/``"none"``.
+
+    Raises:
+        ValueError: An unknown name (the valid ones are listed).
+        TypeError: Neither a name, None nor a policy object.
+    """
+    if base_policy is None or base_policy == "none":
+        return None
+    if isinstance(base_policy, str):
+        if base_policy not in POLICIES:
+            raise ValueError(
+                f"unknown base policy {base_policy!r}; choose one of {sorted(POLICIES)} "
+                "or None (the agent commands everything)."
+            )
+        return make_policy(base_policy, scenario, **(policy_options or {}))
+    if not isinstance(base_policy, FleetPolicy):
+        raise TypeError(
+            "base_policy must be a name, None, or a policy object (act_batch, reset, "
+            f"reset_fleets, diagnostics); got {type(base_policy).__name__}."
+        )
+    return base_policy
+
+
+def make_core(
+    scenario: str | Scenario,
+    num_fleets: int,
+    base_policy: str | FleetPolicy | None = "nn_dsc",
+    residual: ResidualConfig | None = None,
+    stagger: bool = True,
+    policy_options: dict[str, Any] | None = None,
+    **overrides: Any,
+) -> EpisodeCore:
+    """The episode core of a learning route: always the residual form (see the module)."""
+    resolved = make_scenario(scenario, **overrides)
+    base = resolve_base_policy(base_policy, resolved, policy_options)
+    config = ResidualConfig() if residual is None else residual
+    return EpisodeCore(resolved, num_fleets, base, config, stagger)

@@ -1,0 +1,137 @@
+"""Content-keyed cache of the bench's slow cells: the receding-horizon ``oracle`` and ``mpc``.
+
+The headroom bound (``oracle``) and ``mpc`` plan by rolling candidate plans
+out over their horizon at every revision, about a hundred times the work of
+the other analytic policies. Their episodes are a pure function of what
+they are run on (and each episode of its seed alone: the policies seed
+their sampling from the episode, not from its row in the batch), so
+``cpf-bench`` keeps each (policy, scenario) cell's metrics per seed in a JSON
+file keyed by a SHA-256 digest of:
+
+* the policy's name (built with its default gains: ``cpf-bench`` passes none);
+* the scenario, every field (``repr`` of the frozen dataclass);
+* the horizon in steps;
+* the sources the numbers come from: the simulator's kernel sources
+  (``cpf_env.infra.kernel_cache.kernel_sources_digest``), the two modules of
+  the policies (``baselines.mpc``, ``baselines.mpc_kernels``) and the
+  metrics (``cpf_env.evaluation.fleet_metrics``).
+
+A cell whose seeds the matching file all holds is read instead of run; any
+other is run and, when it ran whole episodes, its seeds merged into the file
+(written atomically).
+``CACHE_DIRECTORY`` is ``results/bench_cache`` of a source checkout, where
+the files for the test split of the suite (20 seeds) are committed;
+outside a checkout (an installed package) nothing is cached. The files are
+data (JSON numbers), never code.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import inspect
+import json
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from baselines import mpc, mpc_kernels
+from cpf_env.evaluation import fleet_metrics
+from cpf_env.infra import atomic
+from cpf_env.infra.kernel_cache import kernel_sources_digest
+from cpf_env.scenarios import Scenario
+
+__all__ = ["CACHED_POLICIES", "CACHE_DIRECTORY", "cell_key", "load_cell", "store_cell"]
+
+#: Policy names whose cells are cached (given by name, i.e. with default gains).
+CACHED_POLICIES = frozenset(("oracle", "mpc"))
+#: Where the cells live: results/bench_cache of the source checkout.
+CACHE_DIRECTORY = Path(__file__).resolve().parents[2] / "results" / "bench_cache"
+
+
+def _sources_digest() -> str:
+    """SHA-256 of the kernel sources and of the policies' and metrics' modules."""
+    digest = hashlib.sha256(kernel_sources_digest().encode())
+    for module in (mpc, mpc_kernels, fleet_metrics):
+        digest.update(Path(inspect.getfile(module)).read_bytes())
+    return digest.hexdigest()
+
+
+def cell_key(policy: str, task: Scenario, steps: int | None) -> str:
+    """The content key (SHA-256, hex) of a policy's episodes on a scenario (module docstring)."""
+    horizon = task.max_steps if steps is None else int(steps)
+    digest = hashlib.sha256()
+    for part in (policy, repr(task), str(horizon), _sources_digest()):
+        digest.update(part.encode() + b"\0")
+    return digest.hexdigest()
+
+
+def _read(path: Path, key: str) -> dict[str, dict[str, float]]:
+    """Seed (as text) -> metric -> value of a cache file, empty if absent or of another key."""
+    if not path.is_file():
+        return {}
+    stored = json.loads(path.read_text())
+    if stored.get("key") != key:
+        return {}
+    episodes: dict[str, dict[str, float]] = stored["episodes"]
+    return episodes
+
+
+def _path(directory: Path, policy: str, task: Scenario, key: str) -> Path:
+    return directory / f"{policy}-{task.name}-{key[:16]}.json"
+
+
+def load_cell(
+    policy: str,
+    task: Scenario,
+    seeds: Sequence[int],
+    steps: int | None,
+    directory: Path | None = None,
+) -> dict[str, NDArray[np.float64]] | None:
+    """The cached metrics (name -> (S,)) of a cell, or None unless every seed is cached.
+
+    ``directory`` defaults to ``CACHE_DIRECTORY``.
+    """
+    directory = CACHE_DIRECTORY if directory is None else directory
+    key = cell_key(policy, task, steps)
+    episodes = _read(_path(directory, policy, task, key), key)
+    if not seeds or any(str(int(seed)) not in episodes for seed in seeds):
+        return None
+    names = episodes[str(int(seeds[0]))].keys()
+    return {
+        name: np.array([episodes[str(int(seed))][name] for seed in seeds], dtype=np.float64)
+        for name in names
+    }
+
+
+def store_cell(
+    policy: str,
+    task: Scenario,
+    seeds: Sequence[int],
+    steps: int | None,
+    metrics: dict[str, NDArray[np.float64]],
+    directory: Path | None = None,
+) -> Path | None:
+    """Merge a cell's episodes into its cache file; None (nothing written) outside a checkout.
+
+    ``directory`` defaults to ``CACHE_DIRECTORY``.
+    """
+    directory = CACHE_DIRECTORY if directory is None else directory
+    if not directory.parent.is_dir():
+        return None
+    directory.mkdir(exist_ok=True)
+    key = cell_key(policy, task, steps)
+    path = _path(directory, policy, task, key)
+    episodes = _read(path, key)
+    for k, seed in enumerate(seeds):
+        episodes[str(int(seed))] = {name: float(values[k]) for name, values in metrics.items()}
+    record = {
+        "key": key,
+        "policy": policy,
+        "scenario": task.name,
+        "steps": task.max_steps if steps is None else int(steps),
+        "episodes": dict(sorted(episodes.items(), key=lambda item: int(item[0]))),
+    }
+    atomic.write_text(path, json.dumps(record, indent=1) + "\n")
+    return path
