@@ -54,8 +54,8 @@ from agents.algorithms import make_env
 from agents.train_config import TrainConfig
 from agents.vec_env import FleetVecEnv
 from baselines import PRIVILEGED, make_policy
-from cpf_env import atomic
 from cpf_env.envs.input_statistics import InputStatistics
+from cpf_env.infra import atomic
 from cpf_env.scenarios.splits import check_training
 
 __all__ = ["DistillConfig", "DistillReport", "distill"]
