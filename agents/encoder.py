@@ -14,7 +14,9 @@ slots; ``NeighbourSetEncoder`` does not:
 The same weights run on any K (train with K slots, run with more: a
 10-vessel star's centre has 9), and reordering the slots changes the
 features only by float rounding of the pooled sum. Empty slots contribute
-nothing, bit for bit.
+nothing (their terms are exact zeros); padding to more slots changes the
+features only by float rounding (the slot MLP runs on more rows, for which
+BLAS may pick another kernel).
 
 Normalized inputs. SB3's ``VecNormalize`` maps an empty slot's ``a_ij = 0`` to
 ``(0 - mean) / sqrt(var + eps)``, not to 0. ``empty_weight`` is that value

@@ -54,7 +54,9 @@ def test_empty_slots_are_ignored_and_more_slots_give_the_same_features() -> None
     large = torch.zeros(small.shape[0], SLOTS + 9 * SLOT + TAIL)
     large[:, : SLOTS + 3 * SLOT] = small[:, : SLOTS + 3 * SLOT]
     large[:, -TAIL:] = small[:, -TAIL:]
-    assert torch.equal(encoder(large), encoder(small))
+    # empty slots add exact zeros, but the slot MLP runs on (B K) rows: BLAS may pick
+    # another kernel for another row count, so allow float rounding only
+    torch.testing.assert_close(encoder(large), encoder(small), rtol=1e-6, atol=1e-7)
     # garbage in an empty slot's other fields is ignored (a_ij = 0 marks it empty)
     noisy = large.clone()
     noisy[:, SLOTS + 5 * SLOT + 1 : SLOTS + 6 * SLOT] = 7.0
@@ -122,7 +124,9 @@ def test_ppo_trained_on_few_slots_runs_a_ten_vessel_star() -> None:
     padded[:, : obs.shape[1]] = obs
     small_actions, _ = model.predict(obs, deterministic=True)
     big_actions, _ = big.predict(padded, deterministic=True)
-    np.testing.assert_array_equal(big_actions, small_actions)
+    # Padding adds masked zeros only, but the slot MLP then runs on more rows, for which
+    # BLAS may pick another kernel (by shape and thread count): float rounding only.
+    np.testing.assert_allclose(big_actions, small_actions, rtol=1e-6, atol=1e-7)
     star = np.zeros((1, SLOTS + k_star * SLOT), dtype=np.float32)
     star[0, SLOTS : SLOTS + k_star * SLOT : SLOT] = 1.0  # nine linked neighbours
     action, _ = big.predict(star, deterministic=True)
