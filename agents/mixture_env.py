@@ -42,11 +42,11 @@ from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper
 from stable_baselines3.common.vec_env.base_vec_env import VecEnvIndices, VecEnvStepReturn
 
 from agents.vec_env import FleetVecEnv
-from cpf_env.envs.core import DEFAULT_INFO_LEVEL, check_num_fleets, check_seed, checked_actions
+from cpf_env.envs.core import DEFAULT_INFO_LEVEL, check_num_fleets, checked_actions
 from cpf_env.envs.policy import FleetPolicy
 from cpf_env.envs.residual import ResidualConfig
 from cpf_env.scenarios import Scenario, make_scenario
-from cpf_env.sim.fleet import observation_layout
+from cpf_env.sim.fleet import check_seed, observation_layout
 
 __all__ = ["BalancedRewards", "MixtureVecEnv", "split_fleets"]
 

@@ -56,10 +56,11 @@ from stable_baselines3.common.vec_env import VecEnv
 from stable_baselines3.common.vec_env.base_vec_env import VecEnvIndices, VecEnvStepReturn
 
 from agents.resolve import make_core
-from cpf_env.envs.core import DEFAULT_INFO_LEVEL, check_info_level, check_seed, checked_actions
+from cpf_env.envs.core import DEFAULT_INFO_LEVEL, check_info_level, checked_actions
 from cpf_env.envs.policy import FleetPolicy
 from cpf_env.envs.residual import ResidualConfig
 from cpf_env.scenarios import Scenario
+from cpf_env.sim.fleet import check_seed
 from cpf_env.sim.observation import observation_box
 
 __all__ = ["FleetVecEnv"]

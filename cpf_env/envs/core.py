@@ -54,7 +54,7 @@ from cpf_env.envs.policy import FleetPolicy
 from cpf_env.envs.residual import ResidualConfig, ResidualController, learner_config
 from cpf_env.scenarios import Scenario
 from cpf_env.sim import arrays
-from cpf_env.sim.fleet import FleetSim
+from cpf_env.sim.fleet import FleetSim, check_seed
 
 __all__ = [
     "DEFAULT_INFO_LEVEL",
@@ -64,7 +64,6 @@ __all__ = [
     "check_flag",
     "check_info_level",
     "check_num_fleets",
-    "check_seed",
     "checked_actions",
 ]
 
@@ -73,20 +72,6 @@ __all__ = [
 #: arrays stay readable from ``EpisodeCore.info_arrays`` (and ``core.sim.arrays``).
 INFO_LEVELS = ("none", "minimal", "full")
 DEFAULT_INFO_LEVEL = "none"
-
-
-def check_seed(seed: object, what: str = "seed") -> int | None:
-    """``seed`` as a python int (numpy ints welcome) or None; ValueError for anything else.
-
-    Raises:
-        ValueError: A bool, a float, a string, a negative integer ...; the message says
-            what a seed must be.
-    """
-    if seed is None:
-        return None
-    if isinstance(seed, bool | np.bool_) or not isinstance(seed, int | np.integer) or seed < 0:
-        raise ValueError(f"{what} must be an integer >= 0 or None, got {seed!r}.")
-    return int(seed)
 
 
 def check_info_level(info_level: object) -> str:

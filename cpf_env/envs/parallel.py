@@ -20,11 +20,12 @@ from gymnasium import spaces
 from numpy.typing import NDArray
 from pettingzoo import ParallelEnv
 
-from cpf_env.envs.core import DEFAULT_INFO_LEVEL, EpisodeCore, check_info_level, check_seed
+from cpf_env.envs.core import DEFAULT_INFO_LEVEL, EpisodeCore, check_info_level
 from cpf_env.envs.policy import FleetPolicy
 from cpf_env.envs.residual import ResidualConfig
 from cpf_env.envs.views import FleetViews, check_render_mode
 from cpf_env.scenarios import Scenario, make_scenario
+from cpf_env.sim.fleet import check_seed
 from cpf_env.sim.observation import ObsLayout, observation_box
 
 __all__ = ["CooperativePathFollowingEnv", "check_reset_options", "warn_reset_options"]

@@ -33,7 +33,7 @@ from cpf_env.sim.arrays import FleetArrays, KernelConstants
 from cpf_env.sim.observation import ObsLayout
 from cpf_env.sim.threads import PARALLEL_MIN_FLEETS
 
-__all__ = ["PARALLEL_MIN_FLEETS", "FleetSim", "as_real_actions", "observation_layout"]
+__all__ = ["PARALLEL_MIN_FLEETS", "FleetSim", "as_real_actions", "check_seed", "observation_layout"]
 
 #: Names of the integrated state per vessel, as (array, component, what it is).
 _STATE_NAMES = (
@@ -72,6 +72,20 @@ def _floats(value: ArrayLike) -> NDArray[np.float64]:
     return np.ascontiguousarray(value, dtype=np.float64)
 
 
+def check_seed(seed: object, what: str = "seed") -> int | None:
+    """``seed`` as a python int (numpy ints welcome) or None; ValueError for anything else.
+
+    Raises:
+        ValueError: A bool, a float, a string, a negative integer ...; the message says
+            what a seed must be.
+    """
+    if seed is None:
+        return None
+    if isinstance(seed, bool | np.bool_) or not isinstance(seed, int | np.integer) or seed < 0:
+        raise ValueError(f"{what} must be an integer >= 0 or None, got {seed!r}.")
+    return int(seed)
+
+
 def _seeds(seeds: object, count: int) -> list[int | None]:
     """``count`` reset seeds checked whole: each a Python or numpy integer >= 0, or None.
 
@@ -86,15 +100,7 @@ def _seeds(seeds: object, count: int) -> list[int | None]:
     checked = list(seeds)
     if len(checked) != count:
         raise ValueError(f"got {len(checked)} seeds for {count} fleets; give one per fleet.")
-    for k, seed in enumerate(checked):
-        if seed is None:
-            continue
-        if isinstance(seed, bool | np.bool_) or not isinstance(seed, int | np.integer) or seed < 0:
-            raise ValueError(
-                f"seeds[{k}] is {seed!r}; each seed must be an integer >= 0 or None "
-                "(nothing was reset)."
-            )
-    return [None if seed is None else int(seed) for seed in checked]
+    return [check_seed(seed, f"seeds[{k}]") for k, seed in enumerate(checked)]
 
 
 def _ints(value: ArrayLike) -> NDArray[np.int64]:
