@@ -171,7 +171,7 @@ def markdown(
         f"`P(beats)`: probability of a lower cost than {reference} on the same seed. "
         "All numbers: `summary.csv`.",
     ]
-    versions = sorted({int(v) for r in rows if (v := r.get("suite_version")) is not None})
+    versions = sorted({str(r["suite_version"]) for r in rows if r["suite_version"] is not None})
     if versions:
         lines += [
             "",
