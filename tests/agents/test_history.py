@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from agents import FleetVecEnv
-from agents.history import HistoryVecEnv
+from agents.history_env import HistoryVecEnv
 from cpf_env.sim.observation import SLOTS
 
 H = 3
