@@ -166,3 +166,26 @@ def test_a_six_slot_agent_runs_a_ten_vessel_star(agent: Path) -> None:
     # only the learner's slots changed: the home scenario's 6 stay 6
     assert load_policy(agent)._residual.neighbour_slots == 6
     assert policy._residual.neighbour_slots == 9
+
+
+def test_loading_an_encoder_agent_imports_no_learning_algorithm(agent: Path) -> None:
+    """The encoder and the history are read and run with torch and numpy only."""
+    import os
+    import subprocess
+    import sys
+
+    from conftest import ROOT
+
+    code = (
+        "import sys\n"
+        "from agents import load_policy\n"
+        f"load_policy({str(agent)!r}).act_batch\n"
+        "print(sorted(m for m in sys.modules if m.split('.')[0] == 'stable_baselines3'\n"
+        "    or m in ('agents.algorithms', 'agents.history_env', 'agents.run_folder')))\n"
+    )
+    environment = {**os.environ, "PYTHONPATH": str(ROOT)}
+    done = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, env=environment, check=False
+    )
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == "[]"
