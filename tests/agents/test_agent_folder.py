@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import base64
+import dataclasses
 import json
 import pickle
 import shutil
@@ -267,3 +268,23 @@ def test_an_mlp_without_history_is_still_written_as_version_1(tmp_path: Path) ->
     for name in ("policy.safetensors", "normalization.json", "config.json"):
         assert (folder / name).read_bytes() == (AGENT / name).read_bytes(), name
     assert json.loads((folder / "manifest.json").read_text())["format_version"] == 1
+
+
+@pytest.mark.parametrize("encoder", [None, "deepsets"])
+def test_build_actor_has_the_layers_sb3_trains(encoder: str | None) -> None:
+    """The untrained actor (for other learners) has the tensors ``cpf-train`` writes."""
+    from stable_baselines3.common.vec_env import VecMonitor
+
+    from agents.agent_folder import actor_tensors
+    from agents.algorithms import build_model, make_env
+    from agents.history_env import HistoryVecEnv
+
+    config = dataclasses.replace(ENCODER_CONFIG, encoder=encoder, batch_size=32)
+    env = VecMonitor(HistoryVecEnv(make_env(config), config.history))
+    tensors = actor_tensors(build_model(config, env), config.algo)
+    size = int(env.observation_space.shape[0])  # type: ignore[index]
+    assert size == ENCODER_INPUTS
+    network = build_actor(config, size, 3)
+    shapes = {name: tuple(value.shape) for name, value in network.state_dict().items()}
+    assert shapes == {name: tuple(value.shape) for name, value in tensors.items()}
+    assert (network.encoder is None) == (encoder is None)
