@@ -43,10 +43,10 @@ sit beside these files (``cpf-train`` keeps it to resume training), but is not
 listed in the manifest and is never opened by evaluation.
 
 The actor is an MLP (behind the encoder, in version 2) with ``tanh`` (PPO) or
-``ReLU`` (SAC) hidden layers; its
-deterministic action is the output clipped to [-1, 1] (PPO, as SB3's
-``predict`` clips) or squashed by ``tanh`` and unscaled from [-1, 1] as SB3
-does (SAC), in float32, so it has the bits of SB3's ``predict``.
+``ReLU`` (SAC) hidden layers; its deterministic action is the output clipped
+to [-1, 1] (PPO, as SB3's ``predict`` clips) or squashed by ``tanh`` and
+unscaled from [-1, 1] as SB3 does (SAC), in float32, so it has the bits of
+SB3's ``predict``.
 """
 
 from __future__ import annotations

@@ -268,7 +268,7 @@ class TrainedPolicy(FleetPolicy):
         self._base = resolve_base_policy(config.base, scenario)
         residual = config.residual_config()
         if config.encoder is not None:
-            slots = self._encoder_slots(config, actor, scenario)
+            slots = self._encoder_slots(config, actor)
             residual = dataclasses.replace(residual, neighbour_slots=slots)
         self._residual = learner_config(self._base, residual)
         self._controller: ResidualController | None = None
@@ -293,8 +293,8 @@ class TrainedPolicy(FleetPolicy):
         """Floats the own history appends to each input (0 without one)."""
         return self.config.history * (SLOTS + self._residual.action_size + 1)
 
-    def _encoder_slots(self, config: TrainConfig, actor: Actor, scenario: Scenario) -> int:
-        """Neighbour slots an encoder actor gets on ``scenario``.
+    def _encoder_slots(self, config: TrainConfig, actor: Actor) -> int:
+        """Neighbour slots an encoder actor gets on the evaluation scenario.
 
         Any number (``actor.input_size`` None): the training K or the scenario's
         degree, whichever is larger. A fixed input (an exported graph): the K' its
