@@ -274,6 +274,8 @@ class TrainedPolicy(FleetPolicy):
         self._controller: ResidualController | None = None
         self._history: OwnHistory | None = None
         size = self._residual.input_size(self.layout) + self._history_size()
+        if isinstance(actor, TorchActor) and actor.network.encoder is not None:
+            self._check_encoder(actor.network.encoder.slot_size, actor.network.encoder.tail, size)
         if actor.input_size is not None and actor.input_size != size:
             raise ValueError(
                 f"scenario {scenario.name!r} gives inputs of size {size} but the "
@@ -287,6 +289,26 @@ class TrainedPolicy(FleetPolicy):
                 f"the network of {name!r} gives {actor.action_size} actions but its "
                 f"config.json (mode {self._residual.mode!r}) asks for "
                 f"{self._residual.action_size}."
+            )
+
+    def _check_encoder(self, slot_size: int, tail: int, size: int) -> None:
+        """Refuse an encoder whose slots or tail are not this scenario's inputs'.
+
+        Raises:
+            ValueError: Slots of another message size (the scenario's ``3 + m``).
+            AgentFolderError: A tail (extras and history) other than the configuration's.
+        """
+        if slot_size != self.layout.slot_size:
+            raise ValueError(
+                f"the encoder of {self.name!r} reads neighbour slots of {slot_size} floats but "
+                f"scenario {self.scenario.name!r} gives {self.layout.slot_size} (3 + message "
+                "size): evaluate it on a scenario with the training message size."
+            )
+        expected = size - self._residual.learner_layout(self.layout).size
+        if tail != expected:
+            raise AgentFolderError(
+                f"the encoder of {self.name!r} reads {tail} floats after the slots but its "
+                f"config.json's extras and history give {expected}."
             )
 
     def _history_size(self) -> int:

@@ -605,3 +605,12 @@ def test_a_version_2_weights_file_edited_without_the_manifest_is_refused(tmp_pat
     data[-1] ^= 1
     (folder / "policy.safetensors").write_bytes(bytes(data))
     _refused(folder, "policy.safetensors does not match its SHA-256")
+
+
+def test_a_version_2_encoder_whose_tail_is_not_the_configurations_is_refused(
+    tmp_path: Path,
+) -> None:
+    """Extras added to config.json: the encoder's tail (history only) no longer fits."""
+    folder = _v2(tmp_path)
+    _edit_json(folder, "config.json", _set("config.extras", ["base_action"]))
+    _refused(folder, "reads 44 floats after the slots", "extras and history give 48")

@@ -17,7 +17,7 @@ from agents import FleetVecEnv, TrainConfig, load_policy, train
 from agents.algorithms import build_model
 from agents.history_env import HistoryVecEnv
 from agents.loading import TrainedPolicy
-from cpf_env import FleetSim
+from cpf_env import FleetSim, scenarios
 from cpf_env.model.graph import Graph
 
 H = 3
@@ -189,3 +189,9 @@ def test_loading_an_encoder_agent_imports_no_learning_algorithm(agent: Path) -> 
     )
     assert done.returncode == 0, done.stderr
     assert done.stdout.strip() == "[]"
+
+
+def test_an_encoder_agent_on_another_message_size_is_refused(agent: Path) -> None:
+    other = scenarios.get("bench_mild").replace(message_size=2)
+    with pytest.raises(ValueError, match="slots of 4 floats but scenario 'bench_mild' gives 5"):
+        load_policy(agent, scenario=other)
