@@ -11,6 +11,23 @@ A folder that ``cpf-train`` writes, and the only thing evaluation reads:
 - ``manifest.json``: the format name and version, the package version that
   wrote it, and the SHA-256 and size of each of the three files above.
 
+Version 1 holds an MLP over the flat input of K neighbour slots. Version 2
+(written when the ``TrainConfig`` has an ``encoder`` or a ``history``) adds:
+
+- in ``policy.safetensors``, the neighbour encoder's tensors
+  (``encoder.phi.0.weight`` (hidden, slot_size), ``encoder.phi.0.bias``,
+  ``encoder.phi.2.weight`` (hidden, hidden), ``encoder.phi.2.bias``, and the
+  scalars ``encoder.empty_weight`` and ``encoder.tolerance``), the MLP then
+  reading the encoder's features (``agents.encoder.NeighbourSetEncoder``);
+- in ``config.json``, the field ``actor``: ``encoder`` (``"deepsets"`` or
+  null), ``history`` (own-history entries, ``agents.history``) and, with an
+  encoder, ``pooling``, ``hidden``, ``slot_size`` (3 + m), ``slots`` (K of
+  training, which ``normalization.json`` covers) and ``tail`` (floats after
+  the slots: extras and history).
+
+Version 1 folders are read as before (and an MLP without history is still
+written as version 1, byte for byte as before).
+
 Reading trusts nothing in the folder (``agents.folder_files``): only regular
 files inside it are opened, with size and JSON depth limits; every field is
 typed strictly; the weights must be float32 (float16, bfloat16, float64 or
@@ -25,10 +42,11 @@ over from another run is an error naming that file. SB3's ``model.zip`` may
 sit beside these files (``cpf-train`` keeps it to resume training), but is not
 listed in the manifest and is never opened by evaluation.
 
-The actor is an MLP with ``tanh`` (PPO) or ``ReLU`` (SAC) hidden layers; its
-deterministic action is the output clipped to [-1, 1] (PPO, as SB3's
-``predict`` clips) or squashed by ``tanh`` and unscaled from [-1, 1] as SB3
-does (SAC), in float32, so it has the bits of SB3's ``predict``.
+The actor is an MLP (behind the encoder, in version 2) with ``tanh`` (PPO) or
+``ReLU`` (SAC) hidden layers; its deterministic action is the output clipped
+to [-1, 1] (PPO, as SB3's ``predict`` clips) or squashed by ``tanh`` and
+unscaled from [-1, 1] as SB3 does (SAC), in float32, so it has the bits of
+SB3's ``predict``.
 """
 
 from __future__ import annotations
@@ -38,12 +56,18 @@ import hashlib
 import itertools
 import json
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import torch
 from safetensors.torch import load as load_tensors
 from safetensors.torch import save as save_tensors
 
+from agents.encoder import (
+    POOLINGS,
+    NeighbourSetEncoder,
+    empty_weight_after,
+    statistics_for_slots,
+)
 from agents.folder_files import (
     MAX_JSON_BYTES,
     MAX_WEIGHT_BYTES,
@@ -55,18 +79,26 @@ from agents.folder_files import (
     read_verified,
     statistics_arrays,
 )
-from agents.train_config import TrainConfig
+from agents.train_config import ENCODERS, TrainConfig
 from cpf_env.envs.input_statistics import InputStatistics
 from cpf_env.infra import atomic
+from cpf_env.sim.observation import SLOTS
 
 __all__ = [
+    "ENCODER_HIDDEN",
+    "ENCODER_POOLING",
     "FORMAT",
     "FORMAT_VERSION",
+    "FORMAT_VERSIONS",
     "MANIFEST",
     "Normalization",
     "PolicyNetwork",
+    "actor_from_record",
+    "actor_record",
     "actor_tensors",
     "agent_files",
+    "build_actor",
+    "encoder_layout",
     "network_from_layers",
     "network_from_tensors",
     "normalization_from_json",
@@ -79,7 +111,10 @@ __all__ = [
 ]
 
 FORMAT = "cpf-agent"
-FORMAT_VERSION = 1
+#: The version written for an actor with an encoder or a history (an MLP alone: 1).
+FORMAT_VERSION = 2
+#: The versions read.
+FORMAT_VERSIONS = (1, 2)
 MANIFEST = "manifest.json"
 WEIGHTS = "policy.safetensors"
 NORMALIZATION = "normalization.json"
@@ -87,6 +122,8 @@ CONFIG = "config.json"
 
 #: Hidden-layer activation and output transform of each algorithm's actor.
 ACTORS = {"ppo": ("tanh", "clip"), "sac": ("relu", "tanh")}
+#: Width of the encoder's per-slot MLP and its pooling, for ``TrainConfig(encoder="deepsets")``.
+ENCODER_HIDDEN, ENCODER_POOLING = 32, "mean"
 
 
 #: Observation statistics applied as SB3's ``VecNormalize`` does at evaluation: the env
@@ -98,25 +135,47 @@ Normalization = InputStatistics
 class PolicyNetwork(torch.nn.Module):
     """The deterministic actor: (R, k) float32 inputs -> (R, a) actions in [-1, 1].
 
+    Without an encoder the input has the training layout's k floats
+    (``input_size``). With one, the MLP reads the encoder's features, and the
+    input may have any number K of neighbour slots (``18 + K (3 + m) + tail``
+    floats; ``input_size`` is None).
+
     Args:
-        sizes: Layer widths, input first and action size last.
+        sizes: Layer widths, input first (the encoder's ``features_dim`` with an
+            encoder) and action size last.
         activation: ``"tanh"`` or ``"relu"`` between hidden layers.
         output: ``"clip"`` (clip to [-1, 1]) or ``"tanh"`` (squash, then SB3's unscaling).
+        encoder: A ``NeighbourSetEncoder`` in front of the MLP, or None.
     """
 
-    def __init__(self, sizes: list[int], activation: str, output: str) -> None:
+    input_size: int | None
+
+    def __init__(
+        self,
+        sizes: list[int],
+        activation: str,
+        output: str,
+        encoder: NeighbourSetEncoder | None = None,
+    ) -> None:
         super().__init__()
+        if encoder is not None and encoder.features_dim != sizes[0]:
+            raise ValueError(
+                f"the encoder gives {encoder.features_dim} features but the MLP's layer sizes "
+                f"{sizes} start at {sizes[0]}."
+            )
         self.activation, self.output_transform = activation, output
+        self.encoder = encoder
         self.hidden = torch.nn.ModuleList(
             torch.nn.Linear(a, b) for a, b in itertools.pairwise(sizes[:-1])
         )
         self.output = torch.nn.Linear(sizes[-2], sizes[-1])
-        self.input_size, self.action_size = sizes[0], sizes[-1]
+        self.input_size = sizes[0] if encoder is None else None
+        self.action_size = sizes[-1]
 
     def forward(self, rows: torch.Tensor) -> torch.Tensor:
         """Deterministic actions (R, a) in [-1, 1]."""
         act = torch.tanh if self.activation == "tanh" else torch.relu
-        latent = rows
+        latent = rows if self.encoder is None else self.encoder(rows)
         for layer in self.hidden:
             latent = act(layer(latent))
         action = self.output(latent)
@@ -125,8 +184,81 @@ class PolicyNetwork(torch.nn.Module):
         return -1.0 + 0.5 * (torch.tanh(action) + 1.0) * 2.0  # SB3's unscale_action on [-1, 1]
 
 
+def build_actor(config: TrainConfig, input_size: int, action_size: int) -> PolicyNetwork:
+    """The untrained actor of a run: an MLP, or the neighbour encoder and an MLP.
+
+    The layers are those SB3 builds for ``config`` (``net_arch``, the algorithm's
+    activation and output transform; ``agents.algorithms.build_model``), with
+    torch's default initialization (seed torch first for the same weights).
+
+    Args:
+        config: The run (``algo``, ``net_arch``, ``encoder``, ``history``, slots).
+        input_size: The learner's input length per vessel with the training
+            layout's K slots, the extras and the history.
+        action_size: Floats per action.
+
+    Raises:
+        ValueError: With an encoder, an ``input_size`` shorter than the own features
+            and K slots of ``config``.
+    """
+    encoder = None
+    first = input_size
+    if config.encoder is not None:
+        slots, slot_size = config.learner_slots()
+        tail = input_size - SLOTS - slots * slot_size
+        if tail < 0:
+            raise ValueError(
+                f"an input of {input_size} floats is shorter than the own features and "
+                f"{slots} slots of {slot_size} floats ({SLOTS + slots * slot_size}) this run has."
+            )
+        encoder = NeighbourSetEncoder(
+            slot_size, tail=tail, hidden=ENCODER_HIDDEN, pooling=ENCODER_POOLING
+        )
+        first = encoder.features_dim
+    return PolicyNetwork([first, *config.net_arch, action_size], *ACTORS[config.algo], encoder)
+
+
+def actor_record(network: PolicyNetwork, config: TrainConfig) -> dict[str, Any] | None:
+    """``config.json``'s ``actor`` field (format version 2), or None for version 1.
+
+    Raises:
+        ValueError: The network has an encoder and ``config`` none, or the reverse.
+    """
+    if (network.encoder is None) != (config.encoder is None):
+        raise ValueError(
+            f"the network {'has no' if network.encoder is None else 'has an'} encoder but the "
+            f"configuration's encoder is {config.encoder!r}."
+        )
+    if network.encoder is None and config.history == 0:
+        return None
+    record: dict[str, Any] = {"encoder": config.encoder, "history": config.history}
+    if network.encoder is not None:
+        record.update(encoder_layout(network.encoder), slots=config.learner_slots()[0])
+    return record
+
+
+def encoder_layout(encoder: NeighbourSetEncoder) -> dict[str, Any]:
+    """The encoder's pooling, hidden width, slot size and tail (``network_from_tensors``)."""
+    return {
+        "pooling": encoder.pooling,
+        "hidden": encoder.hidden,
+        "slot_size": encoder.slot_size,
+        "tail": encoder.tail,
+    }
+
+
 def actor_tensors(model: Any, algo: str) -> dict[str, torch.Tensor]:
-    """The deterministic actor's layers of an SB3 PPO or SAC model, as ``PolicyNetwork`` names."""
+    """The deterministic actor's layers of an SB3 PPO or SAC model, as ``PolicyNetwork`` names.
+
+    A PPO model whose actor reads a ``DeepSetsExtractor`` gives its encoder's
+    tensors too (``encoder.*``).
+    """
+    tensors: dict[str, torch.Tensor] = {}
+    extractor = getattr(model.policy, "pi_features_extractor", None) if algo == "ppo" else None
+    encoder = getattr(extractor, "encoder", None)
+    if isinstance(encoder, NeighbourSetEncoder):
+        for name, value in encoder.state_dict().items():
+            tensors[f"encoder.{name}"] = value.detach().clone()
     if algo == "ppo":
         hidden = model.policy.mlp_extractor.policy_net
         output = model.policy.action_net
@@ -134,7 +266,6 @@ def actor_tensors(model: Any, algo: str) -> dict[str, torch.Tensor]:
         hidden = model.actor.latent_pi
         output = model.actor.mu
     layers = [module for module in hidden if isinstance(module, torch.nn.Linear)]
-    tensors: dict[str, torch.Tensor] = {}
     for i, layer in enumerate(layers):
         tensors[f"hidden.{i}.weight"] = layer.weight.detach().clone()
         tensors[f"hidden.{i}.bias"] = layer.bias.detach().clone()
@@ -199,14 +330,21 @@ def write_agent(
     Each file is written atomically; the caller makes the folder as a whole
     appear at once (``cpf_env.infra.atomic.staged_folder``).
 
+    An actor with an encoder, or a run with a history, is written as version 2
+    (``record`` gains the ``actor`` field); an MLP alone as version 1.
+
     Args:
         folder: Existing folder to write into.
         record: The ``config.json`` content (``{"config": TrainConfig.to_json(), ...}``).
         network: The actor.
         normalization: The observation statistics, or None.
     """
+    actor = actor_record(network, TrainConfig.from_json(record["config"]))
+    version = 1 if actor is None else FORMAT_VERSION
+    if actor is not None:
+        record = {**record, "actor": actor}
     tensors = {name: value.detach().contiguous() for name, value in network.state_dict().items()}
-    write_with_manifest(folder, agent_files(tensors, normalization, record), FORMAT, FORMAT_VERSION)
+    write_with_manifest(folder, agent_files(tensors, normalization, record), FORMAT, version)
 
 
 def read_json(folder: Path, name: str, manifest: dict[str, Any]) -> Any:
@@ -242,9 +380,82 @@ def training_config(data: Any, source: Path | str) -> TrainConfig:
     return config
 
 
-def _check_declared_size(sizes: list[int], source: Path | str) -> None:
+#: JSON types of ``config.json``'s ``actor`` field (format version 2); the last five with an
+#: encoder only.
+ACTOR_FIELDS = {
+    "encoder": "str | None",
+    "history": "int",
+    "pooling": "str",
+    "hidden": "int",
+    "slot_size": "int",
+    "slots": "int",
+    "tail": "int",
+}
+
+
+def actor_from_record(
+    record: Any, version: int, config: TrainConfig, source: Path
+) -> dict[str, Any] | None:
+    """The encoder's layout from ``config.json``'s ``actor`` field, checked against ``config``.
+
+    Args:
+        record: The ``config.json`` object.
+        version: The manifest's format version (1: no ``actor`` field).
+        config: The record's ``TrainConfig``.
+        source: ``config.json``, for messages.
+
+    Returns:
+        The ``actor`` field of an encoder actor (``pooling``, ``hidden``, ``slot_size``,
+        ``slots``, ``tail``), or None for an MLP.
+
+    Raises:
+        AgentFolderError: A version-1 folder whose configuration has an encoder or a
+            history, a missing, mistyped or unknown field, or one the configuration
+            contradicts.
+    """
+    if version == 1:
+        if "actor" in record or config.encoder is not None or config.history:
+            raise AgentFolderError(
+                f"{source} describes an encoder or a history (field 'actor', or config encoder="
+                f"{config.encoder!r}, history={config.history}) but the manifest says format "
+                "version 1, an MLP without history; the folder is damaged."
+            )
+        return None
+    actor = field(record, "actor", source)
+    names = list(ACTOR_FIELDS) if config.encoder is not None else ["encoder", "history"]
+    check_fields(actor, {name: ACTOR_FIELDS[name] for name in names}, source, "actor.", True)
+    unknown = sorted(set(actor) - set(names))
+    if unknown:
+        raise AgentFolderError(f"{source}: field 'actor' has unknown field(s) {unknown}.")
+    if actor["encoder"] != config.encoder or actor["history"] != config.history:
+        raise AgentFolderError(
+            f"{source}: field 'actor' gives encoder {actor['encoder']!r} and history "
+            f"{actor['history']}, the config {config.encoder!r} and {config.history}."
+        )
+    if config.encoder is None:
+        return None
+    if actor["encoder"] not in ENCODERS or actor["pooling"] not in POOLINGS:
+        raise AgentFolderError(
+            f"{source}: field 'actor' has encoder {actor['encoder']!r} and pooling "
+            f"{actor['pooling']!r}; known: {list(ENCODERS)} and {list(POOLINGS)}."
+        )
+    low = {"hidden": 1, "slot_size": 3, "slots": 1, "tail": 0}
+    for name, least in low.items():
+        if actor[name] < least:
+            raise AgentFolderError(
+                f"{source}: field 'actor.{name}' must be >= {least}, got {actor[name]}."
+            )
+    return actor
+
+
+def _check_declared_size(
+    sizes: list[int], source: Path | str, encoder: dict[str, Any] | None = None
+) -> None:
     """Refuse layer sizes whose weights exceed ``MAX_WEIGHT_BYTES``, before reading any."""
     parameters = sum(a * b + b for a, b in itertools.pairwise(sizes))
+    if encoder is not None:
+        hidden = encoder["hidden"]
+        parameters += hidden * (encoder["slot_size"] + hidden + 2) + 2
     if 4 * parameters > MAX_WEIGHT_BYTES:
         raise AgentFolderError(
             f"{source}: layer sizes {sizes} declare {4 * parameters:,} bytes of float32 "
@@ -252,8 +463,25 @@ def _check_declared_size(sizes: list[int], source: Path | str) -> None:
         )
 
 
+def _encoder_shapes(encoder: dict[str, Any]) -> dict[str, tuple[int, ...]]:
+    """The encoder's tensors and shapes, by ``PolicyNetwork`` name."""
+    hidden, slot_size = encoder["hidden"], encoder["slot_size"]
+    return {
+        "encoder.phi.0.weight": (hidden, slot_size),
+        "encoder.phi.0.bias": (hidden,),
+        "encoder.phi.2.weight": (hidden, hidden),
+        "encoder.phi.2.bias": (hidden,),
+        "encoder.empty_weight": (),
+        "encoder.tolerance": (),
+    }
+
+
 def network_from_layers(
-    tensors: dict[str, torch.Tensor], sizes: list[int], actor: tuple[str, str], source: Path
+    tensors: dict[str, torch.Tensor],
+    sizes: list[int],
+    actor: tuple[str, str],
+    source: Path,
+    encoder: dict[str, Any] | None = None,
 ) -> PolicyNetwork:
     """The actor of layer ``sizes`` (input first), its tensors checked before any allocation.
 
@@ -262,17 +490,31 @@ def network_from_layers(
         sizes: Layer widths, input first and action size last.
         actor: (hidden activation, output transform), as ``PolicyNetwork`` takes them.
         source: The weights file, for messages.
+        encoder: The encoder's layout (``actor_from_record``), or None for an MLP.
 
     Raises:
         AgentFolderError: Other tensor names, a shape that is not the layer's, a dtype
-            other than float32, or a non-finite weight or bias (each naming the tensor).
+            other than float32, a non-finite weight or bias, a negative tolerance, or an
+            MLP whose input is not the encoder's features (each naming the tensor).
     """
-    _check_declared_size(sizes, source)
+    _check_declared_size(sizes, source, encoder)
     depth = len(sizes) - 2
     shapes: dict[str, tuple[int, ...]] = {}
     for i, (a, b) in enumerate(itertools.pairwise(sizes)):
         name = f"hidden.{i}" if i < depth else "output"
         shapes[f"{name}.weight"], shapes[f"{name}.bias"] = (b, a), (b,)
+    module = None
+    if encoder is not None:
+        shapes.update(_encoder_shapes(encoder))
+        with torch.device("meta"):
+            module = NeighbourSetEncoder(
+                encoder["slot_size"], encoder["tail"], encoder["hidden"], encoder["pooling"]
+            )
+        if module.features_dim != sizes[0]:
+            raise AgentFolderError(
+                f"{source}: tensor hidden.0.weight reads {sizes[0]} features but the encoder "
+                f"of config.json's 'actor' gives {module.features_dim}."
+            )
     if set(tensors) != set(shapes):
         raise AgentFolderError(
             f"{source} holds tensors {sorted(tensors)}, not the actor of layer sizes {sizes} "
@@ -293,16 +535,29 @@ def network_from_layers(
             )
         if not bool(torch.isfinite(tensor).all()):
             raise AgentFolderError(f"{source}: tensor {name} holds a NaN or infinite value.")
+    if encoder is not None and float(tensors["encoder.tolerance"]) < 0.0:
+        raise AgentFolderError(f"{source}: tensor encoder.tolerance is negative.")
     with torch.device("meta"):  # no memory until the checked tensors are assigned
-        network = PolicyNetwork(sizes, *actor)
+        network = PolicyNetwork(sizes, *actor, module)
     network.load_state_dict({k: v.contiguous() for k, v in tensors.items()}, assign=True)
     return network.eval()
 
 
 def network_from_tensors(
-    tensors: dict[str, torch.Tensor], algo: str, net_arch: tuple[int, ...], source: Path
+    tensors: dict[str, torch.Tensor],
+    algo: str,
+    net_arch: tuple[int, ...],
+    source: Path,
+    encoder: dict[str, Any] | None = None,
 ) -> PolicyNetwork:
     """Rebuild the actor from its tensors, checking them against the configuration.
+
+    Args:
+        tensors: The weights by ``PolicyNetwork`` name.
+        algo: ``"ppo"`` or ``"sac"`` (the activation and output transform).
+        net_arch: The MLP's hidden sizes.
+        source: The weights file, for messages.
+        encoder: The encoder's layout (``actor_from_record``), or None for an MLP.
 
     Raises:
         AgentFolderError: Names, shapes, dtypes or values that do not fit ``net_arch``
@@ -316,7 +571,7 @@ def network_from_tensors(
             "and output.weight must be matrices."
         )
     sizes = [int(ends[0].shape[1]), *net_arch, int(ends[1].shape[0])]  # type: ignore[union-attr]
-    return network_from_layers(tensors, sizes, ACTORS[algo], source)
+    return network_from_layers(tensors, sizes, ACTORS[algo], source, encoder)
 
 
 def _shapes(tensors: dict[str, torch.Tensor]) -> list[str]:
@@ -324,7 +579,7 @@ def _shapes(tensors: dict[str, torch.Tensor]) -> list[str]:
 
 
 def read_agent(folder: Path) -> tuple[dict[str, Any], PolicyNetwork, Normalization | None]:
-    """Read an agent folder, verifying every file against the manifest.
+    """Read an agent folder (format version 1 or 2), verifying every file against the manifest.
 
     Returns:
         The ``config.json`` record, the actor, and the statistics (or None).
@@ -332,24 +587,53 @@ def read_agent(folder: Path) -> tuple[dict[str, Any], PolicyNetwork, Normalizati
     Raises:
         AgentFolderError: A missing, unreadable, altered or inconsistent file (named).
     """
-    manifest = read_manifest(folder / MANIFEST, FORMAT, FORMAT_VERSION)
+    manifest = read_manifest(folder / MANIFEST, FORMAT, FORMAT_VERSIONS)
     record = read_json(folder, CONFIG, manifest)
     config = training_config(field(record, "config", folder / CONFIG), folder / CONFIG)
+    encoder = actor_from_record(record, manifest["format_version"], config, folder / CONFIG)
     network = network_from_tensors(
-        read_weights(folder, manifest), config.algo, config.net_arch, folder / WEIGHTS
+        read_weights(folder, manifest), config.algo, config.net_arch, folder / WEIGHTS, encoder
     )
+    if encoder is None:
+        inputs = cast(int, network.input_size)  # an MLP's
+    else:
+        inputs = SLOTS + encoder["slots"] * encoder["slot_size"] + encoder["tail"]
     statistics = read_json(folder, NORMALIZATION, manifest)
     normalization = (
         None
         if statistics is None
-        else normalization_from_json(statistics, folder / NORMALIZATION, network.input_size)
+        else normalization_from_json(statistics, folder / NORMALIZATION, inputs)
     )
     if (normalization is not None) != config.normalize_observations:
         raise AgentFolderError(
             f"{folder / NORMALIZATION} {'holds' if normalization else 'lacks'} statistics but "
             f"config.json says normalize_observations={config.normalize_observations}."
         )
+    if encoder is not None:
+        _check_empty_weight(network, normalization, encoder, folder / NORMALIZATION)
     return record, network, normalization
+
+
+def _check_empty_weight(
+    network: PolicyNetwork,
+    normalization: Normalization | None,
+    encoder: dict[str, Any],
+    source: Path,
+) -> None:
+    """Refuse statistics that differ between slots, or an empty weight they do not give."""
+    empty = 0.0
+    if normalization is not None:
+        try:
+            statistics_for_slots(normalization, encoder["slots"], encoder["slot_size"], 1)
+            empty = empty_weight_after(normalization, encoder["slots"], encoder["slot_size"])
+        except ValueError as error:
+            raise AgentFolderError(f"{source}: {error}") from None
+    held = float(network.encoder.empty_weight) if network.encoder is not None else empty
+    if held != float(torch.tensor(empty, dtype=torch.float32)):
+        raise AgentFolderError(
+            f"{source}: an empty slot's a_ij becomes {empty} after these statistics, but the "
+            f"encoder in {WEIGHTS} masks slots at {held}; the files come from different runs."
+        )
 
 
 def normalization_from_json(data: Any, source: Path, inputs: int) -> Normalization:

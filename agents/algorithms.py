@@ -2,29 +2,69 @@
 
 ``make_env`` builds a run's ``FleetVecEnv`` (or ``MixtureVecEnv``),
 ``build_model`` its untrained PPO or SAC model with the residual-learning
-defaults (``agents.training`` lists them), ``planned_timesteps`` the budget
-SB3 really trains. ``agents.training.train`` and ``agents.run_folder`` use
+defaults (``agents.training`` lists them) and, with ``encoder="deepsets"``,
+the ``DeepSetsExtractor`` in front of the actor, ``planned_timesteps`` the
+budget SB3 really trains. ``agents.training.train`` and ``agents.run_folder`` use
 them; reading an agent folder needs none of this (no SB3 import).
 """
 
 from __future__ import annotations
 
 import warnings
-from typing import cast
+from typing import Any, cast
 
+import gymnasium as gym
 import torch
 from stable_baselines3 import PPO, SAC
 from stable_baselines3.common.base_class import BaseAlgorithm
+from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
 from stable_baselines3.common.vec_env import VecEnv
 
+from agents.agent_folder import ENCODER_HIDDEN, ENCODER_POOLING
+from agents.encoder import NeighbourSetEncoder
 from agents.mixture_env import MixtureVecEnv
 from agents.train_config import TrainConfig
 from agents.vec_env import FleetVecEnv
+from cpf_env.sim.observation import SLOTS
 
-__all__ = ["ALGORITHMS", "build_model", "make_env", "planned_timesteps"]
+__all__ = ["ALGORITHMS", "DeepSetsExtractor", "build_model", "make_env", "planned_timesteps"]
 
 #: SB3 algorithms by name.
 ALGORITHMS: dict[str, type[BaseAlgorithm]] = {"ppo": PPO, "sac": SAC}
+
+
+class DeepSetsExtractor(BaseFeaturesExtractor):
+    """``NeighbourSetEncoder`` as an SB3 features extractor (``policy_kwargs``).
+
+    Args:
+        observation_space: The learner's input space (its length fixes K for SB3's
+            checks only; the weights do not depend on K).
+        tail: Floats after the slots (extras, history).
+        msg_size: Message length m (slot size 3 + m).
+        hidden: Width of the per-slot MLP.
+        pooling: ``"mean"`` or ``"sum"``.
+        empty_weight: See ``NeighbourSetEncoder``.
+    """
+
+    def __init__(
+        self,
+        observation_space: gym.spaces.Box,
+        tail: int = 0,
+        msg_size: int = 1,
+        hidden: int = 32,
+        pooling: str = "mean",
+        empty_weight: float = 0.0,
+    ) -> None:
+        encoder = NeighbourSetEncoder(
+            3 + msg_size, tail=tail, hidden=hidden, pooling=pooling, empty_weight=empty_weight
+        )
+        encoder.slots_in(int(observation_space.shape[-1]))
+        super().__init__(observation_space, encoder.features_dim)
+        self.encoder = encoder
+
+    def forward(self, observations: torch.Tensor) -> torch.Tensor:
+        """Features (B, ``features_dim``) of observations (B, 18 + K (3 + m) + tail)."""
+        return self.encoder(observations)
 
 
 def make_env(config: TrainConfig, num_fleets: int | None = None) -> FleetVecEnv | MixtureVecEnv:
@@ -57,7 +97,8 @@ def build_model(config: TrainConfig, env: VecEnv) -> BaseAlgorithm:
 
     Args:
         config: The run (algorithm, network, learning settings, seed).
-        env: The (monitored, maybe normalized) ``FleetVecEnv`` from ``make_env``.
+        env: The (monitored, maybe normalized, maybe with history) ``FleetVecEnv`` from
+            ``make_env``.
     """
     arch = list(config.net_arch)
     if config.algo == "ppo":
@@ -79,7 +120,11 @@ def build_model(config: TrainConfig, env: VecEnv) -> BaseAlgorithm:
             gamma=config.gamma,
             seed=config.seed,
             device="cpu",
-            policy_kwargs={"net_arch": arch, "log_std_init": config.log_std_init},
+            policy_kwargs={
+                "net_arch": arch,
+                "log_std_init": config.log_std_init,
+                **_encoder_kwargs(config, env),
+            },
         )
         layer = cast(torch.nn.Linear, model.policy.action_net)
     else:
@@ -105,6 +150,30 @@ def build_model(config: TrainConfig, env: VecEnv) -> BaseAlgorithm:
         layer.weight.zero_()
         layer.bias.zero_()
     return model
+
+
+def _encoder_kwargs(config: TrainConfig, env: VecEnv) -> dict[str, Any]:
+    """PPO's ``policy_kwargs`` for the run's encoder: none, or a ``DeepSetsExtractor``.
+
+    The actor and the critic get an encoder each (``share_features_extractor=False``):
+    rewards are not normalized, so the value loss is on the cost's own scale and,
+    shared, would shape the actor's features as much as the policy loss; alone, the
+    actor's encoder is what the agent folder keeps, trained by the policy loss only.
+    """
+    if config.encoder is None:
+        return {}
+    slots, slot_size = config.learner_slots()
+    size = int(env.observation_space.shape[0])  # type: ignore[index]
+    return {
+        "features_extractor_class": DeepSetsExtractor,
+        "features_extractor_kwargs": {
+            "tail": size - SLOTS - slots * slot_size,
+            "msg_size": slot_size - 3,
+            "hidden": ENCODER_HIDDEN,
+            "pooling": ENCODER_POOLING,
+        },
+        "share_features_extractor": False,
+    }
 
 
 def planned_timesteps(config: TrainConfig, num_envs: int) -> int:

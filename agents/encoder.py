@@ -20,33 +20,31 @@ BLAS may pick another kernel).
 
 Normalized inputs. SB3's ``VecNormalize`` maps an empty slot's ``a_ij = 0`` to
 ``(0 - mean) / sqrt(var + eps)``, not to 0. ``empty_weight`` is that value
-(``empty_weight_after(statistics)`` computes it from the running statistics,
-which ``agents.slot_statistics`` pools across slots, so it is the same for
-every slot); a slot is empty when its weight is within ``tolerance`` of it.
+(``empty_weight_after(statistics)`` computes it from statistics pooled across
+slots, ``agents.slot_statistics``); a slot is empty when its weight is within
+``tolerance`` of it. A training run with ``TrainConfig(encoder="deepsets")``
+keeps the weights' statistics at mean 0 and variance 1
+(``SlotSharedVecNormalize(raw_weights=True)``), so an empty slot is an exact 0
+throughout training and in the saved agent, and ``empty_weight`` stays 0.
 
-``DeepSetsExtractor`` wraps the encoder as an SB3 features extractor::
+This module needs torch only (an agent folder's reader uses it);
+``agents.algorithms.DeepSetsExtractor`` wraps the encoder as an SB3 features
+extractor::
 
-    >>> from stable_baselines3 import PPO
-    >>> from agents import FleetVecEnv
-    >>> from agents.encoder import DeepSetsExtractor
-    >>> env = FleetVecEnv("wang2014", num_fleets=1, max_steps=20)
-    >>> model = PPO("MlpPolicy", env, n_steps=8, batch_size=8, device="cpu",
-    ...             policy_kwargs={"features_extractor_class": DeepSetsExtractor,
-    ...                            "features_extractor_kwargs": {"tail": 0}})
-    >>> model.policy.features_extractor.features_dim
-    51
+    >>> encoder = NeighbourSetEncoder(slot_size=4, tail=3)
+    >>> encoder(torch.zeros(5, 18 + 9 * 4 + 3)).shape  # 9 slots, as 2 or 20 would
+    torch.Size([5, 54])
 """
 
 from __future__ import annotations
 
-import gymnasium as gym
+import numpy as np
 import torch
-from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
 
 from cpf_env.envs.input_statistics import InputStatistics
 from cpf_env.sim.observation import SLOT_WEIGHT, SLOTS
 
-__all__ = ["POOLINGS", "DeepSetsExtractor", "NeighbourSetEncoder", "empty_weight_after"]
+__all__ = ["POOLINGS", "NeighbourSetEncoder", "empty_weight_after", "statistics_for_slots"]
 
 #: Pooling operators over the neighbour slots.
 POOLINGS = ("mean", "sum")
@@ -74,6 +72,42 @@ def empty_weight_after(statistics: InputStatistics, n_slots: int, slot_size: int
         )
     scaled = -float(weights[0][0]) / float((weights[1][0] + statistics.epsilon) ** 0.5)
     return float(min(max(scaled, -statistics.clip), statistics.clip))
+
+
+def statistics_for_slots(
+    statistics: InputStatistics, n_slots: int, slot_size: int, new_slots: int
+) -> InputStatistics:
+    """Statistics of an input of K = ``n_slots`` slots, for the same input with ``new_slots``.
+
+    The own features and the tail keep their statistics; every slot gets the
+    slots' shared ones (``agents.slot_statistics`` pools them), so an encoder
+    trained on K slots is normalized alike on K' (a 10-vessel star's centre: 9).
+
+    Args:
+        statistics: Statistics of inputs of 18 + K (3 + m) + tail floats, slots pooled.
+        n_slots: K.
+        slot_size: Floats per slot, 3 + m.
+        new_slots: K' >= 0.
+
+    Raises:
+        ValueError: Statistics shorter than 18 + K slots, or that differ between slots.
+    """
+    stop = SLOTS + n_slots * slot_size
+    if n_slots < 1 or new_slots < 0 or statistics.mean.size < stop:
+        raise ValueError(
+            f"need statistics of 18 + K x {slot_size} + tail inputs with K >= 1 and K' >= 0; "
+            f"got {statistics.mean.size} inputs, K = {n_slots}, K' = {new_slots}."
+        )
+    parts = []
+    for values in (statistics.mean, statistics.var):
+        slots = values[SLOTS:stop].reshape(n_slots, slot_size)
+        if not np.all(slots == slots[0]):
+            raise ValueError(
+                "the slots' statistics differ between slots; an encoder's slots share one set "
+                "(train with shared_slot_statistics, agents.slot_statistics)."
+            )
+        parts.append(np.concatenate([values[:SLOTS], np.tile(slots[0], new_slots), values[stop:]]))
+    return InputStatistics(parts[0], parts[1], statistics.epsilon, statistics.clip)
 
 
 class NeighbourSetEncoder(torch.nn.Module):
@@ -147,37 +181,3 @@ class NeighbourSetEncoder(torch.nn.Module):
         if self.pooling == "mean":
             pooled = pooled / degree.clamp(min=1.0)
         return torch.cat([own, pooled, degree, tail], dim=-1)
-
-
-class DeepSetsExtractor(BaseFeaturesExtractor):
-    """``NeighbourSetEncoder`` as an SB3 features extractor (``policy_kwargs``).
-
-    Args:
-        observation_space: The learner's input space (its length fixes K for SB3's
-            checks only; the weights do not depend on K).
-        tail: Floats after the slots (extras, history).
-        msg_size: Message length m (slot size 3 + m).
-        hidden: Width of the per-slot MLP.
-        pooling: ``"mean"`` or ``"sum"``.
-        empty_weight: See ``NeighbourSetEncoder``.
-    """
-
-    def __init__(
-        self,
-        observation_space: gym.spaces.Box,
-        tail: int = 0,
-        msg_size: int = 1,
-        hidden: int = 32,
-        pooling: str = "mean",
-        empty_weight: float = 0.0,
-    ) -> None:
-        encoder = NeighbourSetEncoder(
-            3 + msg_size, tail=tail, hidden=hidden, pooling=pooling, empty_weight=empty_weight
-        )
-        encoder.slots_in(int(observation_space.shape[-1]))
-        super().__init__(observation_space, encoder.features_dim)
-        self.encoder = encoder
-
-    def forward(self, observations: torch.Tensor) -> torch.Tensor:
-        """Features (B, ``features_dim``) of observations (B, 18 + K (3 + m) + tail)."""
-        return self.encoder(observations)

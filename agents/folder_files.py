@@ -290,12 +290,20 @@ def statistics_arrays(
     return mean, var, float(data["epsilon"]), float(data["clip"])
 
 
-def read_manifest(path: Path, format_name: str, format_version: int) -> dict[str, Any]:
-    """A manifest of ``format_name`` and version, its file list checked.
+def read_manifest(
+    path: Path, format_name: str, format_version: int | tuple[int, ...]
+) -> dict[str, Any]:
+    """A manifest of ``format_name`` and a version this reader knows, its file list checked.
+
+    Args:
+        path: The manifest.
+        format_name: The format it must name.
+        format_version: The version it must give, or the versions read (a tuple).
 
     Raises:
         AgentFolderError: Unreadable, another format or version, or a malformed file list.
     """
+    versions = (format_version,) if isinstance(format_version, int) else format_version
     manifest = parse_json(read_file(path, MAX_JSON_BYTES), path)
     name = field(manifest, "format", path)
     if name != format_name:
@@ -305,10 +313,11 @@ def read_manifest(path: Path, format_name: str, format_version: int) -> dict[str
         raise AgentFolderError(
             f"{path}: field 'format_version' must be an integer, got {_kind(version)}."
         )
-    if version != format_version:
+    if version not in versions:
+        known = " and ".join(str(v) for v in versions)
         raise AgentFolderError(
-            f"{path} has format version {version}; this cpf_env reads version "
-            f"{format_version} only. Use the cpf_env that wrote it, or retrain."
+            f"{path} has format version {version}; this cpf_env reads version {known} only. "
+            "Use the cpf_env that wrote it, or retrain."
         )
     files = field(manifest, "files", path)
     if not isinstance(files, dict) or not files:

@@ -1,110 +1,90 @@
-"""``HistoryVecEnv``: each slot's input carries a short history of its own features and actions.
+"""A vessel's own history: its last inputs and actions, kept row by row, newest first.
 
 RMA-style adaptation infers what the vessel cannot observe (the current, the
 wave and wind forces, its true model) from how it responded to what it did.
-``HistoryVecEnv(venv, length)`` appends, to every slot's observation, its last
-``length`` entries, newest first::
+``OwnHistory(rows, length, own, action_size)`` keeps, for each of ``rows``
+vessels, its last ``length`` entries, newest first::
 
     entry k (k = 1..length) = [own_{t-k} (own floats), action_{t-k} (a floats), valid]
 
-where ``own_{t-k}`` is the first ``own`` floats of the slot's observation k
-steps ago (by default the 18 own-vessel features of the local observation,
-``cpf_env.sim.observation``), ``action_{t-k}`` the action the learner took on
-it, and ``valid`` 1 for a step of the current episode and 0 for the zero
-padding before it. So the input is local by construction: a vessel's own
-past, nothing from other vessels.
+where ``own_{t-k}`` is the first ``own`` floats of the vessel's input k steps
+ago (by default the 18 own-vessel features of the local observation,
+``cpf_env.sim.observation``), ``action_{t-k}`` the action taken on it, and
+``valid`` 1 for a step of the current episode and 0 for the zero padding
+before it. So the input is local by construction: a vessel's own past,
+nothing from other vessels. ``clear`` empties rows whose episode restarts.
 
-Episode boundaries. When a slot's episode ends, the observation returned is
-the first of the next episode, and its history is empty (all zero): nothing
-leaks across episodes. Its ``terminal_observation`` gets the history of the
-ended episode (up to and including the last action), so SB3 bootstraps the
-truncated value on the input the policy would have seen.
-
-Wrap below ``VecNormalize`` (the history is normalized with the rest); the
-``NeighbourSetEncoder``'s ``tail`` then counts the extras and the history
-(``HistoryVecEnv.history_size``).
+One implementation serves training and evaluation: ``agents.history_env.HistoryVecEnv``
+appends it to an SB3 vector env's observations, and ``agents.load_policy``'s
+policy keeps it itself across ``act_batch`` calls (cleared by ``reset`` and
+``reset_fleets``), so a trained agent sees in evaluation the history it
+learned from. This module needs numpy only.
 
 Example:
-    >>> from agents import FleetVecEnv
-    >>> env = HistoryVecEnv(FleetVecEnv("wang2014", num_fleets=1, max_steps=20), length=4)
-    >>> env.reset().shape, env.history_size
-    ((5, 114), 88)
+    >>> history = OwnHistory(rows=2, length=3, own=18, action_size=3)
+    >>> inputs = np.ones((2, 26), dtype=np.float32)
+    >>> history.append_to(inputs).shape, history.size
+    ((2, 92), 66)
+    >>> history.push(inputs, np.zeros((2, 3), dtype=np.float32))
+    >>> history.entries[:, 0, -1]  # the newest entry is valid
+    array([1., 1.], dtype=float32)
 """
 
 from __future__ import annotations
 
 import numpy as np
-from numpy.typing import NDArray
-from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper
-from stable_baselines3.common.vec_env.base_vec_env import VecEnvStepReturn
+from numpy.typing import ArrayLike, NDArray
 
-from cpf_env.sim.observation import SLOTS, observation_box
+from cpf_env.sim.observation import SLOTS
 
-__all__ = ["HistoryVecEnv"]
+__all__ = ["OwnHistory"]
 
 
-class HistoryVecEnv(VecEnvWrapper):
-    """Append each slot's last ``length`` (own features, action, valid) entries to its input.
+class OwnHistory:
+    """Each row's last ``length`` (own features, action, valid) entries, float32, newest first.
 
     Args:
-        venv: A vector env with Box observations (S, D) and Box actions (S, a).
-        length: History entries H >= 1.
-        own: Leading observation floats recorded per entry (default the 18
-            own-vessel features); 1 <= own <= D.
+        rows: Vessels (rows of the learner's input) kept.
+        length: Entries H >= 1.
+        own: Leading input floats recorded per entry (default the 18 own-vessel features).
+        action_size: Floats per action, a.
+
+    Raises:
+        ValueError: ``length`` not an integer >= 1, or ``own`` or ``action_size`` < 1.
     """
 
-    def __init__(self, venv: VecEnv, length: int, own: int = SLOTS) -> None:
-        obs_shape = venv.observation_space.shape
-        act_shape = venv.action_space.shape
-        if obs_shape is None or len(obs_shape) != 1 or act_shape is None or len(act_shape) != 1:
-            raise ValueError("HistoryVecEnv needs flat Box observations and actions.")
+    def __init__(self, rows: int, length: int, own: int = SLOTS, action_size: int = 3) -> None:
         if isinstance(length, bool) or not isinstance(length, int) or length < 1:
             raise ValueError(f"history length must be an integer >= 1, got {length!r}.")
-        if not 1 <= own <= obs_shape[0]:
-            raise ValueError(f"own must be in [1, {obs_shape[0]}] (observation floats), got {own}.")
-        self.length, self.own, self.action_size = length, own, int(act_shape[0])
-        self.entry_size = own + self.action_size + 1
-        super().__init__(venv, observation_space=observation_box(obs_shape[0] + self.history_size))
-        self._history = np.zeros((venv.num_envs, length, self.entry_size), dtype=np.float32)
-        self._last_obs = np.zeros((venv.num_envs, obs_shape[0]), dtype=np.float32)
-        self._actions = np.zeros((venv.num_envs, self.action_size), dtype=np.float32)
+        if own < 1 or action_size < 1:
+            raise ValueError(f"own and action_size must be >= 1, got {own} and {action_size}.")
+        self.length, self.own, self.action_size = length, own, action_size
+        self.entry_size = own + action_size + 1
+        self.entries = np.zeros((rows, length, self.entry_size), dtype=np.float32)
 
     @property
-    def history_size(self) -> int:
-        """Floats appended to each observation, H (own + a + 1)."""
+    def size(self) -> int:
+        """Floats appended to each row's input, H (own + a + 1)."""
         return self.length * self.entry_size
 
-    def _with_history(self, obs: NDArray[np.floating], history: NDArray[np.float32]) -> NDArray:
-        rows = np.asarray(obs, dtype=np.float32)
-        return np.concatenate([rows, history.reshape(rows.shape[0], -1)], axis=1)
+    def append_to(self, inputs: ArrayLike, rows: ArrayLike | None = None) -> NDArray[np.float32]:
+        """``inputs`` (R, D) with the history of ``rows`` (default all) appended: (R, D + size)."""
+        values = np.asarray(inputs, dtype=np.float32)
+        entries = self.entries if rows is None else self.entries[np.asarray(rows)]
+        return np.concatenate([values, entries.reshape(values.shape[0], -1)], axis=1)
 
-    def reset(self) -> NDArray[np.float32]:
-        """Reset every slot; histories start empty."""
-        obs = self.venv.reset()
-        assert isinstance(obs, np.ndarray)
-        self._history[:] = 0.0
-        self._last_obs = np.asarray(obs, dtype=np.float32).copy()
-        return self._with_history(obs, self._history)
+    def push(self, inputs: ArrayLike, actions: ArrayLike) -> None:
+        """Record, for every row, the input (R, D) just acted on and its action (R, a)."""
+        self.entries[:, 1:] = self.entries[:, :-1]
+        self.entries[:, 0, : self.own] = np.asarray(inputs, dtype=np.float32)[:, : self.own]
+        self.entries[:, 0, self.own : -1] = np.asarray(actions, dtype=np.float32).reshape(
+            self.entries.shape[0], self.action_size
+        )
+        self.entries[:, 0, -1] = 1.0
 
-    def step_async(self, actions: NDArray[np.floating]) -> None:
-        """Record the actions (S, a) taken on the last observations, and pass them on."""
-        self._actions = np.asarray(actions, dtype=np.float32).reshape(self.num_envs, -1).copy()
-        self.venv.step_async(actions)
-
-    def step_wait(self) -> VecEnvStepReturn:
-        """Step, push the last (own, action) entry, and clear the histories of ended episodes."""
-        obs, rewards, dones, infos = self.venv.step_wait()
-        assert isinstance(obs, np.ndarray)
-        self._history[:, 1:] = self._history[:, :-1]
-        self._history[:, 0, : self.own] = self._last_obs[:, : self.own]
-        self._history[:, 0, self.own : -1] = self._actions
-        self._history[:, 0, -1] = 1.0
-        for slot in np.flatnonzero(dones):
-            terminal = infos[slot].get("terminal_observation")
-            if terminal is not None:
-                infos[slot]["terminal_observation"] = self._with_history(
-                    np.asarray(terminal)[None], self._history[slot][None]
-                )[0]
-            self._history[slot] = 0.0
-        self._last_obs = np.asarray(obs, dtype=np.float32).copy()
-        return self._with_history(obs, self._history), rewards, dones, infos
+    def clear(self, rows: ArrayLike | None = None) -> None:
+        """Empty the history of ``rows`` (indices or a (R,) mask; default all)."""
+        if rows is None:
+            self.entries[:] = 0.0
+        else:
+            self.entries[np.asarray(rows)] = 0.0

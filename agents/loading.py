@@ -3,7 +3,12 @@
 The loaded policy runs the base policy (rebuilt by name for the evaluation
 scenario) and the trained network on the same local inputs it was trained
 on, normalized with the saved statistics, and acts on the mean action
-(deterministic). It offers ``reset``, ``reset_fleets``, ``act``, ``act_batch``,
+(deterministic). An agent with a neighbour encoder (``TrainConfig(encoder=...)``)
+gets as many neighbour slots as the evaluation scenario needs (at least its
+training K), and an agent trained with a history (``TrainConfig(history=H)``)
+keeps each vessel's own history itself (``agents.history.OwnHistory``, as
+``HistoryVecEnv`` kept it in training), cleared by ``reset`` and
+``reset_fleets``. It offers ``reset``, ``reset_fleets``, ``act``, ``act_batch``,
 ``predict``, ``diagnostics`` and ``name``, so ``cpf-bench``, ``cpf-run`` and
 SB3's ``evaluate_policy`` treat it as any analytic policy.
 
@@ -16,6 +21,7 @@ Example (with a folder written by ``cpf-train --out runs/ppo``)::
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 from typing import Protocol
 
@@ -26,7 +32,7 @@ from numpy.typing import ArrayLike, NDArray
 from agents.agent_folder import (
     CONFIG,
     FORMAT,
-    FORMAT_VERSION,
+    FORMAT_VERSIONS,
     MANIFEST,
     Normalization,
     PolicyNetwork,
@@ -34,6 +40,7 @@ from agents.agent_folder import (
     read_json,
     training_config,
 )
+from agents.encoder import statistics_for_slots
 from agents.folder_files import (
     MAX_JSON_BYTES,
     AgentFolderError,
@@ -42,6 +49,7 @@ from agents.folder_files import (
     read_file,
     read_manifest,
 )
+from agents.history import OwnHistory
 from agents.legacy import is_sb3_folder, read_sb3_folder
 from agents.marl.policy_folder import (
     MARL_FORMAT,
@@ -52,9 +60,10 @@ from agents.marl.policy_folder import (
 from agents.resolve import resolve_base_policy
 from agents.train_config import TrainConfig
 from cpf_env.envs.policy import FleetPolicy
-from cpf_env.envs.residual import ResidualController, learner_config
+from cpf_env.envs.residual import EXTRAS, ResidualController, learner_config
 from cpf_env.scenarios import Scenario, make_scenario
 from cpf_env.sim.fleet import observation_layout
+from cpf_env.sim.observation import SLOTS
 
 __all__ = ["Actor", "TorchActor", "TrainedPolicy", "load_policy", "read_config"]
 
@@ -125,7 +134,8 @@ def read_config(path: str | Path) -> TrainConfig:
         manifest = read_manifest(folder / MANIFEST, MARL_FORMAT, MARL_FORMAT_VERSION)
         return marl_config(read_json(folder, CONFIG, manifest), folder / CONFIG)[0]
     if kind == FORMAT:
-        record = read_json(folder, CONFIG, read_manifest(folder / MANIFEST, FORMAT, FORMAT_VERSION))
+        manifest = read_manifest(folder / MANIFEST, FORMAT, FORMAT_VERSIONS)
+        record = read_json(folder, CONFIG, manifest)
     else:
         record = parse_json(read_file(folder / CONFIG, MAX_JSON_BYTES, folder), folder / CONFIG)
     return training_config(field(record, "config", folder / CONFIG), folder / CONFIG)
@@ -161,10 +171,19 @@ def _format(folder: Path) -> str | None:
 
 
 class Actor(Protocol):
-    """The learned part of a policy: raw learner inputs -> actions in [-1, 1]."""
+    """The learned part of a policy: raw learner inputs -> actions in [-1, 1].
 
-    input_size: int
-    action_size: int
+    ``input_size`` is None for an actor that takes any number of neighbour slots
+    (a neighbour encoder run by torch).
+    """
+
+    @property
+    def input_size(self) -> int | None:
+        """Floats per input row."""
+
+    @property
+    def action_size(self) -> int:
+        """Floats per action."""
 
     def __call__(self, rows: NDArray[np.float32]) -> NDArray[np.float32]:
         """(R, input_size) float32 inputs -> (R, action_size) float32 actions."""
@@ -179,6 +198,10 @@ class TorchActor:
     thread count is process-wide: it is set and restored around each forward
     pass, so calling it from several Python threads at once is not safe.
 
+    With a neighbour encoder the inputs may have any number K' of slots: the
+    statistics (saved for the training K, slots pooled) are given to every
+    slot (``agents.encoder.statistics_for_slots``).
+
     Args:
         network: The deterministic actor.
         normalization: The observation statistics, or None.
@@ -187,11 +210,26 @@ class TorchActor:
     def __init__(self, network: PolicyNetwork, normalization: Normalization | None) -> None:
         self.network, self.normalization = network, normalization
         self.input_size, self.action_size = network.input_size, network.action_size
+        self._statistics: dict[int, Normalization] = {}
+
+    def _normalization(self, size: int) -> Normalization | None:
+        """The statistics for inputs of ``size`` floats."""
+        encoder = self.network.encoder
+        if encoder is None or self.normalization is None:
+            return self.normalization
+        slots = encoder.slots_in(size)
+        if slots not in self._statistics:
+            trained = encoder.slots_in(self.normalization.mean.size)
+            self._statistics[slots] = statistics_for_slots(
+                self.normalization, trained, encoder.slot_size, slots
+            )
+        return self._statistics[slots]
 
     def __call__(self, rows: NDArray[np.float32]) -> NDArray[np.float32]:
         """(R, k) float32 inputs -> (R, a) float32 actions, bit-identical to SB3's predict."""
-        if self.normalization is not None:
-            rows = self.normalization.apply(rows)
+        normalization = self._normalization(rows.shape[-1])
+        if normalization is not None:
+            rows = normalization.apply(rows)
         threads = torch.get_num_threads()
         torch.set_num_threads(1)  # the same bits whatever the process's thread setting
         try:
@@ -228,16 +266,23 @@ class TrainedPolicy(FleetPolicy):
         self.agents = [f"vessel_{i}" for i in range(self.n)]
         self.diagnostics: dict[str, Array] = {}
         self._base = resolve_base_policy(config.base, scenario)
-        self._residual = learner_config(self._base, config.residual_config())
+        residual = config.residual_config()
+        if config.encoder is not None:
+            slots = self._encoder_slots(config, actor)
+            residual = dataclasses.replace(residual, neighbour_slots=slots)
+        self._residual = learner_config(self._base, residual)
         self._controller: ResidualController | None = None
-        size = self._residual.input_size(self.layout)
-        expected = (actor.input_size,)
-        if expected != (size,):
+        self._history: OwnHistory | None = None
+        size = self._residual.input_size(self.layout) + self._history_size()
+        if isinstance(actor, TorchActor) and actor.network.encoder is not None:
+            self._check_encoder(actor.network.encoder.slot_size, actor.network.encoder.tail, size)
+        if actor.input_size is not None and actor.input_size != size:
             raise ValueError(
                 f"scenario {scenario.name!r} gives inputs of size {size} but the "
-                f"network of {name!r} takes {expected}: evaluate it on a scenario with the "
-                f"training scenarios' neighbour slots and message size ({config.home_scenario!r}), "
-                "or train with --neighbour-slots to run on graphs of higher degree."
+                f"network of {name!r} takes {actor.input_size}: evaluate it on a scenario with "
+                f"the training scenarios' neighbour slots and message size "
+                f"({config.home_scenario!r}), or train with --neighbour-slots to run on graphs "
+                "of higher degree."
             )
         if actor.action_size != self._residual.action_size:
             raise AgentFolderError(
@@ -246,16 +291,65 @@ class TrainedPolicy(FleetPolicy):
                 f"{self._residual.action_size}."
             )
 
+    def _check_encoder(self, slot_size: int, tail: int, size: int) -> None:
+        """Refuse an encoder whose slots or tail are not this scenario's inputs'.
+
+        Raises:
+            ValueError: Slots of another message size (the scenario's ``3 + m``).
+            AgentFolderError: A tail (extras and history) other than the configuration's.
+        """
+        if slot_size != self.layout.slot_size:
+            raise ValueError(
+                f"the encoder of {self.name!r} reads neighbour slots of {slot_size} floats but "
+                f"scenario {self.scenario.name!r} gives {self.layout.slot_size} (3 + message "
+                "size): evaluate it on a scenario with the training message size."
+            )
+        expected = size - self._residual.learner_layout(self.layout).size
+        if tail != expected:
+            raise AgentFolderError(
+                f"the encoder of {self.name!r} reads {tail} floats after the slots but its "
+                f"config.json's extras and history give {expected}."
+            )
+
+    def _history_size(self) -> int:
+        """Floats the own history appends to each input (0 without one)."""
+        return self.config.history * (SLOTS + self._residual.action_size + 1)
+
+    def _encoder_slots(self, config: TrainConfig, actor: Actor) -> int:
+        """Neighbour slots an encoder actor gets on the evaluation scenario.
+
+        Any number (``actor.input_size`` None): the training K or the scenario's
+        degree, whichever is larger. A fixed input (an exported graph): the K' its
+        size holds.
+
+        Raises:
+            ValueError: A fixed input size that holds no whole number of slots.
+        """
+        trained, slot_size = config.learner_slots()
+        if actor.input_size is None:
+            return max(trained, self.layout.n_slots)
+        learner = learner_config(self._base, config.residual_config())
+        extras = sum(EXTRAS[name] for name in learner.extras)
+        history = config.history * (SLOTS + learner.action_size + 1)
+        body = actor.input_size - SLOTS - extras - history
+        if body < 0 or body % slot_size:
+            raise ValueError(
+                f"the network of {self.name!r} takes {actor.input_size} floats, not 18 + K' x "
+                f"{slot_size} + {extras} extras + {history} history for any K'."
+            )
+        return body // slot_size
+
     def reset(self, seed: int | None = None) -> None:
-        """Forget all internal states (the base's and the last residuals)."""
+        """Forget all internal states (the base's, the last residuals and the own histories)."""
         del seed
         self._controller = None
+        self._history = None
         if self._base is not None:
             self._base.reset()
         self.diagnostics = {}
 
     def reset_fleets(self, fleets: ArrayLike) -> None:
-        """Forget the internal states of the fleets in a (B,) mask."""
+        """Forget the internal states (own histories too) of the fleets in a (B,) mask."""
         if self._controller is not None:
             mask = np.asarray(fleets)
             if mask.dtype != bool:
@@ -263,12 +357,15 @@ class TrainedPolicy(FleetPolicy):
                 mask = np.zeros(self._controller.num_fleets, dtype=bool)
                 mask[index] = True
             self._controller.reset_fleets(mask)
+            if self._history is not None:
+                self._history.clear(np.repeat(mask, self.n))
 
     def act_batch(self, obs: ArrayLike, fleets: ArrayLike | None = None) -> Array:
         """Base action plus the trained correction, (B, n, 4 + m) float64.
 
         A ``TorchActor`` runs with one torch thread (see there): the actions have
-        the same bits whatever the caller's thread setting.
+        the same bits whatever the caller's thread setting. With a history, each
+        call records the inputs and actions (``agents.history.OwnHistory``).
 
         Args:
             obs: (B, n, obs_dim) local observations.
@@ -287,6 +384,10 @@ class TrainedPolicy(FleetPolicy):
             self._controller = ResidualController(
                 self.scenario, self._base, batch.shape[0], self._residual
             )
+            if self.config.history:
+                self._history = OwnHistory(
+                    batch.shape[0] * self.n, self.config.history, SLOTS, self._residual.action_size
+                )
         elif self._controller.num_fleets != batch.shape[0]:
             raise ValueError(
                 f"this policy holds states for B = {self._controller.num_fleets} fleets but got "
@@ -294,7 +395,11 @@ class TrainedPolicy(FleetPolicy):
             )
         inputs = self._controller.observe(batch)
         rows = inputs.reshape(-1, inputs.shape[-1]).astype(np.float32)
-        action = self.actor(rows)
+        if self._history is None:
+            action = self.actor(rows)
+        else:  # as HistoryVecEnv: act on the input and the history, then record both
+            action = self.actor(self._history.append_to(rows))
+            self._history.push(rows, action)
         command = self._controller.compose(np.asarray(action).reshape(*batch.shape[:2], -1))
         base_diagnostics = getattr(self._base, "diagnostics", {}) if self._base else {}
         self.diagnostics = {**base_diagnostics, "residual": self._controller.residual.copy()}

@@ -28,6 +28,24 @@ scenario)`` rebuilds the base policy and runs the graph with onnxruntime, and
 onnxruntime and the base controller, not torch. ONNX holds data only
 (protobuf), so loading one runs no code.
 
+An agent with a neighbour encoder (format version 2) is exported for a
+static number K' of neighbour slots (``export_onnx(..., slots=K')``,
+``cpf-export --slots K'``; default its training K): tracing freezes the
+input's length, so the graph takes exactly K' slots, and runs every
+scenario whose graph has degree <= K' (fewer neighbours: empty slots,
+masked). The saved statistics are given to every slot
+(``agents.encoder.statistics_for_slots``). An agent trained with a history
+takes it as part of its input, and the graph keeps no state: the caller
+appends each vessel's history (``agents.history.OwnHistory``, as
+``load_onnx_policy``'s policy does). The input layout, per vessel, in order:
+
+- the 18 own-vessel features (``cpf_env.sim.observation``);
+- K' neighbour slots of 3 + m floats ``[a_ij, theta_j - theta_i, age, msg]``
+  (the scenario's, then empty all-zero slots);
+- the extras of the ``TrainConfig`` (``cpf_env.envs.residual.EXTRAS``);
+- H history entries, newest first, each ``[own 18 features, action (a),
+  valid]`` (H = ``TrainConfig.history``; none when 0).
+
 Needs the optional extra: ``pip install -e ".[onnx]"``.
 """
 
@@ -38,13 +56,14 @@ import re
 import tempfile
 import warnings
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 import torch
 from numpy.typing import NDArray
 
 from agents.agent_folder import Normalization, PolicyNetwork, read_agent, training_config
+from agents.encoder import statistics_for_slots
 from agents.folder_files import (
     MAX_WEIGHT_BYTES,
     AgentFolderError,
@@ -57,6 +76,7 @@ from agents.loading import TrainedPolicy
 from agents.train_config import TrainConfig
 from cpf_env.infra import atomic
 from cpf_env.scenarios import Scenario, make_scenario
+from cpf_env.sim.observation import SLOTS
 
 __all__ = ["OnnxActor", "export_onnx", "load_onnx_policy", "residual_range", "seal_onnx"]
 
@@ -119,7 +139,9 @@ class _Graph(torch.nn.Module):
         return action, action * self.scale
 
 
-def export_onnx(folder: str | Path, out: str | Path, checks: int = 1000) -> float:
+def export_onnx(
+    folder: str | Path, out: str | Path, checks: int = 1000, slots: int | None = None
+) -> float:
     """Export an agent folder to ONNX and check it against the torch policy.
 
     Args:
@@ -127,6 +149,8 @@ def export_onnx(folder: str | Path, out: str | Path, checks: int = 1000) -> floa
         out: The ``.onnx`` file to write (atomically).
         checks: Random inputs (drawn around the saved statistics) on which the
             ONNX actions are compared with torch's.
+        slots: Neighbour slots K' of the graph's input, for an agent with a
+            neighbour encoder (default: its training K); None for an MLP.
 
     Returns:
         The largest absolute difference between the ONNX and torch actions.
@@ -134,6 +158,7 @@ def export_onnx(folder: str | Path, out: str | Path, checks: int = 1000) -> floa
     Raises:
         ImportError: onnx or onnxruntime is missing.
         AgentFolderError: The folder is not a valid agent folder.
+        ValueError: ``slots`` for an agent without an encoder, or < 1.
     """
     try:
         import onnx
@@ -142,15 +167,18 @@ def export_onnx(folder: str | Path, out: str | Path, checks: int = 1000) -> floa
     source = Path(folder)
     record, network, normalization = read_agent(source)
     config = training_config(record["config"], source / "config.json")
+    size, normalization = _static_input(network, normalization, record, slots)
     scenario = make_scenario(config.home_scenario, **config.scenario_overrides())
     graph = _Graph(network, normalization, residual_range(config, scenario)).eval()
-    example = torch.zeros(1, scenario.n, network.input_size, dtype=torch.float32)
+    example = torch.zeros(1, scenario.n, size, dtype=torch.float32)
     target = Path(out)
     with tempfile.TemporaryDirectory() as scratch:  # its own: no name to collide or link
         exported = Path(scratch) / "graph.onnx"
         with warnings.catch_warnings():
             # the TorchScript exporter: the torch.export one needs onnxscript, not a dependency
             warnings.simplefilter("ignore", DeprecationWarning)
+            # the encoder reads K from the input's length: a constant of the traced graph
+            warnings.simplefilter("ignore", torch.jit.TracerWarning)
             torch.onnx.export(
                 graph,
                 (example,),
@@ -166,11 +194,39 @@ def export_onnx(folder: str | Path, out: str | Path, checks: int = 1000) -> floa
         entry.key, entry.value = key, value
     onnx.checker.check_model(model)
     atomic.write_bytes(target, seal_onnx(model.SerializeToString()))
-    rows = _check_inputs(network.input_size, normalization, checks)
+    rows = _check_inputs(size, normalization, checks)
     with torch.no_grad():
         expected = network(torch.from_numpy(_normalized(rows, normalization))).numpy()
     got = OnnxActor(target)(rows)
     return float(np.max(np.abs(got - expected)))
+
+
+def _static_input(
+    network: PolicyNetwork,
+    normalization: Normalization | None,
+    record: dict[str, Any],
+    slots: int | None,
+) -> tuple[int, Normalization | None]:
+    """The graph's input length per vessel, and the statistics for it.
+
+    Raises:
+        ValueError: ``slots`` given for an MLP (its K is fixed), or < 1.
+    """
+    encoder = network.encoder
+    if encoder is None:
+        if slots is not None:
+            raise ValueError(
+                "--slots is for an agent with a neighbour encoder; this agent is an MLP over "
+                f"its training K slots ({network.input_size} inputs). Leave --slots out."
+            )
+        return cast(int, network.input_size), normalization
+    trained = int(record["actor"]["slots"])
+    count = trained if slots is None else slots
+    if count < 1:
+        raise ValueError(f"slots must be >= 1 (neighbour slots of the input), got {count}.")
+    if normalization is not None:
+        normalization = statistics_for_slots(normalization, trained, encoder.slot_size, count)
+    return SLOTS + count * encoder.slot_size + encoder.tail, normalization
 
 
 def _normalized(rows: NDArray[np.float32], normalization: Normalization | None) -> NDArray[Any]:

@@ -51,13 +51,15 @@ from stable_baselines3.common.vec_env import VecEnv, VecMonitor, VecNormalize
 from agents.agent_folder import (
     Normalization,
     actor_tensors,
+    encoder_layout,
     network_from_tensors,
     read_agent,
     write_agent,
 )
-from agents.algorithms import build_model, make_env, planned_timesteps
+from agents.algorithms import DeepSetsExtractor, build_model, make_env, planned_timesteps
 from agents.checkpoint import checkpoint_timesteps, load_checkpoint
 from agents.folder_files import AgentFolderError
+from agents.history_env import HistoryVecEnv
 from agents.mixture_env import BalancedRewards, MixtureVecEnv
 from agents.schedule import (
     BEST,
@@ -261,13 +263,22 @@ class TrainingRun:
             torch.set_num_threads(config.torch_threads)
         self.venv = make_env(config)
         self.venv.seed(config.seed)
-        self.env: VecEnv = VecMonitor(self.venv)
+        below: VecEnv = self.venv
+        if config.history:  # below VecNormalize: the history is normalized with the rest
+            below = HistoryVecEnv(self.venv, config.history)
+        self.env: VecEnv = VecMonitor(below)
         if config.balance_rewards and isinstance(self.venv, MixtureVecEnv):
             self.env = BalancedRewards(self.env, self.venv)
         if config.normalize_observations:
             if config.shared_slot_statistics:
                 slots, size = config.learner_slots()
-                self.env = SlotSharedVecNormalize(self.env, slots, size, gamma=config.gamma)
+                self.env = SlotSharedVecNormalize(
+                    self.env,
+                    slots,
+                    size,
+                    gamma=config.gamma,
+                    raw_weights=config.encoder is not None,  # empty slots stay 0 (agents.encoder)
+                )
             else:
                 self.env = VecNormalize(
                     self.env, norm_obs=True, norm_reward=False, gamma=config.gamma
@@ -355,11 +366,16 @@ class TrainingRun:
 
     def write_agent(self, folder: Path, interrupted: bool = False) -> None:
         """Write the current agent (actor, frozen normalization, record) into ``folder``."""
+        encoder = None
+        if self.config.encoder is not None:
+            extractor = cast(DeepSetsExtractor, self.model.policy.pi_features_extractor)
+            encoder = encoder_layout(extractor.encoder)
         network = network_from_tensors(
             actor_tensors(self.model, self.config.algo),
             self.config.algo,
             self.config.net_arch,
             folder / "policy.safetensors",
+            encoder,
         )
         normalization = None
         if isinstance(self.env, VecNormalize):

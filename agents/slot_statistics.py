@@ -19,6 +19,12 @@ permutation-invariant reading of the slots would need; the own-vessel
 components and the extras keep their own statistics. The statistics stay in
 ``obs_rms`` (mean, var per component), so the agent folder stores and applies
 them as it does ``VecNormalize``'s.
+
+With ``raw_weights=True`` (the runs with a neighbour encoder,
+``TrainConfig(encoder="deepsets")``) the slots' weights a_ij keep mean 0 and
+variance 1, so an empty slot's ``a_ij = 0`` is exactly 0 after normalization,
+whatever the statistics are at that step: the encoder's mask
+(``agents.encoder``) tells empty slots from links by that value alone.
 """
 
 from __future__ import annotations
@@ -28,7 +34,7 @@ from numpy.typing import NDArray
 from stable_baselines3.common.running_mean_std import RunningMeanStd
 from stable_baselines3.common.vec_env import VecEnv, VecNormalize
 
-from cpf_env.sim.observation import SLOTS
+from cpf_env.sim.observation import SLOT_WEIGHT, SLOTS
 
 __all__ = ["SlotSharedVecNormalize", "pool_slot_statistics"]
 
@@ -68,15 +74,29 @@ class SlotSharedVecNormalize(VecNormalize):
         n_slots: K.
         slot_size: Components per slot (3 + m).
         gamma: Discount (``VecNormalize``'s; rewards are not normalized).
+        raw_weights: Keep the slots' weights a_ij at mean 0 and variance 1 (an empty
+            slot stays exactly 0).
     """
 
-    def __init__(self, venv: VecEnv, n_slots: int, slot_size: int, gamma: float = 0.99) -> None:
+    def __init__(
+        self,
+        venv: VecEnv,
+        n_slots: int,
+        slot_size: int,
+        gamma: float = 0.99,
+        raw_weights: bool = False,
+    ) -> None:
         super().__init__(venv, norm_obs=True, norm_reward=False, gamma=gamma)
         self.n_slots, self.slot_size = int(n_slots), int(slot_size)
+        self.raw_weights = raw_weights
 
     def normalize_obs(self, obs: NDArray | dict[str, NDArray]) -> NDArray | dict[str, NDArray]:
         """Pool the slots' running statistics, then normalize as ``VecNormalize`` does."""
         rms = self.obs_rms
         assert isinstance(rms, RunningMeanStd)
         rms.mean, rms.var = pool_slot_statistics(rms.mean, rms.var, self.n_slots, self.slot_size)
+        if self.raw_weights:
+            stop = SLOTS + self.n_slots * self.slot_size
+            weights = slice(SLOTS + SLOT_WEIGHT, stop, self.slot_size)
+            rms.mean[weights], rms.var[weights] = 0.0, 1.0
         return super().normalize_obs(obs)

@@ -19,10 +19,12 @@ from cpf_env.envs.residual import ResidualConfig
 from cpf_env.scenarios.reward_weights import REWARD_FORMS
 from cpf_env.sim.fleet import observation_layout
 
-__all__ = ["ALGORITHM_NAMES", "LOG_STD_RANGE", "MAX_SEED", "TrainConfig"]
+__all__ = ["ALGORITHM_NAMES", "ENCODERS", "LOG_STD_RANGE", "MAX_SEED", "TrainConfig"]
 
 #: Algorithms ``agents.training.ALGORITHMS`` maps to SB3 classes.
 ALGORITHM_NAMES = ("ppo", "sac")
+#: Neighbour encoders of the actor (``agents.encoder``); None: an MLP over the flat input.
+ENCODERS = ("deepsets",)
 #: Largest training seed: numpy's legacy seeding, which SB3 calls, takes 32 bits.
 MAX_SEED = 2**32 - 1
 #: Accepted initial log standard deviations: exp(-20) is no noise, exp(5) = 148 already
@@ -79,6 +81,13 @@ class TrainConfig:
             steers the updates by the size of its cost alone. Ignored for one scenario.
         shared_slot_statistics: Normalize every neighbour slot with the same pooled
             statistics (``agents.slot_statistics``) instead of per-position ones.
+        encoder: ``"deepsets"``: the actor reads the neighbour slots through a
+            ``NeighbourSetEncoder`` (PPO only; with ``normalize_observations`` it
+            needs ``shared_slot_statistics``), so the agent runs on any number of
+            slots; None: an MLP over the flat input of K slots.
+        history: Own-history entries appended to the learner's input
+            (``agents.history_env.HistoryVecEnv`` in training, kept by the loaded policy
+            in evaluation); 0: none.
     """
 
     algo: str = "ppo"
@@ -107,6 +116,8 @@ class TrainConfig:
     reward_overrides: dict[str, float] = dataclasses.field(default_factory=dict)
     balance_rewards: bool = True
     shared_slot_statistics: bool = False
+    encoder: str | None = None
+    history: int = 0
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "extras", tuple(self.extras))
@@ -173,10 +184,35 @@ class TrainConfig:
         for name in flags:
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"{name} must be true or false, got {getattr(self, name)!r}.")
+        self._check_actor()
         if self.base != "none":
             self.residual_config()  # validates mode, scale, extras and neighbour slots
         for name in self.scenarios:
             self.scenario_overrides(name)  # validates the reward overrides
+
+    def _check_actor(self) -> None:
+        """Validate ``encoder`` and ``history`` (and what the encoder needs)."""
+        if self.encoder is not None and self.encoder not in ENCODERS:
+            raise ValueError(
+                f"encoder must be one of {list(ENCODERS)} or None (an MLP), got {self.encoder!r}."
+            )
+        if isinstance(self.history, bool) or not isinstance(self.history, int) or self.history < 0:
+            raise ValueError(
+                f"history must be an integer >= 0 (own-history entries; 0: none), got "
+                f"{self.history!r}."
+            )
+        if self.encoder is None:
+            return
+        if self.algo != "ppo":
+            raise ValueError(
+                f"encoder={self.encoder!r} is implemented for PPO; use algo='ppo' or no encoder."
+            )
+        if self.normalize_observations and not self.shared_slot_statistics:
+            raise ValueError(
+                f"encoder={self.encoder!r} runs one set of weights on every slot, so the slots "
+                "need one set of statistics: set shared_slot_statistics=true "
+                "(--shared-slot-statistics), or normalize_observations=false."
+            )
 
     @property
     def scenarios(self) -> tuple[str, ...]:

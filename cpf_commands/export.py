@@ -1,8 +1,10 @@
 """``cpf-export``: a trained agent folder as one ONNX graph, checked against torch.
 
 The graph holds the normalization, the network, the action bounds and the
-residual scaling (``agents.onnx_policy``); ``cpf-bench --policies nn_dsc
-agent.onnx`` runs it through onnxruntime. Needs the ``onnx`` extra.
+residual scaling (``agents.onnx_policy``, which documents the input layout);
+``cpf-bench --policies nn_dsc agent.onnx`` runs it through onnxruntime. An
+agent with a neighbour encoder is exported for ``--slots K`` neighbour slots
+(default its training K). Needs the ``onnx`` extra.
 
 Example::
 
@@ -33,6 +35,13 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument("out", help="the .onnx file to write")
     parser.add_argument(
         "--checks", type=int, default=1000, help="random inputs compared with torch (default 1000)"
+    )
+    parser.add_argument(
+        "--slots",
+        type=int,
+        default=None,
+        help="neighbour slots of the graph's input, for an agent with a neighbour encoder "
+        "(default: its training K); the graph then runs graphs of degree <= K",
     )
     return parser
 
@@ -65,6 +74,8 @@ def export_main(argv: Sequence[str] | None = None) -> int:
         parser.error(f"the output {args.out!r} must end in .onnx.")
     if args.checks < 1:
         parser.error(f"--checks must be >= 1, got {args.checks}.")
+    if args.slots is not None and args.slots < 1:
+        parser.error(f"--slots must be >= 1, got {args.slots}.")
     try:
         _check_paths(Path(args.folder), Path(args.out))
         from agents.onnx_policy import export_onnx
@@ -74,7 +85,7 @@ def export_main(argv: Sequence[str] | None = None) -> int:
         needed = 2 * weights.stat().st_size + 2**20 if weights.is_file() else 0
         atomic.check_writable(args.out, needed)
         with atomic.FolderLock(args.out, "another cpf-export"):
-            difference = export_onnx(args.folder, args.out, checks=args.checks)
+            difference = export_onnx(args.folder, args.out, checks=args.checks, slots=args.slots)
     except (ImportError, ValueError, OSError, atomic.FolderLockedError) as error:
         parser.error(str(error))
     print(

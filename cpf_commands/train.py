@@ -82,7 +82,7 @@ def _reward_overrides(items: list[str]) -> dict[str, float]:
 
 
 def _parser() -> argparse.ArgumentParser:
-    from agents.train_config import TrainConfig
+    from agents.train_config import ENCODERS, TrainConfig
     from baselines import POLICIES
     from cpf_env.envs.residual import EXTRAS, RESIDUAL_MODES
     from cpf_env.scenarios.reward_weights import REWARD_FORMS
@@ -129,6 +129,21 @@ def _parser() -> argparse.ArgumentParser:
         action=argparse.BooleanOptionalAction,
         default=defaults.shared_slot_statistics,
         help="normalize every neighbour slot with the same pooled statistics",
+    )
+    parser.add_argument(
+        "--encoder",
+        default=defaults.encoder,
+        choices=list(ENCODERS),
+        help="read the neighbour slots through a DeepSets encoder (PPO; with normalization "
+        "needs --shared-slot-statistics): the agent then runs on any number of slots "
+        "(default: an MLP over the K slots)",
+    )
+    parser.add_argument(
+        "--history",
+        type=int,
+        default=defaults.history,
+        help="own-history entries (own features, action, valid) appended to each vessel's "
+        "input, kept by the loaded policy in evaluation; 0: none",
     )
     parser.add_argument(
         "--reward-weight",

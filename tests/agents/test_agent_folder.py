@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import base64
+import dataclasses
 import json
 import pickle
 import shutil
@@ -14,7 +15,8 @@ import pytest
 import torch
 from conftest import ROOT
 
-from agents import load_policy
+from agents import TrainConfig, load_policy
+from agents.agent_folder import Normalization, PolicyNetwork, build_actor, read_agent, write_agent
 from agents.folder_files import AgentFolderError
 from agents.legacy import convert_sb3_folder
 from cpf_commands.bench.cli import bench_main
@@ -203,3 +205,86 @@ def test_an_old_folder_without_its_statistics_is_refused(tmp_path: Path) -> None
     (tmp_path / "config.json").write_text(json.dumps({"config": config.to_json()}))
     with pytest.warns(UserWarning), pytest.raises(AgentFolderError, match="unnormalized"):
         load_policy(tmp_path, trust_pickle=True)
+
+
+# ---- format version 2: the neighbour encoder and the own history -------------------------------
+
+ENCODER_CONFIG = TrainConfig(
+    scenario="bench_mild",
+    fleets=2,
+    net_arch=(16,),
+    encoder="deepsets",
+    history=2,
+    neighbour_slots=6,
+    shared_slot_statistics=True,
+)
+#: own 18 + 6 slots of 4 + 2 history entries of (18 + 3 actions + 1 valid)
+ENCODER_INPUTS = 18 + 6 * 4 + 2 * 22
+
+
+def write_encoder_agent(folder: Path) -> PolicyNetwork:
+    """A version-2 folder of an untrained encoder actor (seeded), with slot-pooled statistics."""
+    torch.manual_seed(0)
+    network = build_actor(ENCODER_CONFIG, ENCODER_INPUTS, 3)
+    with torch.no_grad():
+        network.output.weight.normal_()  # not zero: the actions depend on every input
+    rng = np.random.default_rng(0)
+    mean, var = rng.normal(size=ENCODER_INPUTS), rng.uniform(0.5, 2.0, size=ENCODER_INPUTS)
+    slot = (
+        np.concatenate([[0.0], rng.normal(size=3)]),
+        np.concatenate([[1.0], rng.uniform(1, 2, 3)]),
+    )
+    mean[18:42], var[18:42] = np.tile(slot[0], 6), np.tile(slot[1], 6)  # pooled; a_ij raw
+    folder.mkdir()
+    write_agent(folder, {"config": ENCODER_CONFIG.to_json()}, network, Normalization(mean, var))
+    return network
+
+
+def test_a_version_2_folder_round_trips_the_encoder_and_its_layout(tmp_path: Path) -> None:
+    folder = tmp_path / "encoder"
+    network = write_encoder_agent(folder)
+    assert json.loads((folder / "manifest.json").read_text())["format_version"] == 2
+    record, loaded, normalization = read_agent(folder)
+    assert record["actor"] == {"encoder": "deepsets", "history": 2, "pooling": "mean",
+                               "hidden": 32, "slot_size": 4, "tail": 44, "slots": 6}  # fmt: skip
+    assert loaded.input_size is None and loaded.encoder is not None
+    saved = network.state_dict()
+    assert sorted(loaded.state_dict()) == sorted(saved)
+    for name, tensor in loaded.state_dict().items():
+        assert torch.equal(tensor, saved[name]), name
+    assert normalization is not None and normalization.mean.size == ENCODER_INPUTS
+    rows = torch.from_numpy(np.random.default_rng(1).normal(size=(50, ENCODER_INPUTS)))
+    with torch.no_grad():
+        assert torch.equal(loaded(rows.float()), network(rows.float()))
+
+
+def test_an_mlp_without_history_is_still_written_as_version_1(tmp_path: Path) -> None:
+    """The committed agents are version 1; a new MLP folder too, without an 'actor' field."""
+    record, network, normalization = read_agent(AGENT)
+    assert json.loads((AGENT / "manifest.json").read_text())["format_version"] == 1
+    folder = tmp_path / "mlp"
+    folder.mkdir()
+    write_agent(folder, record, network, normalization)
+    for name in ("policy.safetensors", "normalization.json", "config.json"):
+        assert (folder / name).read_bytes() == (AGENT / name).read_bytes(), name
+    assert json.loads((folder / "manifest.json").read_text())["format_version"] == 1
+
+
+@pytest.mark.parametrize("encoder", [None, "deepsets"])
+def test_build_actor_has_the_layers_sb3_trains(encoder: str | None) -> None:
+    """The untrained actor (for other learners) has the tensors ``cpf-train`` writes."""
+    from stable_baselines3.common.vec_env import VecMonitor
+
+    from agents.agent_folder import actor_tensors
+    from agents.algorithms import build_model, make_env
+    from agents.history_env import HistoryVecEnv
+
+    config = dataclasses.replace(ENCODER_CONFIG, encoder=encoder, batch_size=32)
+    env = VecMonitor(HistoryVecEnv(make_env(config), config.history))
+    tensors = actor_tensors(build_model(config, env), config.algo)
+    size = int(env.observation_space.shape[0])  # type: ignore[index]
+    assert size == ENCODER_INPUTS
+    network = build_actor(config, size, 3)
+    shapes = {name: tuple(value.shape) for name, value in network.state_dict().items()}
+    assert shapes == {name: tuple(value.shape) for name, value in tensors.items()}
+    assert (network.encoder is None) == (encoder is None)

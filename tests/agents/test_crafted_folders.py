@@ -518,3 +518,99 @@ def test_an_onnx_link_to_a_sealed_file_is_followed(
     link = tmp_path / "link.onnx"
     link.symlink_to(onnx_file())
     assert load_onnx_policy(link).actor.input_size == 26
+
+
+# ---- format version 2: the encoder's layout and tensors, checked against each other -----------
+
+
+def _v2(tmp_path: Path) -> Path:
+    from test_agent_folder import write_encoder_agent
+
+    folder = tmp_path / "encoder"
+    write_encoder_agent(folder)
+    return folder
+
+
+def _bump_slot_mean(data: Any) -> None:
+    data["mean"][18 + 1] += 1.0  # slot 0's theta difference only: the slots no longer pooled
+
+
+def _bump_weight_mean(data: Any) -> None:
+    for k in range(6):
+        data["mean"][18 + 4 * k] = 0.5  # every slot's a_ij: an empty slot is no longer 0
+
+
+@pytest.mark.parametrize(
+    ("name", "edit", "patterns"),
+    [
+        ("config.json", _set("actor.hidden", 64), ["hidden.0.weight reads 95", "gives 127"]),
+        ("config.json", _set("actor.slot_size", 5), ["encoder.phi.0.weight", "(32, 5)"]),
+        ("config.json", _set("actor.tail", 40), ["config.json's 'actor'", "hidden.0.weight"]),
+        ("config.json", _set("actor.slots", 7), ["normalization.json", "statistics for 86"]),
+        ("config.json", _set("actor.pooling", "max"), ["'actor'", "'max'"]),
+        ("config.json", _set("actor.history", 3), ["'actor'", "history 3"]),
+        ("config.json", _set("actor.encoder", None), ["'actor'", "encoder None"]),
+        ("config.json", _set("actor.hidden", "32"), ["'actor.hidden' must be an integer"]),
+        ("config.json", _set("actor.extra", 1), ["unknown field(s) ['extra']"]),
+        ("config.json", lambda data: data.pop("actor"), ["lacks the field 'actor'"]),
+        ("config.json", _set("config.history", 0), ["'actor'", "history 2"]),
+        ("normalization.json", _bump_slot_mean, ["differ between slots"]),
+        ("normalization.json", _bump_weight_mean, ["empty slot's a_ij becomes", "masks slots at"]),
+        ("manifest.json", _set("format_version", 1), ["format version 1, an MLP without"]),
+        ("manifest.json", _set("format_version", 3), ["format version 3", "version 1 and 2"]),
+    ],
+)
+def test_a_tampered_version_2_folder_is_refused_naming_what(
+    tmp_path: Path, name: str, edit: Callable[[Any], None], patterns: list[str]
+) -> None:
+    folder = _v2(tmp_path)
+    load_policy(folder)  # valid before the edit
+    _edit_json(folder, name, edit)
+    _refused(folder, *patterns)
+
+
+@pytest.mark.parametrize(
+    ("edit", "patterns"),
+    [
+        (lambda t: t.pop("encoder.phi.2.bias"), ["safetensors holds tensors", "phi.2.bias"]),
+        (
+            lambda t: t.__setitem__("encoder.tolerance", torch.tensor(-1.0)),
+            ["safetensors: tensor encoder.tolerance is negative"],
+        ),
+        (
+            lambda t: t.__setitem__("encoder.empty_weight", torch.tensor(0.5)),
+            ["normalization.json", "masks slots at 0.5"],
+        ),
+        (
+            lambda t: t.__setitem__("encoder.phi.0.weight", t["encoder.phi.0.weight"].double()),
+            ["encoder.phi.0.weight is float64"],
+        ),
+        (
+            lambda t: t["encoder.phi.2.weight"].__setitem__((0, 0), float("nan")),
+            ["encoder.phi.2.weight holds a NaN"],
+        ),
+    ],
+)
+def test_a_version_2_folder_with_forged_encoder_tensors_is_refused(
+    tmp_path: Path, edit: Callable[[dict[str, torch.Tensor]], None], patterns: list[str]
+) -> None:
+    folder = _v2(tmp_path)
+    _edit_tensors(folder, edit)
+    _refused(folder, *patterns)
+
+
+def test_a_version_2_weights_file_edited_without_the_manifest_is_refused(tmp_path: Path) -> None:
+    folder = _v2(tmp_path)
+    data = bytearray((folder / "policy.safetensors").read_bytes())
+    data[-1] ^= 1
+    (folder / "policy.safetensors").write_bytes(bytes(data))
+    _refused(folder, "policy.safetensors does not match its SHA-256")
+
+
+def test_a_version_2_encoder_whose_tail_is_not_the_configurations_is_refused(
+    tmp_path: Path,
+) -> None:
+    """Extras added to config.json: the encoder's tail (history only) no longer fits."""
+    folder = _v2(tmp_path)
+    _edit_json(folder, "config.json", _set("config.extras", ["base_action"]))
+    _refused(folder, "reads 44 floats after the slots", "extras and history give 48")

@@ -8,7 +8,8 @@ import torch
 from stable_baselines3 import PPO
 
 from agents import FleetVecEnv
-from agents.encoder import DeepSetsExtractor, NeighbourSetEncoder, empty_weight_after
+from agents.algorithms import DeepSetsExtractor
+from agents.encoder import NeighbourSetEncoder, empty_weight_after
 from cpf_env.envs.input_statistics import InputStatistics
 from cpf_env.sim.observation import SLOTS, observation_box
 

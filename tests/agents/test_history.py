@@ -1,4 +1,4 @@
-"""HistoryVecEnv: the entries are the slot's own past, and nothing crosses an episode end."""
+"""OwnHistory, HistoryVecEnv: the entries are the own past; nothing crosses an episode end."""
 
 from __future__ import annotations
 
@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from agents import FleetVecEnv
-from agents.history import HistoryVecEnv
+from agents.history import OwnHistory
+from agents.history_env import HistoryVecEnv
 from cpf_env.sim.observation import SLOTS
 
 H = 3
@@ -84,3 +85,16 @@ def test_bad_arguments_are_refused() -> None:
         HistoryVecEnv(venv, length=0)
     with pytest.raises(ValueError, match="own must be"):
         HistoryVecEnv(venv, length=2, own=1000)
+
+
+def test_own_history_pushes_newest_first_and_clears_the_rows_given() -> None:
+    history = OwnHistory(rows=3, length=2, own=2, action_size=1)
+    for step in (1.0, 2.0):
+        inputs = np.full((3, 4), step, dtype=np.float32)
+        history.push(inputs, np.full((3, 1), -step, dtype=np.float32))
+    np.testing.assert_array_equal(history.entries[0], [[2, 2, -2, 1], [1, 1, -1, 1]])
+    history.clear(np.array([False, True, False]))
+    assert np.all(history.entries[1] == 0.0) and np.all(history.entries[[0, 2], :, -1] == 1.0)
+    assert history.append_to(np.zeros((3, 4))).shape == (3, 4 + 2 * 4)
+    with pytest.raises(ValueError, match="own and action_size must be >= 1"):
+        OwnHistory(rows=1, length=1, own=0)

@@ -80,3 +80,87 @@ def test_bench_runs_the_onnx_policy_within_the_torch_policys_interval(exported: 
 def test_an_onnx_file_for_another_fleet_size_is_refused(exported: Path) -> None:
     with pytest.raises(ValueError, match="exported for fleets of 5"):
         load_onnx_policy(exported, "bench_large_fleet")
+
+
+# ---- an agent with a neighbour encoder and a history: static K', the history in the input -------
+
+
+@pytest.fixture(scope="module")
+def encoder_agent(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    import torch
+    from test_loading import CONFIG
+
+    from agents import train
+
+    torch.manual_seed(0)
+    return train(CONFIG, tmp_path_factory.mktemp("encoder") / "agent", progress=False)
+
+
+def test_an_encoder_agent_exported_for_nine_slots_acts_as_torch_on_a_ten_vessel_star(
+    encoder_agent: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Trained on 6 slots, exported with --slots 9: the graph's actions on the star's inputs.
+
+    The graph's fleet size is the training scenario's (5: the residual range is per
+    vessel), so the star's 10 rows per step run as two groups of 5; the actions are
+    per row. The inputs, history included, are those the torch policy built.
+    """
+    from test_mixture_env import fleet_of
+
+    from cpf_env.model.graph import Graph
+
+    out = tmp_path / "star.onnx"
+    assert export_main([str(encoder_agent), str(out), "--slots", "9"]) == 0
+    assert float(capsys.readouterr().out.rsplit(":", 1)[1]) < 1e-5
+    star = fleet_of(10, Graph.star(10, center=4, leaders=(4,)))
+    torch_policy = load_policy(encoder_agent, scenario=star)
+    torch_actor = torch_policy.actor
+    seen: list[np.ndarray] = []
+
+    def recording(rows: np.ndarray) -> np.ndarray:
+        seen.append(rows)
+        return torch_actor(rows)
+
+    torch_policy.actor = recording  # type: ignore[assignment]
+    onnx_actor = OnnxActor(out)
+    assert onnx_actor.input_size == 18 + 9 * 4 + 3 * 22  # own, 9 slots, 3 history entries
+    sim = FleetSim(star, num_fleets=2)
+    obs = sim.reset(seeds=[0, 1])
+    for _ in range(30):
+        obs = sim.step(torch_policy.act_batch(obs))
+        rows = seen[-1]
+        assert rows.shape == (20, onnx_actor.input_size)
+        np.testing.assert_allclose(onnx_actor(rows), torch_actor(rows), rtol=0, atol=1e-5)
+    assert np.all(seen[-1][:, -1] == 1.0)  # the oldest history entry is filled by now
+
+
+def test_an_encoder_agent_with_history_runs_from_onnx_as_from_torch(
+    encoder_agent: Path, tmp_path: Path
+) -> None:
+    """load_onnx_policy keeps the history itself; K' = 3 runs the chain, K' = 1 is refused."""
+    out = tmp_path / "three.onnx"
+    assert export_main([str(encoder_agent), str(out), "--slots", "3"]) == 0
+    torch_policy, onnx_policy = load_policy(encoder_agent), load_onnx_policy(out)
+    sim = FleetSim(torch_policy.scenario, num_fleets=2)
+    obs = sim.reset(seeds=[0, 1])
+    for _ in range(30):
+        command = torch_policy.act_batch(obs)
+        np.testing.assert_allclose(
+            onnx_policy.act_batch(obs) - command, 0.0, atol=1e-4
+        )  # forces of up to ~10 N: float32 rounding of 1e-6 relative
+        obs = sim.step(command)
+    one = tmp_path / "one.onnx"
+    assert export_main([str(encoder_agent), str(one), "--slots", "1"]) == 0
+    with pytest.raises(ValueError, match="at most 1 neighbours"):
+        load_onnx_policy(one)
+
+
+def test_slots_for_an_mlp_agent_are_refused(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    with pytest.raises(SystemExit):
+        export_main([str(AGENT), str(tmp_path / "a.onnx"), "--slots", "9"])
+    assert "--slots is for an agent with a neighbour encoder" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        export_main([str(AGENT), str(tmp_path / "a.onnx"), "--slots", "0"])
+    assert "--slots must be >= 1" in capsys.readouterr().err

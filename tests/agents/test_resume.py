@@ -257,3 +257,23 @@ def test_a_killed_mixture_run_resumes_to_the_same_files(tmp_path: Path) -> None:
               schedule=schedule)  # fmt: skip
     train(config, parts, False, evaluate=evaluate, schedule=schedule, resume=True)
     _assert_same_run(whole, parts)
+
+
+def test_a_killed_encoder_run_with_history_resumes_to_the_same_files(tmp_path: Path) -> None:
+    """The own histories (``HistoryVecEnv``) and the encoder's weights are in the checkpoint."""
+    config = TrainConfig(
+        scenario="bench_mild",
+        timesteps=640,
+        seed=3,
+        encoder="deepsets",
+        history=2,
+        shared_slot_statistics=True,
+        **TINY,  # type: ignore[arg-type]
+    )
+    whole = train(config, tmp_path / "whole", False, evaluate=_evaluator(), schedule=SCHEDULE)
+    parts = tmp_path / "parts"
+    with pytest.raises(RuntimeError, match="killed"):  # after the checkpoint at 320
+        train(config, parts, False, callbacks=[_KillAt(490)], evaluate=_evaluator(),
+              schedule=SCHEDULE)  # fmt: skip
+    train(config, parts, False, evaluate=_evaluator(), schedule=SCHEDULE, resume=True)
+    _assert_same_run(whole, parts)

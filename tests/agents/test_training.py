@@ -186,6 +186,9 @@ def test_a_trained_policy_acts_the_same_whatever_the_torch_threads() -> None:
         ("fleets", 0, "fleets must be an integer >= 1"),
         ("seed", -1, "seed must be an integer in"),
         ("seed", 2**32, "seed must be an integer in"),
+        ("history", -1, "history must be an integer >= 0"),
+        ("history", True, "history must be an integer >= 0"),
+        ("encoder", "transformer", r"encoder must be one of \['deepsets'\] or None"),
     ],
 )
 def test_train_config_rejects_bad_settings_before_any_training(
@@ -194,6 +197,32 @@ def test_train_config_rejects_bad_settings_before_any_training(
     """A bad setting is refused when the config is built (a sweep checks it before Ray starts)."""
     with pytest.raises(ValueError, match=message):
         TrainConfig(scenario="bench_mild", **{field: value})  # type: ignore[arg-type]
+
+
+def test_an_encoder_needs_ppo_and_shared_slot_statistics() -> None:
+    with pytest.raises(ValueError, match="implemented for PPO"):
+        TrainConfig(scenario="bench_mild", algo="sac", encoder="deepsets")
+    with pytest.raises(ValueError, match="set shared_slot_statistics=true"):
+        TrainConfig(scenario="bench_mild", encoder="deepsets")
+    TrainConfig(scenario="bench_mild", encoder="deepsets", normalize_observations=False)
+
+
+def test_cpf_train_takes_the_encoder_and_the_history(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "encoder"
+    argv = ["--scenario", "bench_mild", "--fleets", "2", "-n", "32", "--n-steps", "16",
+            "--batch-size", "32", "--epochs", "1", "--eval-every", "0", "--out", str(out),
+            "--quiet", "--encoder", "deepsets", "--shared-slot-statistics",
+            "--history", "2"]  # fmt: skip
+    assert train_main(argv) == 0
+    config = load_policy(out).config
+    assert (config.encoder, config.history) == ("deepsets", 2)
+    saved = (out / "hyperparameters.toml").read_text()
+    assert 'encoder = "deepsets"' in saved and "history = 2" in saved
+    with pytest.raises(SystemExit):
+        train_main([a for a in argv if a != "--shared-slot-statistics"] + ["--force"])
+    assert "set shared_slot_statistics=true" in capsys.readouterr().err
 
 
 def test_a_minibatch_larger_than_one_rollout_is_cut_to_it_with_a_warning() -> None:

@@ -1,0 +1,197 @@
+"""load_policy of an encoder agent with a history: any number of slots, the history kept."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+import torch
+from stable_baselines3 import PPO
+from test_mixture_env import fleet_of
+
+from agents import FleetVecEnv, TrainConfig, load_policy, train
+from agents.algorithms import build_model
+from agents.history_env import HistoryVecEnv
+from agents.loading import TrainedPolicy
+from cpf_env import FleetSim, scenarios
+from cpf_env.model.graph import Graph
+
+H = 3
+#: Trained on bench_mild's chain padded to 6 slots, with a history of 3 entries.
+CONFIG = TrainConfig(
+    scenario="bench_mild",
+    fleets=2,
+    timesteps=64,
+    n_steps=16,
+    batch_size=32,
+    n_epochs=1,
+    net_arch=(16,),
+    encoder="deepsets",
+    history=H,
+    neighbour_slots=6,
+    shared_slot_statistics=True,
+    torch_threads=1,
+)
+
+
+@pytest.fixture(scope="module")
+def agent(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A tiny encoder agent with a history, trained by ``train`` (cpf-train's route)."""
+    torch.manual_seed(0)
+    return train(CONFIG, tmp_path_factory.mktemp("encoder") / "agent", progress=False)
+
+
+def _recording(policy: TrainedPolicy) -> list[np.ndarray]:
+    """Record the actor's actions (R, a) at each ``act_batch``."""
+    actions: list[np.ndarray] = []
+    actor = policy.actor
+
+    class Recorder:
+        input_size, action_size = actor.input_size, actor.action_size
+
+        def __call__(self, rows: np.ndarray) -> np.ndarray:
+            actions.append(actor(rows))
+            return actions[-1]
+
+    policy.actor = Recorder()
+    return actions
+
+
+def test_the_folder_is_version_2_and_describes_the_actor(agent: Path) -> None:
+    manifest = json.loads((agent / "manifest.json").read_text())
+    record = json.loads((agent / "config.json").read_text())
+    assert manifest["format_version"] == 2
+    # own 18, 6 slots of 4; tail: 3 entries of (18 own + 3 actions + 1 valid)
+    assert record["actor"] == {
+        "encoder": "deepsets",
+        "history": H,
+        "pooling": "mean",
+        "hidden": 32,
+        "slot_size": 4,
+        "slots": 6,
+        "tail": H * 22,
+    }
+    statistics = json.loads((agent / "normalization.json").read_text())
+    assert len(statistics["mean"]) == 18 + 6 * 4 + H * 22
+    weights = statistics["mean"][18 : 18 + 24 : 4], statistics["var"][18 : 18 + 24 : 4]
+    assert weights == ([0.0] * 6, [1.0] * 6)  # a_ij kept raw: an empty slot stays 0
+
+
+def test_actions_equal_sb3_inside_history_vec_env_bit_for_bit(agent: Path) -> None:
+    """300 steps of 2 fleets through auto-resets: load_policy's actions are SB3's predict.
+
+    SB3's PPO is rebuilt from the folder's weights (no pickle read; the output layer
+    scaled by 50 in both, so the actions are large and the history matters); it acts on
+    ``HistoryVecEnv``'s inputs, normalized by ``VecNormalize``'s formula written
+    out here. The loaded policy sees only the simulator's raw observations and
+    keeps the history itself, reset on the fleets whose episode ended.
+    """
+    policy = load_policy(agent)
+    network = policy.actor.network  # type: ignore[attr-defined]
+    statistics = json.loads((agent / "normalization.json").read_text())
+    mean, var = np.array(statistics["mean"]), np.array(statistics["var"])
+    base = FleetVecEnv(
+        CONFIG.home_scenario,
+        num_fleets=2,
+        base_policy=CONFIG.base,
+        residual=CONFIG.residual_config(),
+        max_steps=100,  # staggered: fleet 1 restarts after 50 steps, fleet 0 after 100
+    )
+    env = HistoryVecEnv(base, H)
+    model = build_model(dataclasses.replace(CONFIG, batch_size=32), env)
+    assert isinstance(model, PPO)
+    extractor: Any = model.policy.pi_features_extractor
+    extractor.encoder.load_state_dict(network.encoder.state_dict())
+    layers = [m for m in model.policy.mlp_extractor.policy_net if isinstance(m, torch.nn.Linear)]
+    with torch.no_grad():
+        network.output.weight.mul_(50.0)  # a 64-step agent barely moved: larger actions
+        for mine, theirs in zip(network.hidden, layers, strict=True):
+            theirs.weight.copy_(mine.weight)
+            theirs.bias.copy_(mine.bias)
+        model.policy.action_net.weight.copy_(network.output.weight)
+        model.policy.action_net.bias.copy_(network.output.bias)
+    base.seed(5)
+    obs = env.reset()
+    recorded = _recording(policy)
+    ended = 0
+    for _ in range(300):
+        raw = base.core.sim.arrays.obs.copy()
+        policy.act_batch(raw)
+        normalized = np.clip((obs - mean) / np.sqrt(var + 1e-8), -10.0, 10.0).astype(np.float32)
+        expected, _ = model.predict(normalized, deterministic=True)
+        np.testing.assert_array_equal(recorded[-1], expected)
+        obs, _, dones, _ = env.step(expected)
+        restarted = dones.reshape(2, -1).any(axis=1)
+        policy.reset_fleets(restarted)
+        ended += int(restarted.sum())
+    assert ended >= 6  # several episode ends of both fleets crossed
+    assert np.abs(np.concatenate(recorded)).max() > 0.1  # the actions are not all zero
+
+
+def test_the_history_is_kept_and_cleared_on_reset(agent: Path) -> None:
+    policy = load_policy(agent)
+    sim = FleetSim(policy.scenario, num_fleets=2)
+    obs = sim.reset(seeds=[0, 1])
+    first = policy.act_batch(obs)
+    assert policy._history is not None
+    entries = policy._history.entries
+    assert np.all(entries[:, 0, -1] == 1.0) and np.all(entries[:, 1:] == 0.0)
+    sim.step(first)
+    policy.act_batch(sim.arrays.obs)
+    assert np.all(policy._history.entries[:, :2, -1] == 1.0)
+    policy.reset_fleets(np.array([False, True]))  # fleet 1 restarts: its 5 vessels' rows
+    valid = policy._history.entries[:, :, -1]
+    assert np.all(valid[5:] == 0.0) and np.all(valid[:5, :2] == 1.0)
+    policy.reset()
+    again = policy.act_batch(sim.reset(seeds=[0, 1]))
+    np.testing.assert_array_equal(again, first)  # a reset policy acts as a fresh one
+
+
+def test_a_six_slot_agent_runs_a_ten_vessel_star(agent: Path) -> None:
+    """The centre of the star has 9 neighbours: the encoder reads them all."""
+    star = fleet_of(10, Graph.star(10, center=4, leaders=(4,)))
+    policy = load_policy(agent, scenario=star)
+    sim = FleetSim(star, num_fleets=1)
+    obs = sim.reset(seeds=[0])
+    for _ in range(5):
+        command = policy.act_batch(obs)
+        assert command.shape == (1, 10, 5) and np.all(np.isfinite(command))
+        obs = sim.step(command)
+    residual = policy.diagnostics["residual"]
+    assert np.all(np.isfinite(residual)) and np.abs(residual).max() > 0.0
+    # only the learner's slots changed: the home scenario's 6 stay 6
+    assert load_policy(agent)._residual.neighbour_slots == 6
+    assert policy._residual.neighbour_slots == 9
+
+
+def test_loading_an_encoder_agent_imports_no_learning_algorithm(agent: Path) -> None:
+    """The encoder and the history are read and run with torch and numpy only."""
+    import os
+    import subprocess
+    import sys
+
+    from conftest import ROOT
+
+    code = (
+        "import sys\n"
+        "from agents import load_policy\n"
+        f"load_policy({str(agent)!r}).act_batch\n"
+        "print(sorted(m for m in sys.modules if m.split('.')[0] == 'stable_baselines3'\n"
+        "    or m in ('agents.algorithms', 'agents.history_env', 'agents.run_folder')))\n"
+    )
+    environment = {**os.environ, "PYTHONPATH": str(ROOT)}
+    done = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, env=environment, check=False
+    )
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == "[]"
+
+
+def test_an_encoder_agent_on_another_message_size_is_refused(agent: Path) -> None:
+    other = scenarios.get("bench_mild").replace(message_size=2)
+    with pytest.raises(ValueError, match="slots of 4 floats but scenario 'bench_mild' gives 5"):
+        load_policy(agent, scenario=other)
