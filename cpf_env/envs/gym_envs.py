@@ -31,10 +31,10 @@ from cpf_env.sim.observation import observation_box
 
 __all__ = [
     "GYM_ID",
+    "ID_VERSIONS",
     "PETTINGZOO_ID",
     "CentralizedFleetEnv",
     "CentralizedFleetVectorEnv",
-    "ID_VERSIONS",
     "register_envs",
     "scenario_id",
 ]
