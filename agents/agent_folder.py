@@ -25,15 +25,19 @@ Version 1 holds an MLP over the flat input of K neighbour slots. Version 2
   training, which ``normalization.json`` covers) and ``tail`` (floats after
   the slots: extras and history).
 
-Version 1 folders are read as before (and an MLP without history is still
-written as version 1, byte for byte as before).
+Version 1 folders are read as before, and an MLP without history is still
+written as version 1: no ``actor`` field, and ``TrainConfig.to_json`` leaves
+out ``encoder`` and ``history`` at their defaults, so earlier cpf_env versions
+read its ``config.json``.
 
 Reading trusts nothing in the folder (``agents.folder_files``): only regular
 files inside it are opened, with size and JSON depth limits; every field is
 typed strictly; the weights must be float32 (float16, bfloat16, float64 or
 integer tensors are refused, not converted) and finite, and their shapes must
-match the configuration before any network is allocated. Each failure is one
-line (``AgentFolderError``) naming the file and the field.
+match the configuration before any network is allocated: the ``actor``
+record's ``slots``, ``slot_size`` and ``tail`` (an MLP: its input size) are
+the learner input of the ``TrainConfig`` (``learner_slots``, ``learner_tail``).
+Each failure is one line (``AgentFolderError``) naming the file and the field.
 
 safetensors holds tensors and a JSON header only, so opening a folder runs no
 code, unlike SB3's ``model.zip`` (cloudpickled entries) and ``VecNormalize``'s
