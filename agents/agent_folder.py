@@ -102,6 +102,7 @@ __all__ = [
     "actor_tensors",
     "agent_files",
     "build_actor",
+    "check_mlp_input",
     "encoder_layout",
     "network_from_layers",
     "network_from_tensors",
@@ -627,12 +628,8 @@ def read_agent(folder: Path) -> tuple[dict[str, Any], PolicyNetwork, Normalizati
         read_weights(folder, manifest), config.algo, config.net_arch, folder / WEIGHTS, encoder
     )
     inputs = config.learner_input_size()  # the encoder's: checked by actor_from_record
-    if encoder is None and network.input_size != inputs:
-        raise AgentFolderError(
-            f"{folder / WEIGHTS}: tensor hidden.0.weight reads {network.input_size} inputs but "
-            f"the TrainConfig of {folder / CONFIG} gives the learner {inputs} (18 + K x (3 + m) "
-            "+ extras + history); the files come from different runs."
-        )
+    if encoder is None:
+        check_mlp_input(network, config, folder / WEIGHTS, folder / CONFIG)
     statistics = read_json(folder, NORMALIZATION, manifest)
     normalization = (
         None
@@ -647,6 +644,29 @@ def read_agent(folder: Path) -> tuple[dict[str, Any], PolicyNetwork, Normalizati
     if encoder is not None:
         _check_empty_weight(network, normalization, encoder, folder / NORMALIZATION)
     return record, network, normalization
+
+
+def check_mlp_input(
+    network: PolicyNetwork, config: TrainConfig, weights: Path, source: Path
+) -> None:
+    """Refuse an MLP whose input size is not the learner input ``config`` gives.
+
+    Args:
+        network: The actor (an MLP: ``input_size`` set).
+        config: The ``TrainConfig`` of ``source``.
+        weights: The weights file, for messages.
+        source: The ``config.json``, for messages.
+
+    Raises:
+        AgentFolderError: ``network.input_size`` is not ``config.learner_input_size()``.
+    """
+    inputs = config.learner_input_size()
+    if network.input_size != inputs:
+        raise AgentFolderError(
+            f"{weights}: tensor hidden.0.weight reads {network.input_size} inputs but the "
+            f"TrainConfig of {source} gives the learner {inputs} (18 + K x (3 + m) + extras + "
+            "history); the files come from different runs."
+        )
 
 
 def _check_empty_weight(

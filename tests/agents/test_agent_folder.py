@@ -207,6 +207,26 @@ def test_an_old_folder_without_its_statistics_is_refused(tmp_path: Path) -> None
         load_policy(tmp_path, trust_pickle=True)
 
 
+def test_an_old_folder_whose_network_is_not_its_configurations_is_refused(
+    tmp_path: Path,
+) -> None:
+    """model.zip of 26 inputs, config.json with an extra (30): refused naming config.json."""
+    from stable_baselines3.common.vec_env import VecMonitor
+
+    from agents.algorithms import build_model, make_env
+
+    config = TrainConfig(scenario="bench_mild", fleets=2, n_steps=16, batch_size=160,
+                         net_arch=(8,), normalize_observations=False)  # fmt: skip
+    build_model(config, VecMonitor(make_env(config))).save(tmp_path / "model.zip")
+    edited = dataclasses.replace(config, extras=("base_action",))
+    (tmp_path / "config.json").write_text(json.dumps({"config": edited.to_json()}))
+    with pytest.warns(UserWarning), pytest.raises(AgentFolderError) as caught:
+        load_policy(tmp_path, trust_pickle=True)
+    message = str(caught.value)
+    assert "reads 26 inputs" in message and "learner 30" in message
+    assert str(tmp_path / "config.json") in message
+
+
 # ---- format version 2: the neighbour encoder and the own history -------------------------------
 
 ENCODER_CONFIG = TrainConfig(
