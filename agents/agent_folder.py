@@ -25,15 +25,19 @@ Version 1 holds an MLP over the flat input of K neighbour slots. Version 2
   training, which ``normalization.json`` covers) and ``tail`` (floats after
   the slots: extras and history).
 
-Version 1 folders are read as before (and an MLP without history is still
-written as version 1, byte for byte as before).
+Version 1 folders are read as before, and an MLP without history is still
+written as version 1: no ``actor`` field, and ``TrainConfig.to_json`` leaves
+out ``encoder`` and ``history`` at their defaults, so earlier cpf_env versions
+read its ``config.json``.
 
 Reading trusts nothing in the folder (``agents.folder_files``): only regular
 files inside it are opened, with size and JSON depth limits; every field is
 typed strictly; the weights must be float32 (float16, bfloat16, float64 or
 integer tensors are refused, not converted) and finite, and their shapes must
-match the configuration before any network is allocated. Each failure is one
-line (``AgentFolderError``) naming the file and the field.
+match the configuration before any network is allocated: the ``actor``
+record's ``slots``, ``slot_size`` and ``tail`` (an MLP: its input size) are
+the learner input of the ``TrainConfig`` (``learner_slots``, ``learner_tail``).
+Each failure is one line (``AgentFolderError``) naming the file and the field.
 
 safetensors holds tensors and a JSON header only, so opening a folder runs no
 code, unlike SB3's ``model.zip`` (cloudpickled entries) and ``VecNormalize``'s
@@ -56,7 +60,7 @@ import hashlib
 import itertools
 import json
 from pathlib import Path
-from typing import Any, cast
+from typing import Any
 
 import torch
 from safetensors.torch import load as load_tensors
@@ -98,6 +102,7 @@ __all__ = [
     "actor_tensors",
     "agent_files",
     "build_actor",
+    "check_mlp_input",
     "encoder_layout",
     "network_from_layers",
     "network_from_tensors",
@@ -190,6 +195,7 @@ def build_actor(config: TrainConfig, input_size: int, action_size: int) -> Polic
     The layers are those SB3 builds for ``config`` (``net_arch``, the algorithm's
     activation and output transform; ``agents.algorithms.build_model``), with
     torch's default initialization (seed torch first for the same weights).
+    ``agents.distill`` builds its student with it, for learners other than SB3.
 
     Args:
         config: The run (``algo``, ``net_arch``, ``encoder``, ``history``, slots).
@@ -374,6 +380,7 @@ def training_config(data: Any, source: Path | str) -> TrainConfig:
     check_fields(data, types, source, "config.")
     try:
         config = TrainConfig.from_json(data)
+        config.learner_slots()  # the home scenario's degree fits neighbour_slots
     except (TypeError, ValueError) as error:
         raise AgentFolderError(f"{source}: field 'config' is not a TrainConfig: {error}") from None
     _check_declared_size(list(config.net_arch), source)
@@ -390,6 +397,13 @@ ACTOR_FIELDS = {
     "slot_size": "int",
     "slots": "int",
     "tail": "int",
+}
+
+#: What each of ``actor``'s layout fields is, for messages.
+_LAYOUT = {
+    "slots": "neighbour slots K: the home scenario's degree or neighbour_slots",
+    "slot_size": "floats per slot, 3 + message size",
+    "tail": "floats after the slots: the extras, then history x (18 + actions + 1)",
 }
 
 
@@ -411,7 +425,8 @@ def actor_from_record(
     Raises:
         AgentFolderError: A version-1 folder whose configuration has an encoder or a
             history, a missing, mistyped or unknown field, or one the configuration
-            contradicts.
+            contradicts (``slots`` and ``slot_size``: ``config.learner_slots()``; ``tail``:
+            ``config.learner_tail()``), naming ``source``.
     """
     if version == 1:
         if "actor" in record or config.encoder is not None or config.history:
@@ -439,11 +454,17 @@ def actor_from_record(
             f"{source}: field 'actor' has encoder {actor['encoder']!r} and pooling "
             f"{actor['pooling']!r}; known: {list(ENCODERS)} and {list(POOLINGS)}."
         )
-    low = {"hidden": 1, "slot_size": 3, "slots": 1, "tail": 0}
-    for name, least in low.items():
-        if actor[name] < least:
+    if actor["hidden"] < 1:
+        raise AgentFolderError(
+            f"{source}: field 'actor.hidden' must be >= 1, got {actor['hidden']}."
+        )
+    slots, slot_size = config.learner_slots()  # valid: training_config checked it
+    expected = {"slots": slots, "slot_size": slot_size, "tail": config.learner_tail()}
+    for name, value in expected.items():
+        if actor[name] != value:
             raise AgentFolderError(
-                f"{source}: field 'actor.{name}' must be >= {least}, got {actor[name]}."
+                f"{source}: field 'actor.{name}' is {actor[name]} but the config's learner input "
+                f"has {value} ({_LAYOUT[name]}); the folder is damaged."
             )
     return actor
 
@@ -451,14 +472,26 @@ def actor_from_record(
 def _check_declared_size(
     sizes: list[int], source: Path | str, encoder: dict[str, Any] | None = None
 ) -> None:
-    """Refuse layer sizes whose weights exceed ``MAX_WEIGHT_BYTES``, before reading any."""
-    parameters = sum(a * b + b for a, b in itertools.pairwise(sizes))
-    if encoder is not None:
-        hidden = encoder["hidden"]
-        parameters += hidden * (encoder["slot_size"] + hidden + 2) + 2
-    if 4 * parameters > MAX_WEIGHT_BYTES:
+    """Refuse layer sizes whose weights exceed ``MAX_WEIGHT_BYTES``, before reading any.
+
+    With an encoder, its weights (``actor.hidden`` x (``actor.slot_size`` + ``actor.hidden``
+    + 2) + 2) count too, and the message names those fields.
+    """
+    layers = sum(a * b + b for a, b in itertools.pairwise(sizes))
+    if encoder is None:
+        if 4 * layers > MAX_WEIGHT_BYTES:
+            raise AgentFolderError(
+                f"{source}: layer sizes {sizes} declare {4 * layers:,} bytes of float32 "
+                f"weights, more than the {MAX_WEIGHT_BYTES:,} this loader reads."
+            )
+        return
+    hidden, slot_size = encoder["hidden"], encoder["slot_size"]
+    encoding = hidden * (slot_size + hidden + 2) + 2
+    if 4 * (layers + encoding) > MAX_WEIGHT_BYTES:
         raise AgentFolderError(
-            f"{source}: layer sizes {sizes} declare {4 * parameters:,} bytes of float32 "
+            f"{source}: layer sizes {sizes} ({4 * layers:,} bytes) and an encoder of "
+            f"config.json's actor.hidden = {hidden}, actor.slot_size = {slot_size} "
+            f"({4 * encoding:,} bytes) declare {4 * (layers + encoding):,} bytes of float32 "
             f"weights, more than the {MAX_WEIGHT_BYTES:,} this loader reads."
         )
 
@@ -594,10 +627,9 @@ def read_agent(folder: Path) -> tuple[dict[str, Any], PolicyNetwork, Normalizati
     network = network_from_tensors(
         read_weights(folder, manifest), config.algo, config.net_arch, folder / WEIGHTS, encoder
     )
+    inputs = config.learner_input_size()  # the encoder's: checked by actor_from_record
     if encoder is None:
-        inputs = cast(int, network.input_size)  # an MLP's
-    else:
-        inputs = SLOTS + encoder["slots"] * encoder["slot_size"] + encoder["tail"]
+        check_mlp_input(network, config, folder / WEIGHTS, folder / CONFIG)
     statistics = read_json(folder, NORMALIZATION, manifest)
     normalization = (
         None
@@ -612,6 +644,29 @@ def read_agent(folder: Path) -> tuple[dict[str, Any], PolicyNetwork, Normalizati
     if encoder is not None:
         _check_empty_weight(network, normalization, encoder, folder / NORMALIZATION)
     return record, network, normalization
+
+
+def check_mlp_input(
+    network: PolicyNetwork, config: TrainConfig, weights: Path, source: Path
+) -> None:
+    """Refuse an MLP whose input size is not the learner input ``config`` gives.
+
+    Args:
+        network: The actor (an MLP: ``input_size`` set).
+        config: The ``TrainConfig`` of ``source``.
+        weights: The weights file, for messages.
+        source: The ``config.json``, for messages.
+
+    Raises:
+        AgentFolderError: ``network.input_size`` is not ``config.learner_input_size()``.
+    """
+    inputs = config.learner_input_size()
+    if network.input_size != inputs:
+        raise AgentFolderError(
+            f"{weights}: tensor hidden.0.weight reads {network.input_size} inputs but the "
+            f"TrainConfig of {source} gives the learner {inputs} (18 + K x (3 + m) + extras + "
+            "history); the files come from different runs."
+        )
 
 
 def _check_empty_weight(

@@ -37,7 +37,21 @@ from numpy.typing import ArrayLike, NDArray
 
 from cpf_env.sim.observation import SLOTS
 
-__all__ = ["OwnHistory"]
+__all__ = ["OwnHistory", "history_size"]
+
+
+def history_size(length: int, action_size: int, own: int = SLOTS) -> int:
+    """Floats ``length`` history entries append to an input: length x (own + action_size + 1).
+
+    The one formula of the history's size, used by ``OwnHistory``, ``TrainConfig``'s
+    learner layout and the agent-folder reader.
+
+    Args:
+        length: Entries H >= 0 (0: no history).
+        action_size: Floats per action, a.
+        own: Leading input floats recorded per entry (default the 18 own-vessel features).
+    """
+    return length * (own + action_size + 1)
 
 
 class OwnHistory:
@@ -59,13 +73,13 @@ class OwnHistory:
         if own < 1 or action_size < 1:
             raise ValueError(f"own and action_size must be >= 1, got {own} and {action_size}.")
         self.length, self.own, self.action_size = length, own, action_size
-        self.entry_size = own + action_size + 1
+        self.entry_size = history_size(1, action_size, own)
         self.entries = np.zeros((rows, length, self.entry_size), dtype=np.float32)
 
     @property
     def size(self) -> int:
         """Floats appended to each row's input, H (own + a + 1)."""
-        return self.length * self.entry_size
+        return history_size(self.length, self.action_size, self.own)
 
     def append_to(self, inputs: ArrayLike, rows: ArrayLike | None = None) -> NDArray[np.float32]:
         """``inputs`` (R, D) with the history of ``rows`` (default all) appended: (R, D + size)."""

@@ -14,12 +14,12 @@ truncated value on the input the policy would have seen.
 Wrap below ``VecNormalize`` (the history is normalized with the rest), as
 ``cpf-train`` does with ``TrainConfig(history=H)``; the
 ``NeighbourSetEncoder``'s ``tail`` then counts the extras and the history
-(``HistoryVecEnv.history_size``).
+(``env.history.size``, ``agents.history.history_size``).
 
 Example:
     >>> from agents import FleetVecEnv
     >>> env = HistoryVecEnv(FleetVecEnv("wang2014", num_fleets=1, max_steps=20), length=4)
-    >>> env.reset().shape, env.history_size
+    >>> env.reset().shape, env.history.size
     ((5, 114), 88)
 """
 
@@ -39,6 +39,9 @@ __all__ = ["HistoryVecEnv"]
 class HistoryVecEnv(VecEnvWrapper):
     """Append each slot's last ``length`` (own features, action, valid) entries to its input.
 
+    Its ``history`` (an ``OwnHistory``) holds the entries and their layout: ``length``,
+    ``own``, ``action_size``, ``entry_size`` and ``size`` (the floats appended).
+
     Args:
         venv: A vector env with Box observations (S, D) and Box actions (S, a).
         length: History entries H >= 1.
@@ -54,16 +57,9 @@ class HistoryVecEnv(VecEnvWrapper):
         if not 1 <= own <= obs_shape[0]:
             raise ValueError(f"own must be in [1, {obs_shape[0]}] (observation floats), got {own}.")
         self.history = OwnHistory(venv.num_envs, length, own, int(act_shape[0]))
-        self.length, self.own, self.action_size = length, own, self.history.action_size
-        self.entry_size = self.history.entry_size
-        super().__init__(venv, observation_space=observation_box(obs_shape[0] + self.history_size))
+        super().__init__(venv, observation_space=observation_box(obs_shape[0] + self.history.size))
         self._last_obs = np.zeros((venv.num_envs, obs_shape[0]), dtype=np.float32)
-        self._actions = np.zeros((venv.num_envs, self.action_size), dtype=np.float32)
-
-    @property
-    def history_size(self) -> int:
-        """Floats appended to each observation, H (own + a + 1)."""
-        return self.history.size
+        self._actions = np.zeros((venv.num_envs, self.history.action_size), dtype=np.float32)
 
     def reset(self) -> NDArray[np.float32]:
         """Reset every slot; histories start empty."""

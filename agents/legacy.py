@@ -20,6 +20,7 @@ from agents.agent_folder import (
     Normalization,
     PolicyNetwork,
     actor_tensors,
+    check_mlp_input,
     network_from_tensors,
     training_config,
     write_agent,
@@ -66,6 +67,7 @@ def read_sb3_folder(
     network = network_from_tensors(
         actor_tensors(model, config.algo), config.algo, config.net_arch, folder / "model.zip"
     )
+    check_mlp_input(network, config, folder / "model.zip", source)
     normalization = None
     statistics_file = folder / "vecnormalize.pkl"
     if config.normalize_observations:

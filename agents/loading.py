@@ -60,7 +60,7 @@ from agents.marl.policy_folder import (
 from agents.resolve import resolve_base_policy
 from agents.train_config import TrainConfig
 from cpf_env.envs.policy import FleetPolicy
-from cpf_env.envs.residual import EXTRAS, ResidualController, learner_config
+from cpf_env.envs.residual import ResidualController, learner_config
 from cpf_env.scenarios import Scenario, make_scenario
 from cpf_env.sim.fleet import observation_layout
 from cpf_env.sim.observation import SLOTS
@@ -273,9 +273,9 @@ class TrainedPolicy(FleetPolicy):
         self._residual = learner_config(self._base, residual)
         self._controller: ResidualController | None = None
         self._history: OwnHistory | None = None
-        size = self._residual.input_size(self.layout) + self._history_size()
+        size = self._residual.learner_layout(self.layout).size + config.learner_tail()
         if isinstance(actor, TorchActor) and actor.network.encoder is not None:
-            self._check_encoder(actor.network.encoder.slot_size, actor.network.encoder.tail, size)
+            self._check_encoder(actor.network.encoder.slot_size, actor.network.encoder.tail)
         if actor.input_size is not None and actor.input_size != size:
             raise ValueError(
                 f"scenario {scenario.name!r} gives inputs of size {size} but the "
@@ -291,7 +291,7 @@ class TrainedPolicy(FleetPolicy):
                 f"{self._residual.action_size}."
             )
 
-    def _check_encoder(self, slot_size: int, tail: int, size: int) -> None:
+    def _check_encoder(self, slot_size: int, tail: int) -> None:
         """Refuse an encoder whose slots or tail are not this scenario's inputs'.
 
         Raises:
@@ -304,40 +304,43 @@ class TrainedPolicy(FleetPolicy):
                 f"scenario {self.scenario.name!r} gives {self.layout.slot_size} (3 + message "
                 "size): evaluate it on a scenario with the training message size."
             )
-        expected = size - self._residual.learner_layout(self.layout).size
+        expected = self.config.learner_tail()
         if tail != expected:
             raise AgentFolderError(
                 f"the encoder of {self.name!r} reads {tail} floats after the slots but its "
                 f"config.json's extras and history give {expected}."
             )
 
-    def _history_size(self) -> int:
-        """Floats the own history appends to each input (0 without one)."""
-        return self.config.history * (SLOTS + self._residual.action_size + 1)
-
     def _encoder_slots(self, config: TrainConfig, actor: Actor) -> int:
         """Neighbour slots an encoder actor gets on the evaluation scenario.
 
         Any number (``actor.input_size`` None): the training K or the scenario's
         degree, whichever is larger. A fixed input (an exported graph): the K' its
-        size holds.
+        size holds, which must cover the scenario's degree.
 
         Raises:
-            ValueError: A fixed input size that holds no whole number of slots.
+            ValueError: A fixed input size that holds no whole number of slots, or
+                fewer slots than the scenario's degree (re-export with more).
         """
         trained, slot_size = config.learner_slots()
         if actor.input_size is None:
             return max(trained, self.layout.n_slots)
-        learner = learner_config(self._base, config.residual_config())
-        extras = sum(EXTRAS[name] for name in learner.extras)
-        history = config.history * (SLOTS + learner.action_size + 1)
-        body = actor.input_size - SLOTS - extras - history
+        tail = config.learner_tail()
+        body = actor.input_size - SLOTS - tail
         if body < 0 or body % slot_size:
             raise ValueError(
                 f"the network of {self.name!r} takes {actor.input_size} floats, not 18 + K' x "
-                f"{slot_size} + {extras} extras + {history} history for any K'."
+                f"{slot_size} + {tail} (extras and history) for any K'."
             )
-        return body // slot_size
+        slots = body // slot_size
+        if slots < self.layout.n_slots:
+            raise ValueError(
+                f"{self.name!r} was exported for {slots} neighbour slots but scenario "
+                f"{self.scenario.name!r} gives a vessel {self.layout.n_slots} neighbours: "
+                "re-export the agent folder with cpf-export FOLDER OUT.onnx --slots K, K >= "
+                f"{self.layout.n_slots}."
+            )
+        return slots
 
     def reset(self, seed: int | None = None) -> None:
         """Forget all internal states (the base's, the last residuals and the own histories)."""

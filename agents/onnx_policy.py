@@ -158,7 +158,8 @@ def export_onnx(
     Raises:
         ImportError: onnx or onnxruntime is missing.
         AgentFolderError: The folder is not a valid agent folder.
-        ValueError: ``slots`` for an agent without an encoder, or < 1.
+        ValueError: ``slots`` for an agent without an encoder, < 1, or more than the
+            n - 1 neighbours a vessel of the training scenario's fleet of n can have.
     """
     try:
         import onnx
@@ -167,8 +168,8 @@ def export_onnx(
     source = Path(folder)
     record, network, normalization = read_agent(source)
     config = training_config(record["config"], source / "config.json")
-    size, normalization = _static_input(network, normalization, record, slots)
     scenario = make_scenario(config.home_scenario, **config.scenario_overrides())
+    size, normalization = _static_input(network, normalization, record, slots, scenario.n)
     graph = _Graph(network, normalization, residual_range(config, scenario)).eval()
     example = torch.zeros(1, scenario.n, size, dtype=torch.float32)
     target = Path(out)
@@ -206,11 +207,19 @@ def _static_input(
     normalization: Normalization | None,
     record: dict[str, Any],
     slots: int | None,
+    n: int,
 ) -> tuple[int, Normalization | None]:
     """The graph's input length per vessel, and the statistics for it.
 
+    Args:
+        network: The actor.
+        normalization: Its statistics (for the training K), or None.
+        record: The ``config.json`` record (``actor.slots``: the training K).
+        slots: K' for an encoder actor, or None (the training K, which may exceed n - 1).
+        n: The fleet size the graph is tied to: a vessel has at most n - 1 neighbours.
+
     Raises:
-        ValueError: ``slots`` given for an MLP (its K is fixed), or < 1.
+        ValueError: ``slots`` given for an MLP (its K is fixed), < 1, or > n - 1.
     """
     encoder = network.encoder
     if encoder is None:
@@ -221,9 +230,13 @@ def _static_input(
             )
         return cast(int, network.input_size), normalization
     trained = int(record["actor"]["slots"])
+    if slots is not None and not 1 <= slots <= n - 1:
+        raise ValueError(
+            f"--slots must be in [1, {n - 1}]: the graph runs fleets of n = {n} vessels (the "
+            f"training scenario's), whose vessels have at most n - 1 = {n - 1} neighbours; "
+            f"got {slots}."
+        )
     count = trained if slots is None else slots
-    if count < 1:
-        raise ValueError(f"slots must be >= 1 (neighbour slots of the input), got {count}.")
     if normalization is not None:
         normalization = statistics_for_slots(normalization, trained, encoder.slot_size, count)
     return SLOTS + count * encoder.slot_size + encoder.tail, normalization

@@ -32,6 +32,7 @@ differ (``tests/agents/test_resume.py``).
 
 from __future__ import annotations
 
+import dataclasses
 import io
 import json
 import os
@@ -146,9 +147,9 @@ def prepare_resume(folder: Path, config: TrainConfig) -> Path:
     for scratch in folder.glob(".evaluating-*"):  # a run killed while evaluating
         shutil.rmtree(scratch, ignore_errors=True)
     differ = [
-        name
-        for name, value in config.to_json().items()
-        if name != "timesteps" and saved.to_json()[name] != value
+        f.name
+        for f in dataclasses.fields(config)
+        if f.name != "timesteps" and getattr(saved, f.name) != getattr(config, f.name)
     ]
     if differ:
         raise ValueError(

@@ -13,18 +13,29 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
+from agents.history import history_size
 from baselines import POLICIES
 from cpf_env import scenarios
-from cpf_env.envs.residual import ResidualConfig
+from cpf_env.envs.residual import EXTRAS, ResidualConfig, learner_config
 from cpf_env.scenarios.reward_weights import REWARD_FORMS
 from cpf_env.sim.fleet import observation_layout
+from cpf_env.sim.observation import SLOTS
 
-__all__ = ["ALGORITHM_NAMES", "ENCODERS", "LOG_STD_RANGE", "MAX_SEED", "TrainConfig"]
+__all__ = [
+    "ALGORITHM_NAMES",
+    "ENCODERS",
+    "LOG_STD_RANGE",
+    "MAX_SEED",
+    "SINCE_FORMAT_2",
+    "TrainConfig",
+]
 
 #: Algorithms ``agents.training.ALGORITHMS`` maps to SB3 classes.
 ALGORITHM_NAMES = ("ppo", "sac")
 #: Neighbour encoders of the actor (``agents.encoder``); None: an MLP over the flat input.
 ENCODERS = ("deepsets",)
+#: Fields added with agent-folder format version 2, and the defaults ``to_json`` leaves out.
+SINCE_FORMAT_2: dict[str, Any] = {"encoder": None, "history": 0}
 #: Largest training seed: numpy's legacy seeding, which SB3 calls, takes 32 bits.
 MAX_SEED = 2**32 - 1
 #: Accepted initial log standard deviations: exp(-20) is no noise, exp(5) = 148 already
@@ -234,12 +245,43 @@ class TrainConfig:
             neighbour_slots=self.neighbour_slots,
         )
 
+    def learner_config(self) -> ResidualConfig:
+        """The learner's composition: ``residual_config()``, or the learner's own without a base.
+
+        ``base="none"``: ``cpf_env.envs.residual.learner_config``'s (forces and rate, no extras).
+        """
+        residual = self.residual_config()
+        return learner_config(None, residual) if self.base == "none" else residual
+
     def learner_slots(self) -> tuple[int, int]:
-        """(K, floats per slot) of the learner's input: its neighbour slots' layout."""
+        """(K, floats per slot) of the learner's input: its neighbour slots' layout.
+
+        Raises:
+            ValueError: The home scenario's degree exceeds ``neighbour_slots``.
+        """
         layout = self.residual_config().learner_layout(
             observation_layout(scenarios.get(self.home_scenario))
         )
         return layout.n_slots, layout.slot_size
+
+    def learner_tail(self) -> int:
+        """Floats after the neighbour slots of the learner's input, per vessel.
+
+        The extras (``cpf_env.envs.residual.EXTRAS``), then the own history
+        (``agents.history.history_size``: H x (18 + a + 1), a the learner's action size).
+        """
+        learner = self.learner_config()
+        extras = sum(EXTRAS[name] for name in learner.extras)
+        return extras + history_size(self.history, learner.action_size)
+
+    def learner_input_size(self) -> int:
+        """The learner's input length per vessel in training: 18 + K (3 + m) + ``learner_tail()``.
+
+        Raises:
+            ValueError: The home scenario's degree exceeds ``neighbour_slots``.
+        """
+        slots, slot_size = self.learner_slots()
+        return SLOTS + slots * slot_size + self.learner_tail()
 
     def scenario_overrides(self, name: str | None = None) -> dict[str, Any]:
         """``Scenario`` overrides of this run for one training scenario (default: the home one).
@@ -264,12 +306,21 @@ class TrainConfig:
         return {"reward": dataclasses.replace(reward, **self.reward_overrides)}  # type: ignore[arg-type]
 
     def to_json(self) -> dict[str, Any]:
-        """A JSON-ready dict of the fields."""
-        return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+        """A JSON-ready dict of the fields, those of ``SINCE_FORMAT_2`` only when not default.
+
+        So the record of an MLP without history (``config.json`` of a format-1 agent
+        folder) holds the fields cpf_env versions before the encoder and the history
+        read, and those versions read it.
+        """
+        return {
+            f.name: getattr(self, f.name)
+            for f in dataclasses.fields(self)
+            if f.name not in SINCE_FORMAT_2 or getattr(self, f.name) != SINCE_FORMAT_2[f.name]
+        }
 
     @classmethod
     def from_json(cls, data: dict[str, Any]) -> TrainConfig:
-        """Inverse of ``to_json``; unknown keys raise ValueError."""
+        """Inverse of ``to_json``: absent fields take their defaults; unknown keys: ValueError."""
         names = {f.name for f in dataclasses.fields(cls)}
         unknown = sorted(set(data) - names)
         if unknown:

@@ -4,7 +4,8 @@ The graph holds the normalization, the network, the action bounds and the
 residual scaling (``agents.onnx_policy``, which documents the input layout);
 ``cpf-bench --policies nn_dsc agent.onnx`` runs it through onnxruntime. An
 agent with a neighbour encoder is exported for ``--slots K`` neighbour slots
-(default its training K). Needs the ``onnx`` extra.
+(default its training K; at most n - 1, n the training scenario's fleet size,
+which the graph is tied to). Needs the ``onnx`` extra.
 
 Example::
 
@@ -41,7 +42,8 @@ def _parser() -> argparse.ArgumentParser:
         type=int,
         default=None,
         help="neighbour slots of the graph's input, for an agent with a neighbour encoder "
-        "(default: its training K); the graph then runs graphs of degree <= K",
+        "(default: its training K), from 1 to n - 1 (n: the training scenario's fleet size); "
+        "the graph then runs graphs of degree <= K",
     )
     return parser
 

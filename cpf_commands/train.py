@@ -81,6 +81,15 @@ def _reward_overrides(items: list[str]) -> dict[str, float]:
     return overrides
 
 
+#: ``--encoder``'s value for an MLP over the flat input (``TrainConfig(encoder=None)``).
+NO_ENCODER = "none"
+
+
+def _encoder(value: str) -> str | None:
+    """``--encoder`` as ``TrainConfig.encoder``: ``none`` is None (an MLP)."""
+    return None if value == NO_ENCODER else value
+
+
 def _parser() -> argparse.ArgumentParser:
     from agents.train_config import ENCODERS, TrainConfig
     from baselines import POLICIES
@@ -133,10 +142,11 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument(
         "--encoder",
         default=defaults.encoder,
-        choices=list(ENCODERS),
+        choices=[*ENCODERS, NO_ENCODER],
         help="read the neighbour slots through a DeepSets encoder (PPO; with normalization "
-        "needs --shared-slot-statistics): the agent then runs on any number of slots "
-        "(default: an MLP over the K slots)",
+        "needs --shared-slot-statistics): the agent then runs on any number of slots; "
+        f"{NO_ENCODER}: an MLP over the K slots (the default; overrides a --config file's "
+        "encoder)",
     )
     parser.add_argument(
         "--history",
@@ -262,6 +272,7 @@ FLAG_FIELDS: dict[str, tuple[str, Callable[[Any], Any] | None]] = {
     "reward": ("reward_form", None),
     "extras": ("extras", tuple),
     "reward_weight": ("reward_overrides", _reward_overrides),
+    "encoder": ("encoder", _encoder),
 }
 
 

@@ -207,6 +207,26 @@ def test_an_old_folder_without_its_statistics_is_refused(tmp_path: Path) -> None
         load_policy(tmp_path, trust_pickle=True)
 
 
+def test_an_old_folder_whose_network_is_not_its_configurations_is_refused(
+    tmp_path: Path,
+) -> None:
+    """model.zip of 26 inputs, config.json with an extra (30): refused naming config.json."""
+    from stable_baselines3.common.vec_env import VecMonitor
+
+    from agents.algorithms import build_model, make_env
+
+    config = TrainConfig(scenario="bench_mild", fleets=2, n_steps=16, batch_size=160,
+                         net_arch=(8,), normalize_observations=False)  # fmt: skip
+    build_model(config, VecMonitor(make_env(config))).save(tmp_path / "model.zip")
+    edited = dataclasses.replace(config, extras=("base_action",))
+    (tmp_path / "config.json").write_text(json.dumps({"config": edited.to_json()}))
+    with pytest.warns(UserWarning), pytest.raises(AgentFolderError) as caught:
+        load_policy(tmp_path, trust_pickle=True)
+    message = str(caught.value)
+    assert "reads 26 inputs" in message and "learner 30" in message
+    assert str(tmp_path / "config.json") in message
+
+
 # ---- format version 2: the neighbour encoder and the own history -------------------------------
 
 ENCODER_CONFIG = TrainConfig(
@@ -288,3 +308,63 @@ def test_build_actor_has_the_layers_sb3_trains(encoder: str | None) -> None:
     shapes = {name: tuple(value.shape) for name, value in network.state_dict().items()}
     assert shapes == {name: tuple(value.shape) for name, value in tensors.items()}
     assert (network.encoder is None) == (encoder is None)
+
+
+#: An MLP (no encoder) with 2 history entries, on bench_mild's chain (K = 2 slots of 4).
+HISTORY_CONFIG = TrainConfig(scenario="bench_mild", fleets=2, net_arch=(16,), history=2)
+#: own 18 + 2 slots of 4 + 2 history entries of (18 + 3 actions + 1 valid)
+HISTORY_INPUTS = 18 + 2 * 4 + 2 * 22
+
+
+def write_history_mlp(folder: Path) -> PolicyNetwork:
+    """A version-2 folder of an untrained MLP with a history (seeded), with statistics."""
+    torch.manual_seed(0)
+    network = build_actor(HISTORY_CONFIG, HISTORY_INPUTS, 3)
+    with torch.no_grad():
+        network.output.weight.normal_()  # not zero: the actions depend on every input
+    rng = np.random.default_rng(0)
+    mean, var = rng.normal(size=HISTORY_INPUTS), rng.uniform(0.5, 2.0, size=HISTORY_INPUTS)
+    folder.mkdir()
+    write_agent(folder, {"config": HISTORY_CONFIG.to_json()}, network, Normalization(mean, var))
+    return network
+
+
+def test_a_version_2_mlp_with_history_round_trips(tmp_path: Path) -> None:
+    folder = tmp_path / "mlp"
+    network = write_history_mlp(folder)
+    assert HISTORY_CONFIG.learner_input_size() == HISTORY_INPUTS
+    assert json.loads((folder / "manifest.json").read_text())["format_version"] == 2
+    record, loaded, normalization = read_agent(folder)
+    assert record["actor"] == {"encoder": None, "history": 2}
+    assert "encoder" not in record["config"] and record["config"]["history"] == 2
+    assert loaded.encoder is None and loaded.input_size == HISTORY_INPUTS
+    saved = network.state_dict()
+    assert sorted(loaded.state_dict()) == sorted(saved)
+    for name, tensor in loaded.state_dict().items():
+        assert torch.equal(tensor, saved[name]), name
+    assert normalization is not None and normalization.mean.size == HISTORY_INPUTS
+    rows = torch.from_numpy(np.random.default_rng(1).normal(size=(50, HISTORY_INPUTS))).float()
+    with torch.no_grad():
+        assert torch.equal(loaded(rows), network(rows))
+
+
+def test_a_fresh_mlp_folder_holds_only_the_fields_of_format_1(tmp_path: Path) -> None:
+    """No 'encoder', 'history' nor 'actor': cpf_env versions before format 2 read config.json."""
+    config = dataclasses.replace(HISTORY_CONFIG, history=0)
+    folder = tmp_path / "mlp"
+    folder.mkdir()
+    network = build_actor(config, 26, 3)
+    write_agent(
+        folder, {"config": config.to_json()}, network, Normalization(np.zeros(26), np.ones(26))
+    )
+    record = json.loads((folder / "config.json").read_text())
+    assert set(record) == {"config"}
+    fields = {f.name for f in dataclasses.fields(TrainConfig)}
+    assert set(record["config"]) == fields - {"encoder", "history"}
+    assert TrainConfig.from_json(record["config"]) == config
+    assert json.loads((folder / "manifest.json").read_text())["format_version"] == 1
+    assert read_agent(folder)[1].input_size == 26
+    for other in (HISTORY_CONFIG, ENCODER_CONFIG):  # set: written, and read back
+        assert TrainConfig.from_json(json.loads(json.dumps(other.to_json()))) == other
+    assert "encoder" not in HISTORY_CONFIG.to_json()
+    assert ENCODER_CONFIG.to_json()["history"] == 2

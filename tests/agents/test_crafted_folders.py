@@ -544,9 +544,9 @@ def _bump_weight_mean(data: Any) -> None:
     ("name", "edit", "patterns"),
     [
         ("config.json", _set("actor.hidden", 64), ["hidden.0.weight reads 95", "gives 127"]),
-        ("config.json", _set("actor.slot_size", 5), ["encoder.phi.0.weight", "(32, 5)"]),
-        ("config.json", _set("actor.tail", 40), ["config.json's 'actor'", "hidden.0.weight"]),
-        ("config.json", _set("actor.slots", 7), ["normalization.json", "statistics for 86"]),
+        ("config.json", _set("actor.slot_size", 5), ["'actor.slot_size' is 5", "has 4"]),
+        ("config.json", _set("actor.tail", 40), ["'actor.tail' is 40", "has 44"]),
+        ("config.json", _set("actor.slots", 7), ["'actor.slots' is 7", "has 6"]),
         ("config.json", _set("actor.pooling", "max"), ["'actor'", "'max'"]),
         ("config.json", _set("actor.history", 3), ["'actor'", "history 3"]),
         ("config.json", _set("actor.encoder", None), ["'actor'", "encoder None"]),
@@ -607,10 +607,89 @@ def test_a_version_2_weights_file_edited_without_the_manifest_is_refused(tmp_pat
     _refused(folder, "policy.safetensors does not match its SHA-256")
 
 
-def test_a_version_2_encoder_whose_tail_is_not_the_configurations_is_refused(
+def _exported_refused(folder: Path, tmp_path: Path, *patterns: str) -> str:
+    """``_refused``; ``export_onnx`` (cpf-export) refuses the folder with the same message."""
+    message = _refused(folder, *patterns)
+    pytest.importorskip("onnx")
+    from agents.onnx_policy import export_onnx
+
+    out = tmp_path / "refused.onnx"
+    with pytest.raises(AgentFolderError) as caught:
+        export_onnx(folder, out, checks=1)
+    assert str(caught.value) == message
+    assert not out.exists()
+    return message
+
+
+def _drop_statistics(folder: Path) -> None:
+    """Make the folder an unnormalized run's: normalize_observations false, statistics null."""
+    _edit_json(folder, "config.json", _set("config.normalize_observations", False))
+    _forge(folder, "normalization.json", b"null\n")
+
+
+@pytest.mark.parametrize(
+    ("edits", "patterns"),
+    [
+        # an extra added: the encoder's tail (the history's 44 floats) no longer fits
+        ([("config.extras", ["base_action"])], ["'actor.tail' is 44", "has 48"]),
+        # the history lengthened in both places: the tail still says 2 entries
+        ([("config.history", 3), ("actor.history", 3)], ["'actor.tail' is 44", "has 66"]),
+        ([("actor.slots", 10**12)], ["'actor.slots' is 1000000000000", "has 6"]),
+        ([("actor.slot_size", 10**6)], ["'actor.slot_size' is 1000000", "has 4"]),
+        ([("config.neighbour_slots", 9)], ["'actor.slots' is 6", "has 9"]),
+    ],
+)
+@pytest.mark.parametrize("normalized", [True, False])
+def test_a_version_2_actor_record_is_checked_against_the_config_on_every_load_path(
+    tmp_path: Path, edits: list[tuple[str, Any]], patterns: list[str], normalized: bool
+) -> None:
+    """load_policy and export_onnx (cpf-export) both refuse it, naming config.json.
+
+    Without statistics nothing else ties ``actor.slots`` to the weights: 10**12 slots
+    loaded, and cpf-export then allocated 18 + 4 x 10**12 floats per vessel.
+    """
+    folder = _v2(tmp_path)
+    if not normalized:
+        _drop_statistics(folder)
+    load_policy(folder)  # valid before the edit
+    for path, value in edits:
+        _edit_json(folder, "config.json", _set(path, value))
+    _exported_refused(folder, tmp_path, "config.json", *patterns)
+
+
+@pytest.mark.parametrize(
+    ("path", "value", "inputs"),
+    [("config.extras", ["base_action"], 30), ("config.neighbour_slots", 3, 30)],
+)
+def test_an_mlp_whose_input_is_not_the_configurations_is_refused(
+    tmp_path: Path, path: str, value: Any, inputs: int
+) -> None:
+    """The committed MLP reads 18 + 2 x 4 = 26 inputs; config.json edited to give another size."""
+    folder = _copy(AGENT, tmp_path)
+    _edit_json(folder, "config.json", _set(path, value))
+    _exported_refused(
+        folder, tmp_path, "config.json", "hidden.0.weight reads 26 inputs", f"learner {inputs}"
+    )
+
+
+def test_an_mlp_with_history_whose_input_is_not_the_configurations_is_refused(
     tmp_path: Path,
 ) -> None:
-    """Extras added to config.json: the encoder's tail (history only) no longer fits."""
+    """A version-2 MLP with 2 history entries, config and actor saying 3: one entry short."""
+    from test_agent_folder import write_history_mlp
+
+    folder = tmp_path / "mlp"
+    write_history_mlp(folder)
+    load_policy(folder)
+    for path in ("config.history", "actor.history"):
+        _edit_json(folder, "config.json", _set(path, 3))
+    _exported_refused(folder, tmp_path, "config.json", "reads 70 inputs", "learner 92")
+
+
+def test_a_huge_encoder_is_refused_naming_its_fields(tmp_path: Path) -> None:
+    """actor.hidden = 10**5: 4 x 10**10 bytes of encoder weights, refused before any is built."""
     folder = _v2(tmp_path)
-    _edit_json(folder, "config.json", _set("config.extras", ["base_action"]))
-    _refused(folder, "reads 44 floats after the slots", "extras and history give 48")
+    _edit_json(folder, "config.json", _set("actor.hidden", 10**5))
+    _exported_refused(
+        folder, tmp_path, "actor.hidden = 100000", "actor.slot_size = 4", "config.json"
+    )

@@ -29,19 +29,19 @@ def _step(
 
 
 def _history(env: HistoryVecEnv, obs: np.ndarray) -> np.ndarray:
-    raw = obs.shape[1] - env.history_size
-    return obs[:, raw:].reshape(obs.shape[0], H, env.entry_size)
+    raw = obs.shape[1] - env.history.size
+    return obs[:, raw:].reshape(obs.shape[0], H, env.history.entry_size)
 
 
 def test_entries_are_the_last_observations_and_actions_newest_first() -> None:
     env = _env(max_steps=50)
     obs = env.reset()
-    raw_size = obs.shape[1] - env.history_size
+    raw_size = obs.shape[1] - env.history.size
     assert np.all(_history(env, obs) == 0.0)
     rng = np.random.default_rng(0)
     seen, taken = [], []
     for _ in range(4):
-        actions = rng.uniform(-1, 1, (env.num_envs, env.action_size)).astype(np.float32)
+        actions = rng.uniform(-1, 1, (env.num_envs, env.history.action_size)).astype(np.float32)
         seen.append(obs[:, :SLOTS].copy())
         taken.append(actions)
         obs, _, dones, _ = _step(env, actions)
@@ -51,7 +51,7 @@ def test_entries_are_the_last_observations_and_actions_newest_first() -> None:
         np.testing.assert_array_equal(history[:, k, :SLOTS], seen[-1 - k])
         np.testing.assert_array_equal(history[:, k, SLOTS:-1], taken[-1 - k])
         assert np.all(history[:, k, -1] == 1.0)
-    assert obs.shape == (env.num_envs, raw_size + H * (SLOTS + env.action_size + 1))
+    assert obs.shape == (env.num_envs, raw_size + H * (SLOTS + env.history.action_size + 1))
     assert env.observation_space.contains(obs[0])
 
 
@@ -59,7 +59,7 @@ def test_no_history_crosses_an_episode_end() -> None:
     env = _env()
     n = env.num_envs // 2
     obs = env.reset()
-    actions = np.full((env.num_envs, env.action_size), 0.25, dtype=np.float32)
+    actions = np.full((env.num_envs, env.history.action_size), 0.25, dtype=np.float32)
     for step in range(1, 4):  # noqa: B007 (the last step is checked below)
         before = obs
         obs, _, dones, infos = _step(env, actions)

@@ -81,34 +81,40 @@ def test_the_folder_is_version_2_and_describes_the_actor(agent: Path) -> None:
     assert weights == ([0.0] * 6, [1.0] * 6)  # a_ij kept raw: an empty slot stays 0
 
 
-def test_actions_equal_sb3_inside_history_vec_env_bit_for_bit(agent: Path) -> None:
-    """300 steps of 2 fleets through auto-resets: load_policy's actions are SB3's predict.
+def _compare_with_sb3(
+    folder: Path, config: TrainConfig, steps: int, max_steps: int, gain: float
+) -> tuple[int, np.ndarray]:
+    """Step load_policy's policy beside SB3's predict inside ``HistoryVecEnv``: equal bits.
 
     SB3's PPO is rebuilt from the folder's weights (no pickle read; the output layer
-    scaled by 50 in both, so the actions are large and the history matters); it acts on
-    ``HistoryVecEnv``'s inputs, normalized by ``VecNormalize``'s formula written
-    out here. The loaded policy sees only the simulator's raw observations and
-    keeps the history itself, reset on the fleets whose episode ended.
+    scaled by ``gain`` in both, so the actions are large and the history matters); it
+    acts on ``HistoryVecEnv``'s inputs, normalized by ``VecNormalize``'s formula written
+    out here. The loaded policy sees only the simulator's raw observations and keeps
+    the history itself, reset on the fleets whose episode ended.
+
+    Returns:
+        The episode ends crossed, and every action (steps x R, a).
     """
-    policy = load_policy(agent)
+    policy = load_policy(folder)
     network = policy.actor.network  # type: ignore[attr-defined]
-    statistics = json.loads((agent / "normalization.json").read_text())
+    statistics = json.loads((folder / "normalization.json").read_text())
     mean, var = np.array(statistics["mean"]), np.array(statistics["var"])
     base = FleetVecEnv(
-        CONFIG.home_scenario,
+        config.home_scenario,
         num_fleets=2,
-        base_policy=CONFIG.base,
-        residual=CONFIG.residual_config(),
-        max_steps=100,  # staggered: fleet 1 restarts after 50 steps, fleet 0 after 100
+        base_policy=config.base,
+        residual=config.residual_config(),
+        max_steps=max_steps,  # staggered: fleet 1 restarts after max_steps / 2 steps
     )
-    env = HistoryVecEnv(base, H)
-    model = build_model(dataclasses.replace(CONFIG, batch_size=32), env)
+    env = HistoryVecEnv(base, config.history)
+    model = build_model(dataclasses.replace(config, batch_size=32), env)
     assert isinstance(model, PPO)
-    extractor: Any = model.policy.pi_features_extractor
-    extractor.encoder.load_state_dict(network.encoder.state_dict())
+    if network.encoder is not None:
+        extractor: Any = model.policy.pi_features_extractor
+        extractor.encoder.load_state_dict(network.encoder.state_dict())
     layers = [m for m in model.policy.mlp_extractor.policy_net if isinstance(m, torch.nn.Linear)]
     with torch.no_grad():
-        network.output.weight.mul_(50.0)  # a 64-step agent barely moved: larger actions
+        network.output.weight.mul_(gain)
         for mine, theirs in zip(network.hidden, layers, strict=True):
             theirs.weight.copy_(mine.weight)
             theirs.bias.copy_(mine.bias)
@@ -118,7 +124,7 @@ def test_actions_equal_sb3_inside_history_vec_env_bit_for_bit(agent: Path) -> No
     obs = env.reset()
     recorded = _recording(policy)
     ended = 0
-    for _ in range(300):
+    for _ in range(steps):
         raw = base.core.sim.arrays.obs.copy()
         policy.act_batch(raw)
         normalized = np.clip((obs - mean) / np.sqrt(var + 1e-8), -10.0, 10.0).astype(np.float32)
@@ -128,8 +134,25 @@ def test_actions_equal_sb3_inside_history_vec_env_bit_for_bit(agent: Path) -> No
         restarted = dones.reshape(2, -1).any(axis=1)
         policy.reset_fleets(restarted)
         ended += int(restarted.sum())
+    return ended, np.concatenate(recorded)
+
+
+def test_actions_equal_sb3_inside_history_vec_env_bit_for_bit(agent: Path) -> None:
+    """300 steps of 2 fleets through auto-resets (the 64-step agent's output x 50)."""
+    ended, actions = _compare_with_sb3(agent, CONFIG, steps=300, max_steps=100, gain=50.0)
     assert ended >= 6  # several episode ends of both fleets crossed
-    assert np.abs(np.concatenate(recorded)).max() > 0.1  # the actions are not all zero
+    assert np.abs(actions).max() > 0.1  # the actions are not all zero
+
+
+def test_an_mlp_with_history_acts_as_sb3_inside_history_vec_env(tmp_path: Path) -> None:
+    """A version-2 MLP (no encoder) with 2 history entries: 50 steps, 4 episode ends."""
+    from test_agent_folder import HISTORY_CONFIG, write_history_mlp
+
+    folder = tmp_path / "mlp"
+    write_history_mlp(folder)
+    ended, actions = _compare_with_sb3(folder, HISTORY_CONFIG, steps=50, max_steps=20, gain=1.0)
+    assert ended >= 4
+    assert np.abs(actions).max() > 0.1
 
 
 def test_the_history_is_kept_and_cleared_on_reset(agent: Path) -> None:
@@ -151,21 +174,65 @@ def test_the_history_is_kept_and_cleared_on_reset(agent: Path) -> None:
     np.testing.assert_array_equal(again, first)  # a reset policy acts as a fresh one
 
 
-def test_a_six_slot_agent_runs_a_ten_vessel_star(agent: Path) -> None:
-    """The centre of the star has 9 neighbours: the encoder reads them all."""
+def _inputs_recorded(policy: TrainedPolicy) -> list[np.ndarray]:
+    """Record the raw inputs (R, k) the policy gives its actor at each ``act_batch``."""
+    rows: list[np.ndarray] = []
+    actor = policy.actor
+
+    class Recorder:
+        input_size, action_size = actor.input_size, actor.action_size
+
+        def __call__(self, inputs: np.ndarray) -> np.ndarray:
+            rows.append(inputs.copy())
+            return actor(inputs)
+
+    policy.actor = Recorder()
+    return rows
+
+
+def test_a_six_slot_agent_reads_all_nine_slots_of_a_ten_vessel_star(agent: Path) -> None:
+    """The star's centre has 9 neighbours: the encoder reads them all, the 7th to 9th too."""
     star = fleet_of(10, Graph.star(10, center=4, leaders=(4,)))
     policy = load_policy(agent, scenario=star)
+    actor: Any = policy.actor
+    with torch.no_grad():
+        actor.network.output.weight.mul_(50.0)  # a 64-step agent barely moved: larger actions
+    seen = _inputs_recorded(policy)
     sim = FleetSim(star, num_fleets=1)
     obs = sim.reset(seeds=[0])
     for _ in range(5):
         command = policy.act_batch(obs)
         assert command.shape == (1, 10, 5) and np.all(np.isfinite(command))
         obs = sim.step(command)
-    residual = policy.diagnostics["residual"]
-    assert np.all(np.isfinite(residual)) and np.abs(residual).max() > 0.0
-    # only the learner's slots changed: the home scenario's 6 stay 6
+    assert policy._residual.neighbour_slots == 9  # the learner's slots; the base's unchanged
     assert load_policy(agent)._residual.neighbour_slots == 6
-    assert policy._residual.neighbour_slots == 9
+    centre = seen[-1][4:5]
+    assert centre.shape == (1, 18 + 9 * 4 + H * 22)
+    assert np.all(centre[0, 18 : 18 + 9 * 4 : 4] != 0.0)  # nine neighbours: no empty slot
+    action = actor(centre)
+    for slot in (6, 7, 8):  # beyond the 6 slots of training
+        changed = centre.copy()
+        changed[0, 18 + 4 * slot + 1] += 0.5  # that neighbour's theta_j - theta_i
+        assert np.abs(actor(changed) - action).max() > 1e-4, slot
+
+
+def test_empty_slots_added_to_an_input_leave_the_action_unchanged(agent: Path) -> None:
+    """bench_mild's inputs (6 slots) padded with 3 empty ones: the same actions to rounding."""
+    policy = load_policy(agent)
+    actor: Any = policy.actor
+    with torch.no_grad():
+        actor.network.output.weight.mul_(50.0)
+    seen = _inputs_recorded(policy)
+    sim = FleetSim(policy.scenario, num_fleets=2)
+    obs = sim.reset(seeds=[0, 1])
+    for _ in range(5):
+        obs = sim.step(policy.act_batch(obs))
+    rows = seen[-1]
+    body = 18 + 6 * 4
+    padded = np.concatenate([rows[:, :body], np.zeros((len(rows), 3 * 4)), rows[:, body:]], axis=1)
+    action = actor(rows)
+    assert np.abs(action).max() > 0.1
+    np.testing.assert_allclose(actor(padded.astype(np.float32)), action, rtol=0, atol=1e-6)
 
 
 def test_loading_an_encoder_agent_imports_no_learning_algorithm(agent: Path) -> None:

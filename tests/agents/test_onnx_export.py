@@ -12,6 +12,7 @@ pytest.importorskip("onnx")
 onnxruntime = pytest.importorskip("onnxruntime")
 
 from agents import load_policy  # noqa: E402
+from agents.loading import TrainedPolicy  # noqa: E402
 from agents.onnx_policy import OnnxActor, load_onnx_policy  # noqa: E402
 from cpf_commands.bench.run import run_bench  # noqa: E402
 from cpf_commands.export import export_main  # noqa: E402
@@ -96,48 +97,67 @@ def encoder_agent(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return train(CONFIG, tmp_path_factory.mktemp("encoder") / "agent", progress=False)
 
 
-def test_an_encoder_agent_exported_for_nine_slots_acts_as_torch_on_a_ten_vessel_star(
+def _actions_recorded(policy: TrainedPolicy) -> tuple[list[np.ndarray], list[np.ndarray]]:
+    """Record the inputs (R, k) and actions (R, a) of the policy's actor at each ``act_batch``."""
+    inputs: list[np.ndarray] = []
+    actions: list[np.ndarray] = []
+    actor = policy.actor
+
+    class Recorder:
+        input_size, action_size = actor.input_size, actor.action_size
+
+        def __call__(self, rows: np.ndarray) -> np.ndarray:
+            inputs.append(rows.copy())
+            actions.append(actor(rows))
+            return actions[-1]
+
+    policy.actor = Recorder()
+    return inputs, actions
+
+
+def test_an_encoder_agent_exported_for_four_slots_acts_as_torch_on_a_five_vessel_star(
     encoder_agent: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    """Trained on 6 slots, exported with --slots 9: the graph's actions on the star's inputs.
+    """Trained on 6 slots, exported with --slots 4, the most a fleet of 5 vessels needs.
 
-    The graph's fleet size is the training scenario's (5: the residual range is per
-    vessel), so the star's 10 rows per step run as two groups of 5; the actions are
-    per row. The inputs, history included, are those the torch policy built.
+    On a star whose centre has 4 neighbours, the graph (4 slots, all filled at the
+    centre) acts as the torch policy (6 slots, 2 of them empty) to float rounding,
+    the history, which each policy keeps itself, included.
     """
     from test_mixture_env import fleet_of
 
     from cpf_env.model.graph import Graph
 
     out = tmp_path / "star.onnx"
-    assert export_main([str(encoder_agent), str(out), "--slots", "9"]) == 0
+    assert export_main([str(encoder_agent), str(out), "--slots", "4"]) == 0
     assert float(capsys.readouterr().out.rsplit(":", 1)[1]) < 1e-5
-    star = fleet_of(10, Graph.star(10, center=4, leaders=(4,)))
+    star = fleet_of(5, Graph.star(5, center=2, leaders=(2,)))
     torch_policy = load_policy(encoder_agent, scenario=star)
-    torch_actor = torch_policy.actor
-    seen: list[np.ndarray] = []
-
-    def recording(rows: np.ndarray) -> np.ndarray:
-        seen.append(rows)
-        return torch_actor(rows)
-
-    torch_policy.actor = recording  # type: ignore[assignment]
-    onnx_actor = OnnxActor(out)
-    assert onnx_actor.input_size == 18 + 9 * 4 + 3 * 22  # own, 9 slots, 3 history entries
+    onnx_policy = load_onnx_policy(out, scenario=star)
+    assert onnx_policy.actor.input_size == 18 + 4 * 4 + 3 * 22  # own, 4 slots, 3 entries
+    _, torch_actions = _actions_recorded(torch_policy)
+    onnx_inputs, onnx_actions = _actions_recorded(onnx_policy)
     sim = FleetSim(star, num_fleets=2)
     obs = sim.reset(seeds=[0, 1])
     for _ in range(30):
-        obs = sim.step(torch_policy.act_batch(obs))
-        rows = seen[-1]
-        assert rows.shape == (20, onnx_actor.input_size)
-        np.testing.assert_allclose(onnx_actor(rows), torch_actor(rows), rtol=0, atol=1e-5)
-    assert np.all(seen[-1][:, -1] == 1.0)  # the oldest history entry is filled by now
+        command = torch_policy.act_batch(obs)
+        onnx_policy.act_batch(obs)
+        np.testing.assert_allclose(onnx_actions[-1], torch_actions[-1], rtol=1e-4, atol=1e-7)
+        obs = sim.step(command)
+    centre = onnx_inputs[-1][2]
+    assert np.all(centre[18 : 18 + 4 * 4 : 4] != 0.0)  # the centre's 4 slots all filled
+    assert centre[-1] == 1.0  # the oldest history entry is filled by now
+    assert np.abs(np.concatenate(torch_actions)).max() > 1e-4  # the actions are not all zero
 
 
 def test_an_encoder_agent_with_history_runs_from_onnx_as_from_torch(
     encoder_agent: Path, tmp_path: Path
 ) -> None:
-    """load_onnx_policy keeps the history itself; K' = 3 runs the chain, K' = 1 is refused."""
+    """load_onnx_policy keeps the history itself; K' = 3 runs the chain, K' = 1 is refused.
+
+    The chain's vessels have up to 2 neighbours: a graph of 1 slot is refused, saying how
+    to export one that fits.
+    """
     out = tmp_path / "three.onnx"
     assert export_main([str(encoder_agent), str(out), "--slots", "3"]) == 0
     torch_policy, onnx_policy = load_policy(encoder_agent), load_onnx_policy(out)
@@ -151,8 +171,26 @@ def test_an_encoder_agent_with_history_runs_from_onnx_as_from_torch(
         obs = sim.step(command)
     one = tmp_path / "one.onnx"
     assert export_main([str(encoder_agent), str(one), "--slots", "1"]) == 0
-    with pytest.raises(ValueError, match="at most 1 neighbours"):
+    with pytest.raises(ValueError) as caught:
         load_onnx_policy(one)
+    message = str(caught.value)
+    assert "exported for 1 neighbour slots" in message and "gives a vessel 2" in message
+    assert "re-export the agent folder with cpf-export FOLDER OUT.onnx --slots K, K >= 2" in message
+    assert "--neighbour-slots" not in message
+
+
+@pytest.mark.parametrize("slots", ["5", "100"])
+def test_more_slots_than_a_vessel_can_have_neighbours_are_refused(
+    encoder_agent: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str], slots: str
+) -> None:
+    """bench_mild's fleet of n = 5: at most 4 neighbours, so --slots 5 is refused."""
+    out = tmp_path / "many.onnx"
+    with pytest.raises(SystemExit) as caught:
+        export_main([str(encoder_agent), str(out), "--slots", slots])
+    assert caught.value.code == 2
+    error = capsys.readouterr().err
+    assert "--slots must be in [1, 4]" in error and "n = 5 vessels" in error
+    assert f"got {slots}" in error and not out.exists()
 
 
 def test_slots_for_an_mlp_agent_are_refused(

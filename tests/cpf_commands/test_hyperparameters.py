@@ -107,3 +107,17 @@ def test_a_mixture_and_reward_overrides_round_trip_through_the_file(tmp_path: Pa
     file.write_text("[policy]\nnet_arch = [8]\n")
     with pytest.raises(ValueError, match="unknown keys \\['policy'\\]"):
         read_hyperparameters(file)
+
+
+def test_encoder_none_overrides_the_files_encoder(tmp_path: Path) -> None:
+    """``--encoder none``: an MLP, whatever the file says; its folder is format version 1."""
+    path = tmp_path / "h.toml"
+    path.write_text(TINY + 'encoder = "deepsets"\nshared_slot_statistics = true\n')
+    out = tmp_path / "run"
+    assert train_main(["--config", str(path), "--encoder", "none", "--out", str(out),
+                       "--quiet"]) == 0  # fmt: skip
+    record = json.loads((out / "config.json").read_text())
+    assert "encoder" not in record["config"] and "actor" not in record
+    assert TrainConfig.from_json(record["config"]).shared_slot_statistics  # the file's
+    assert json.loads((out / "manifest.json").read_text())["format_version"] == 1
+    assert "encoder" not in (out / "hyperparameters.toml").read_text()
