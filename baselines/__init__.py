@@ -8,7 +8,6 @@ name                        policy
                             (Wang, Wang & Peng 2014; the reference policy)
 ``dsc``                     ``nn_dsc`` without the NN term
 ``nn_dsc_no_aux``           ``nn_dsc`` without the auxiliary system
-``nn_dsc_global_v0``        ``nn_dsc`` with v0 known to every vessel (no estimator)
 ``backstepping``            analytic derivative of alpha, nominal-model cancellation
 ``nn_dsc_delay_comp``       ``nn_dsc`` with neighbour theta advanced by packet age x dt x vhat_j
 ``backstepping_delay_comp`` ``backstepping`` with the same delay compensation
@@ -16,7 +15,10 @@ name                        policy
                             stage cost, from its local observation (``baselines.mpc``)
 ==========================  ===========================================================
 
-Privileged references, not deployable (``PRIVILEGED``): ``oracle``, the same
+Privileged references, not deployable (``PRIVILEGED``): ``nn_dsc_global_v0``,
+``nn_dsc`` told v0's schedule on every vessel (no estimator; an ablation
+of the speed estimator, which a vessel cut off from the leader cannot
+run: ``bench_switching`` steps v0 while no vessel hears it); ``oracle``, the same
 receding-horizon control told everything (true model and future disturbances
 via copies of the simulator, ideal links, true v0, centralized), the
 benchmark's headroom bound (``HEADROOM_REFERENCE``); ``mpc_privileged``,
@@ -79,7 +81,6 @@ POLICIES: dict[str, type[FleetPolicy]] = {
         NNDSCPolicy,
         DSCPolicy,
         NoAuxPolicy,
-        GlobalSpeedPolicy,
         BacksteppingPolicy,
         NNDSCDelayCompensated,
         BacksteppingDelayCompensated,
@@ -87,10 +88,17 @@ POLICIES: dict[str, type[FleetPolicy]] = {
     )
 }
 
-#: Privileged references by name: not deployable, they read the simulator (headroom).
+#: Privileged references by name: not deployable, they read what no local observation
+#: holds (the simulator, or the scenario's v0 schedule).
 PRIVILEGED: dict[str, type[FleetPolicy]] = {
     policy.name: policy
-    for policy in (OraclePolicy, MPCPrivileged, NNDSCPrivileged, BacksteppingPrivileged)
+    for policy in (
+        GlobalSpeedPolicy,
+        OraclePolicy,
+        MPCPrivileged,
+        NNDSCPrivileged,
+        BacksteppingPrivileged,
+    )
 }
 #: The headroom bound the benchmark's normalized score is measured against.
 HEADROOM_REFERENCE = OraclePolicy.name
