@@ -127,8 +127,8 @@ def test_a_mixture_student_on_an_mpc_base_with_rate_labels(tmp_path: Path) -> No
     record = json.loads((tmp_path / "s" / "config.json").read_text())
     assert record["distillation"]["teacher"] == "oracle"
     assert record["distillation"]["procedural"] == 1
-    policy = load_policy(tmp_path / "s", scenario="bench_switching")
-    obs = FleetVecEnv("bench_switching", num_fleets=1).sim.reset(seeds=[3])
+    policy = load_policy(tmp_path / "s", scenario="bench_mild")
+    obs = FleetVecEnv("bench_mild", num_fleets=1).sim.reset(seeds=[3])
     assert np.all(np.isfinite(policy.act_batch(obs)))
 
 
