@@ -27,6 +27,7 @@ from numpy.typing import NDArray
 from baselines import HEADROOM_REFERENCE
 from cpf_commands.bench import stats
 from cpf_commands.bench.episodes import METRICS
+from cpf_env.scenarios import splits
 
 __all__ = [
     "GAP_METRICS",
@@ -81,6 +82,7 @@ SUMMARY_COLUMNS = (
     "gap_closed",
     "gap_ci_low",
     "gap_ci_high",
+    "suite_version",
 )
 #: Metrics with a share of the gap closed (lower is better for both).
 GAP_METRICS = ("cost", "cost_window")
@@ -290,7 +292,13 @@ def summarize(
                             zip(("gap_closed", "gap_ci_low", "gap_ci_high"), found, strict=True)
                         )
             rows.append(row)
-    return rows + _suite_rows(cells, reference, headroom, by_key)
+    rows += _suite_rows(cells, reference, headroom, by_key)
+    versions = {splits.suite_version(cell.scenario) for cell in cells}
+    suite_wide = versions.pop() if len(versions) == 1 else None  # one version on every scenario
+    for row in rows:
+        scenario = str(row["scenario"])
+        row["suite_version"] = suite_wide if scenario == "all" else splits.suite_version(scenario)
+    return rows
 
 
 def normalized_score(row: Mapping[str, object]) -> tuple[float, float, float] | None:

@@ -171,6 +171,14 @@ def markdown(
         f"`P(beats)`: probability of a lower cost than {reference} on the same seed. "
         "All numbers: `summary.csv`.",
     ]
+    versions = sorted({str(r["suite_version"]) for r in rows if r["suite_version"] is not None})
+    if versions:
+        lines += [
+            "",
+            f"Suite scenarios: benchmark suite version {', '.join(map(str, versions))} "
+            "(`cpf_env.scenarios.suite.SUITE_VERSION`); results of another version do not "
+            "compare.",
+        ]
     judged = verdicts(cells, reference, margin)
     if judged:
         lines += [

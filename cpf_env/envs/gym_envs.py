@@ -4,7 +4,7 @@
 Env           ``CentralizedFleetEnv``; vector form ``CentralizedFleetVectorEnv``
 Action        ``Box(n (4 + m))`` float32: per vessel [tau_u, tau_v, tau_r, theta_dot, msg...]
 Observation   ``Box(n obs_dim)`` float32: the n local observations, concatenated
-Ids           ``cpf_env/CentralizedFleet-v0``, ``cpf_env/CentralizedFleet-<scenario>-v0``
+Ids           ``cpf_env/CentralizedFleet-v0``, ``cpf_env/CentralizedFleet-<scenario>-vN``
 PettingZoo    ``cpf_env/cooperative_path_following-v0`` ("parallel" and "aec")
 ============  ==================================================================
 """
@@ -34,6 +34,7 @@ __all__ = [
     "PETTINGZOO_ID",
     "CentralizedFleetEnv",
     "CentralizedFleetVectorEnv",
+    "ID_VERSIONS",
     "register_envs",
     "scenario_id",
 ]
@@ -367,9 +368,23 @@ class CentralizedFleetVectorEnv(VectorEnv[NDArray[np.float32], NDArray[np.float3
         self._views.close()
 
 
+#: Scenarios whose dynamics changed since their id was first registered -> their id's
+#: version (the version policy of CHANGELOG.md): suite version 2 changed bench_switching.
+ID_VERSIONS = {"bench_switching": 1, "bench_switching_shift": 1}
+
+
 def scenario_id(scenario: str) -> str:
-    """Gymnasium id of the centralized env preset to a named scenario."""
-    return f"cpf_env/CentralizedFleet-{scenario}-v0"
+    """Gymnasium id of the centralized env preset to a named scenario.
+
+    The ``-vN`` suffix is ``ID_VERSIONS``'s (0 for a scenario that never
+    changed); Gymnasium answers an older version's id by naming the current
+    one.
+
+    Example:
+        >>> scenario_id("wang2014"), scenario_id("bench_switching")
+        ('cpf_env/CentralizedFleet-wang2014-v0', 'cpf_env/CentralizedFleet-bench_switching-v1')
+    """
+    return f"cpf_env/CentralizedFleet-{scenario}-v{ID_VERSIONS.get(scenario, 0)}"
 
 
 def register_envs() -> None:

@@ -50,7 +50,14 @@ from cpf_env.scenarios import suite
 from cpf_env.scenarios.registry import register
 from cpf_env.scenarios.scenario import Scenario
 
-__all__ = ["EVALUATION_SEED", "SHIFTS", "SPLITS", "check_training", "split_scenario"]
+__all__ = [
+    "EVALUATION_SEED",
+    "SHIFTS",
+    "SPLITS",
+    "check_training",
+    "split_scenario",
+    "suite_version",
+]
 
 #: First evaluation seed; training resets use seeds below it.
 EVALUATION_SEED = 10_000
@@ -100,7 +107,9 @@ def _switching() -> Scenario:
     topology = base.topology
     assert isinstance(topology, SwitchingTopology)
     return base.replace(
-        topology=SwitchingTopology(graphs=topology.graphs, switch_steps=(0, 100, 200), period=300)
+        topology=SwitchingTopology(
+            graphs=topology.graphs, switch_steps=(0, 100, 200, 300), period=400
+        )
     )
 
 
@@ -159,6 +168,17 @@ def split_scenario(name: str, split: str) -> Scenario:
             f"{name!r} has no held-out splits; only the suite's scenarios do: {sorted(SHIFTS)}."
         )
     return getattr(suite, name)() if split == "test" else _named(name)
+
+
+def suite_version(name: str) -> int | None:
+    """``suite.SUITE_VERSION`` for a suite scenario or its shift variant, else None.
+
+    Example:
+        >>> suite_version("bench_mild_shift") == suite.SUITE_VERSION, suite_version("wang2014")
+        (True, None)
+    """
+    base = name[: -len(SHIFT_SUFFIX)] if name.endswith(SHIFT_SUFFIX) else name
+    return suite.SUITE_VERSION if base in SHIFTS else None
 
 
 def check_training(scenario: str | Scenario, seeds: Iterable[int]) -> None:

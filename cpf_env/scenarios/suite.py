@@ -15,7 +15,7 @@ name                     what it stresses
 ``bench_saturation``     v0 = 0.5 m/s, halved force limits, large random offsets
 ``bench_current_waves``  varying current, Gauss-Markov waves and wind, model spread 10 %
 ``bench_lossy_links``    30 % packet loss, 5-step delay, large path-variable spread
-``bench_switching``      chain, ring and star in turn, 10 s each
+``bench_switching``      chain, ring, star, leaderless ring (10 s each); v0 steps unheard
 ``bench_heterogeneous``  true models drawn +-30 % around Cybership II
 ``bench_large_fleet``    n = 10 on a ring graph
 =======================  ============================================================
@@ -36,12 +36,20 @@ from __future__ import annotations
 
 import dataclasses
 
+from cpf_env.model.graph import Graph, SwitchingTopology
 from cpf_env.model.links import LinkImpairments
 from cpf_env.scenarios import paper
 from cpf_env.scenarios.registry import register
-from cpf_env.scenarios.scenario import Scenario
+from cpf_env.scenarios.scenario import Scenario, SpeedSchedule
 
-__all__ = ["SUITE", "is_deterministic", "list_suite"]
+__all__ = ["SUITE", "SUITE_VERSION", "is_deterministic", "list_suite"]
+
+#: Version of the suite's definitions; results of different versions do not compare.
+#: 1: the first suite. 2: ``bench_switching`` cuts the fleet off the leader for
+#: 10 s of every 40 and steps v0 meanwhile, inside the scored window too (in
+#: version 1 it cycled chain, ring and star with leader links throughout at a
+#: constant v0, and its final-window costs equalled ``bench_mild``'s).
+SUITE_VERSION = 2
 
 #: Spread of the random starts (m, rad, path-variable units), common to the suite.
 POSITION_STD, HEADING_STD, THETA_STD = 1.0, 0.3, 0.5
@@ -96,11 +104,29 @@ def bench_lossy_links() -> Scenario:
 
 
 def bench_switching() -> Scenario:
-    """``switching_topology`` from random starts."""
+    """Chain, ring, star and a leaderless ring in turn; v0 steps while no vessel hears it.
+
+    The graph cycles every 10 s through a chain, a ring and a star (leader
+    links change with them) and a ring on which no vessel hears the leader
+    (10 s without leader links, from 30 s and from 70 s). The leader's speed
+    steps up to 0.15 m/s at 35 s and back to 0.1 m/s at 78 s, each time
+    while the fleet is cut off from it, so the new v0 reaches the fleet only
+    through the switching graph, inside the benchmark's scored final window
+    (the last 25 s) too.
+    """
+    graphs = (
+        Graph.path(5, leaders=(0, 3)),
+        Graph.ring(5, leaders=(2,)),
+        Graph.star(5, center=2, leaders=(4,)),
+        Graph.ring(5, leaders=()),
+    )
     return _randomized(
-        paper.switching_topology(),
+        paper.wang2014(),
         "bench_switching",
-        "Chain, ring, star in turn (10 s each), random starts.",
+        "Chain, ring, star, leaderless ring in turn (10 s each); v0 steps at 35 s and 78 s "
+        "while no vessel hears the leader; random starts.",
+        topology=SwitchingTopology(graphs=graphs, switch_steps=(0, 200, 400, 600), period=800),
+        v0=SpeedSchedule(times=(0.0, 35.0, 78.0), values=(0.1, 0.15, 0.1)),
     )
 
 

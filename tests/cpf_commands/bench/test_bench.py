@@ -197,6 +197,10 @@ def test_identical_arguments_give_identical_files(tmp_path):
     summary = (tmp_path / "one" / "summary.md").read_text()
     assert "`cpf-bench --policies nn_dsc backstepping --scenarios bench_mild wang2014" in summary
     assert "wang2014 (deterministic" in summary and str(tmp_path) not in summary
+    assert f"benchmark suite version {suite.SUITE_VERSION} " in summary
+    with open(tmp_path / "one" / "summary.csv") as file:
+        versions = {(r["scenario"], r["suite_version"]) for r in csv.DictReader(file)}
+    assert versions == {("bench_mild", str(suite.SUITE_VERSION)), ("wang2014", ""), ("all", "")}
 
 
 def test_failures_are_counted_not_dropped(tmp_path):
@@ -245,6 +249,13 @@ def test_summary_has_the_required_columns_and_reference_scores():
             ]
         )
     )
+
+
+def test_switching_is_scored_while_the_fleet_re_synchronizes():
+    """bench_switching's final window is not bench_mild's (as it was in suite version 1)."""
+    cells = run_bench(["nn_dsc"], ["bench_mild", "bench_switching"], seeds=2)
+    mild, switching = (cell.metrics["cost_window"] for cell in cells)
+    assert np.all(switching > 10 * mild)
 
 
 def _picky(scenario):

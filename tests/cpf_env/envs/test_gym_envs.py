@@ -223,3 +223,9 @@ def test_step_before_reset_raises() -> None:
         CentralizedFleetEnv().step(np.zeros(25))
     with pytest.raises(RuntimeError, match="reset"):
         CentralizedFleetVectorEnv(num_envs=2).step(np.zeros((2, 25)))
+
+
+def test_a_changed_scenario_gets_a_new_id_version_and_the_old_id_names_it():
+    assert scenario_id("bench_switching").endswith("-v1")
+    with pytest.raises(gymnasium.error.DeprecatedEnv, match="bench_switching-v1"):
+        gymnasium.make("cpf_env/CentralizedFleet-bench_switching-v0")

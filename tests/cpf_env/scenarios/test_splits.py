@@ -64,3 +64,25 @@ def test_cpf_train_refuses_evaluation_seeds(capsys):
     with pytest.raises(SystemExit):
         train_main(["--scenario", "bench_mild", "--seed", "10000", "--out", "unused"])
     assert "evaluation seeds" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("split", splits.SPLITS)
+def test_switching_cuts_the_leader_off_while_v0_steps_inside_the_scored_window(split):
+    """Both v0 steps fall while no vessel hears the leader, the second in the last 25 %."""
+    scenario = splits.split_scenario("bench_switching", split)
+    topology, schedule = scenario.topology, scenario.v0_schedule
+    steps = scenario.max_steps
+    window = range(int(0.75 * steps), steps)  # the bench's final window
+    assert len({topology.index_at(step) for step in window}) >= 2  # it switches there
+    for time in schedule.times[1:]:
+        step = round(time / scenario.dt)
+        assert not topology.graph_at(step).leaders, f"v0 steps at {time} s with a leader link"
+        assert schedule.at(time) != schedule.at(time - scenario.dt)
+    assert round(schedule.times[-1] / scenario.dt) in window
+    assert scenario.v0_schedule == scenarios.get("bench_switching").v0_schedule
+
+
+def test_suite_version_belongs_to_suite_scenarios_and_their_shifts():
+    assert splits.suite_version("bench_switching") == suite.SUITE_VERSION
+    assert splits.suite_version("bench_switching_shift") == suite.SUITE_VERSION
+    assert splits.suite_version("switching_topology") is None
