@@ -31,7 +31,7 @@ MAX_DEGREE = 4
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Draw the held-out fleets and bench the policies on them."""
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], allow_abbrev=False)
     parser.add_argument("--policies", nargs="+", required=True, help="as cpf-bench --policies")
     parser.add_argument("--draws", type=int, default=8, help="held-out fleets (draw seeds 10000+)")
     parser.add_argument("--seeds", type=int, default=5, help="episodes per policy and fleet")
