@@ -11,9 +11,12 @@ with its 95 % bootstrap interval, ``cpf_commands.bench.stats``) and its
 verdict against ``mpc`` (``beats``: the whole interval below 0; ``loses``:
 above 0; else ``no difference``), and its verdict against ``nn_dsc`` as
 ``cpf-bench`` wrote it in ``summary.md``. Then per student: the scenarios on
-which it beats ``mpc``, those on which it loses to ``nn_dsc``, and (where
+which it beats ``mpc``, those on which it loses to ``nn_dsc`` or is mixed
+(better cost, a guarded metric worse), those it did not run on, and (where
 ``oracle`` ran) the interquartile mean over scenarios of the normalized
-score (J_nn_dsc - J) / (J_nn_dsc - J_oracle) of the mean costs.
+score (J_nn_dsc - J) / (J_nn_dsc - J_oracle) of the mean costs, over the
+scenarios it ran on (``cpf-bench`` does not run a student on a graph of more
+neighbours than its input has slots).
 """
 
 from __future__ import annotations
@@ -76,11 +79,18 @@ def _table(folder: Path) -> list[str]:
     beats_mpc: dict[str, list[str]] = defaultdict(list)
     loses_nn_dsc: dict[str, list[str]] = defaultdict(list)
     scores: dict[str, list[float]] = defaultdict(list)
+    ran: dict[str, int] = defaultdict(int)
+    missing: dict[str, list[str]] = defaultdict(list)
     for scenario in scenarios:
         cells = [f"{mean[('nn_dsc', scenario)]:.1f}", f"{mean[('mpc', scenario)]:.1f}"]
         if has_oracle:
             cells.append(f"{mean[('oracle', scenario)]:.1f}")
         for student in students:
+            if (student, scenario) not in costs:  # cpf-bench lists it under "Not run"
+                cells.append("not run")
+                missing[student].append(scenario)
+                continue
+            ran[student] += 1
             delta, low, high = _against(costs[(student, scenario)], costs[("mpc", scenario)])
             versus_mpc = "beats" if high < 0 else "loses" if low > 0 else "no difference"
             versus_nn_dsc = verdicts.get((student, scenario), "-")
@@ -102,9 +112,10 @@ def _table(folder: Path) -> list[str]:
     for student in students:
         score = f", IQM normalized score {float(iqm(scores[student])):.3f}" if has_oracle else ""
         lines.append(
-            f"- {Path(student).name}: beats mpc on {len(beats_mpc[student])}/{len(scenarios)} "
-            f"({', '.join(beats_mpc[student]) or 'none'}); loses to nn_dsc on "
-            f"{', '.join(loses_nn_dsc[student]) or 'none'}{score}"
+            f"- {Path(student).name}: beats mpc on {len(beats_mpc[student])}/{ran[student]} "
+            f"({', '.join(beats_mpc[student]) or 'none'}); loses or is mixed against nn_dsc on "
+            f"{', '.join(loses_nn_dsc[student]) or 'none'}; not run on "
+            f"{', '.join(missing[student]) or 'none'}{score}"
         )
     return lines
 
