@@ -39,7 +39,7 @@ def test_tables_count_wins_over_mpc_and_the_score(tmp_path: Path) -> None:
     }
     _bench(tmp_path / "bench_test", costs)
     lines = _tables()._table(tmp_path / "bench_test")
-    summary = "beats mpc on 1/1 (bench_mild); loses or is mixed against nn_dsc on none; not run on none"
+    summary = "beats mpc on 1/1 (bench_mild); loses or is mixed against nn_dsc on none; not run"
     assert summary in lines[-1]
     assert lines[-1].endswith("IQM normalized score 0.875")  # (100 - 30) / (100 - 20)
     costs["r/agents/student_s0"] = [41.0, 45.0, 37.0, 41.0]
