@@ -1,0 +1,213 @@
+"""``cpf-distill``: DAgger of a local residual student from a teacher policy (``agents.distill``).
+
+The run is one TOML file: its top-level keys are ``agents.TrainConfig`` fields
+(the student: ``scenario``, a name, a list of names or ``"suite"``; ``base``,
+``mode``, ``scale``, ``fleets``, ``net_arch``, ...) and its ``[distill]`` table
+holds ``agents.distill.DistillConfig`` fields (``teacher``, ``rounds``,
+``steps``, ``epochs``, ``batch_size``, ``learning_rate``, ``procedural``).
+``--seed`` sets ``TrainConfig.seed`` (the student's weights, the fleets'
+seeds and the data order). ``--out`` receives an ordinary agent folder
+(``agents.load_policy``, ``cpf-bench --policies DIR``) plus the run files:
+
+- ``run.json``: the configuration, the distillation settings, the package
+  versions, the wall time and the per-round record;
+- ``rounds.csv``: per DAgger round, ``round``, ``samples`` (labelled
+  vessel-steps so far), ``loss`` (the student's mean squared error on them),
+  ``zero_loss`` (the base's, a = 0), ``clipped`` (share of label components
+  beyond the residual's reach) and ``seconds`` (since the start).
+
+``--log DIR`` writes the run files to DIR instead. An existing ``--out`` (or
+``--log``) is refused unless ``--force``; everything is written atomically.
+
+Example::
+
+    cpf-distill --config examples/student/student_mpc.toml --seed 0 --out runs/student_s0
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import dataclasses
+import io
+import json
+import platform
+import sys
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from cpf_env.infra import atomic
+from cpf_env.scenarios.suite import SUITE
+
+if TYPE_CHECKING:
+    from agents.distill import DistillConfig
+    from agents.train_config import TrainConfig
+
+__all__ = ["distill_main", "read_distill_config"]
+
+#: The run record and the per-round curve ``--out`` (or ``--log``) receives.
+RUN_RECORD, ROUNDS = "run.json", "rounds.csv"
+#: Columns of ``rounds.csv``.
+ROUND_COLUMNS = ("round", "samples", "loss", "zero_loss", "clipped", "seconds")
+
+
+def read_distill_config(path: str | Path, seed: int) -> tuple[TrainConfig, DistillConfig]:
+    """The student's ``TrainConfig`` and the ``DistillConfig`` of a TOML file.
+
+    Args:
+        path: The file: ``TrainConfig`` keys at the top, ``DistillConfig`` keys in ``[distill]``.
+        seed: ``TrainConfig.seed`` (a ``seed`` key in the file is refused: give ``--seed``).
+
+    Raises:
+        ValueError: Unreadable or invalid TOML, a missing ``[distill]`` table, an unknown
+            key (the valid ones are listed), or a value the configurations refuse.
+    """
+    import tomllib
+
+    from agents.distill import DistillConfig
+    from agents.train_config import TrainConfig
+
+    file = Path(path)
+    try:
+        values: dict[str, Any] = tomllib.loads(file.read_text())
+    except OSError as error:
+        raise ValueError(f"cannot read the distillation file {file}: {error}") from None
+    except tomllib.TOMLDecodeError as error:
+        raise ValueError(f"{file} is not valid TOML: {error}") from None
+    table = values.pop("distill", None)
+    if not isinstance(table, dict):
+        raise ValueError(
+            f"{file} needs a [distill] table (DistillConfig: teacher, rounds, steps, ...); "
+            "the student's TrainConfig keys go above it."
+        )
+    if "seed" in values:
+        raise ValueError(f"{file} sets seed; give it on the command line (--seed) instead.")
+    known = {f.name for f in dataclasses.fields(TrainConfig)} - {"seed"}
+    unknown = sorted(set(values) - known)
+    if unknown:
+        raise ValueError(f"{file} has unknown keys {unknown}; valid keys: {sorted(known)}.")
+    settings_known = {f.name for f in dataclasses.fields(DistillConfig)}
+    unknown = sorted(set(table) - settings_known)
+    if unknown:
+        raise ValueError(
+            f"{file} [distill] has unknown keys {unknown}; valid keys: {sorted(settings_known)}."
+        )
+    scenario = values.get("scenario")
+    if scenario == "suite":
+        values["scenario"] = tuple(SUITE)
+    elif isinstance(scenario, list):
+        values["scenario"] = tuple(scenario)
+    if isinstance(values.get("net_arch"), list):
+        values["net_arch"] = tuple(values["net_arch"])
+    return TrainConfig(**values, seed=seed), DistillConfig(**table)
+
+
+def _rounds_csv(rounds: Sequence[dict[str, float]]) -> str:
+    """``rounds.csv`` text."""
+    buffer = io.StringIO()
+    writer = csv.writer(buffer, lineterminator="\n")
+    writer.writerow(ROUND_COLUMNS)
+    for row in rounds:
+        writer.writerow([row[name] for name in ROUND_COLUMNS])
+    return buffer.getvalue()
+
+
+def _versions() -> dict[str, str]:
+    """Versions of the packages the student depends on."""
+    import numpy
+    import torch
+
+    import cpf_env
+
+    return {
+        "python": platform.python_version(),
+        "cpf_env": cpf_env.__version__,
+        "torch": torch.__version__,
+        "numpy": numpy.__version__,
+    }
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        allow_abbrev=False,
+        prog="cpf-distill",
+        description="DAgger of a local residual student (the agent-folder actor on the "
+        "vessel's local input) from a teacher policy of baselines (deployable or privileged), "
+        "over one scenario, a mixture or the suite, optionally with procedural fleets. "
+        "Writes an agent folder (cpf-bench --policies DIR) with run.json and rounds.csv.",
+    )
+    parser.add_argument(
+        "--config", metavar="FILE.toml", required=True,
+        help="TrainConfig keys at the top (scenario may be 'suite'), DistillConfig keys in a "
+        "[distill] table",
+    )  # fmt: skip
+    parser.add_argument("--seed", type=int, required=True, help="training seed (< 10000)")
+    parser.add_argument("--out", required=True, help="the agent folder to write")
+    parser.add_argument(
+        "--log", metavar="DIR", default=None,
+        help="write run.json and rounds.csv to DIR instead of --out",
+    )  # fmt: skip
+    parser.add_argument(
+        "--force", action="store_true", help="replace an existing --out (and --log)"
+    )
+    return parser
+
+
+def distill_main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of ``cpf-distill``."""
+    parser = _parser()
+    args = parser.parse_args(argv)
+    out = Path(args.out)
+    log = out if args.log is None else Path(args.log)
+    for folder in {out, log}:
+        if folder.exists() and not args.force:
+            parser.error(f"{folder} exists; pass --force to replace it, or choose another --out.")
+    try:
+        config, settings = read_distill_config(args.config, args.seed)
+        from agents.distill import check_distillation
+
+        check_distillation(config, settings)
+    except ValueError as error:
+        parser.error(str(error))
+    import torch
+
+    from agents.distill import distill
+
+    if config.torch_threads is not None:
+        torch.set_num_threads(config.torch_threads)
+    started = time.perf_counter()
+    report = distill(config, settings, out)
+    record = {
+        "config": config.to_json(),
+        "distill": dataclasses.asdict(settings),
+        "command": ["cpf-distill", *(sys.argv[1:] if argv is None else argv)],
+        "versions": _versions(),
+        "wall_clock_seconds": round(time.perf_counter() - started, 1),
+        "samples": report.samples,
+        "clipped": report.clipped,
+        "rounds": list(report.rounds),
+    }
+    files = {RUN_RECORD: json.dumps(record, indent=2) + "\n", ROUNDS: _rounds_csv(report.rounds)}
+    if log == out:
+        for name, text in files.items():
+            atomic.write_text(out / name, text)
+    else:
+        with atomic.staged_folder(log) as staging:
+            for name, text in files.items():
+                atomic.write_text(staging / name, text)
+    print(
+        f"distilled {settings.teacher} into a {config.mode} residual on {config.base} over "
+        f"{' + '.join(config.scenarios)}"
+        f"{f' + {settings.procedural} procedural fleets' if settings.procedural else ''}: "
+        f"{report.samples:,} samples, loss {report.losses[-1]:.4g} (base {report.zero_loss:.4g}), "
+        f"{report.clipped:.1%} of label components clipped, {record['wall_clock_seconds']} s; "
+        f"saved to {out}/\n"
+        f"evaluate: cpf-bench --policies {config.base} {settings.teacher} {out} --split test"
+    )
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(distill_main())

@@ -1,0 +1,134 @@
+r"""Print results/student/README.md's tables from the committed benchmark episodes.
+
+    python examples/student/tables.py                       # results/student
+    python examples/student/tables.py --root results/student
+
+For each of ``bench_test``, ``bench_shift`` and ``bench_procedural`` (those
+that exist), one row per scenario: the mean episode cost of ``nn_dsc``,
+``mpc`` and ``oracle`` (where it ran) and of each student (one per training
+seed), each student's paired cost difference to ``mpc`` (mean over seeds
+with its 95 % bootstrap interval, ``cpf_commands.bench.stats``) and its
+verdict against ``mpc`` (``beats``: the whole interval below 0; ``loses``:
+above 0; else ``no difference``), and its verdict against ``nn_dsc`` as
+``cpf-bench`` wrote it in ``summary.md``. Then per student: the scenarios on
+which it beats ``mpc``, those on which it loses to ``nn_dsc`` or is mixed
+(better cost, a guarded metric worse), those it did not run on, and (where
+``oracle`` ran) the interquartile mean over scenarios of the normalized
+score (J_nn_dsc - J) / (J_nn_dsc - J_oracle) of the mean costs, over the
+scenarios it ran on (``cpf-bench`` does not run a student on a graph of more
+neighbours than its input has slots).
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+from collections import defaultdict
+from pathlib import Path
+
+import numpy as np
+
+from cpf_commands.bench.stats import iqm, paired_difference
+
+BENCHES = ("bench_test", "bench_shift", "bench_procedural")
+STUDENT = "agents/student"
+
+
+def _episodes(path: Path) -> dict[tuple[str, str], dict[int, float]]:
+    """(policy, scenario) -> seed -> episode cost, from an ``episodes.csv``."""
+    costs: dict[tuple[str, str], dict[int, float]] = defaultdict(dict)
+    with path.open() as file:
+        for row in csv.DictReader(file):
+            costs[(row["policy"], row["scenario"])][int(row["seed"])] = float(row["cost"])
+    return costs
+
+
+def _verdicts(summary: Path) -> dict[tuple[str, str], str]:
+    """(policy, scenario) -> verdict against the reference, from a ``summary.md``."""
+    found = {}
+    for line in summary.read_text().splitlines():
+        cells = [cell.strip() for cell in line.strip().strip("|").split("|")]
+        if len(cells) == 6 and cells[2].isdigit():
+            found[(cells[0], cells[1])] = cells[5]
+    return found
+
+
+def _against(costs: dict[int, float], reference: dict[int, float]) -> tuple[float, float, float]:
+    """Mean paired difference (policy - reference) and its 95 % interval."""
+    seeds = sorted(reference)
+    return paired_difference([costs[s] for s in seeds], [reference[s] for s in seeds])
+
+
+def _table(folder: Path) -> list[str]:
+    costs = _episodes(folder / "episodes.csv")
+    verdicts = _verdicts(folder / "summary.md")
+    students = sorted({p for p, _ in costs if STUDENT in p})
+    scenarios = list(dict.fromkeys(s for _, s in costs))
+    has_oracle = all(("oracle", s) in costs for s in scenarios)
+    mean = {key: float(np.mean(list(values.values()))) for key, values in costs.items()}
+    lines = [
+        f"{folder.name}: mean cost per scenario; each student's cost difference to mpc "
+        "[95 %] and verdicts (vs mpc; vs nn_dsc)",
+        "",
+        "| scenario | nn_dsc | mpc | "
+        + ("oracle | " if has_oracle else "")
+        + " | ".join(Path(s).name for s in students)
+        + " |",
+        "|---|---|---|" + ("---|" if has_oracle else "") + "---|" * len(students),
+    ]
+    beats_mpc: dict[str, list[str]] = defaultdict(list)
+    loses_nn_dsc: dict[str, list[str]] = defaultdict(list)
+    scores: dict[str, list[float]] = defaultdict(list)
+    ran: dict[str, int] = defaultdict(int)
+    missing: dict[str, list[str]] = defaultdict(list)
+    for scenario in scenarios:
+        cells = [f"{mean[('nn_dsc', scenario)]:.1f}", f"{mean[('mpc', scenario)]:.1f}"]
+        if has_oracle:
+            cells.append(f"{mean[('oracle', scenario)]:.1f}")
+        for student in students:
+            if (student, scenario) not in costs:  # cpf-bench lists it under "Not run"
+                cells.append("not run")
+                missing[student].append(scenario)
+                continue
+            ran[student] += 1
+            delta, low, high = _against(costs[(student, scenario)], costs[("mpc", scenario)])
+            versus_mpc = "beats" if high < 0 else "loses" if low > 0 else "no difference"
+            versus_nn_dsc = verdicts.get((student, scenario), "-")
+            if versus_mpc == "beats":
+                beats_mpc[student].append(scenario)
+            if versus_nn_dsc.startswith(("loses", "mixed")):
+                loses_nn_dsc[student].append(scenario)
+            if has_oracle:
+                gap = mean[("nn_dsc", scenario)] - mean[("oracle", scenario)]
+                scores[student].append(
+                    (mean[("nn_dsc", scenario)] - mean[(student, scenario)]) / gap
+                )
+            cells.append(
+                f"{mean[(student, scenario)]:.1f} ({delta:+.2f} [{low:+.2f}, {high:+.2f}]; "
+                f"{versus_mpc}; {versus_nn_dsc})"
+            )
+        lines.append(f"| {scenario} | " + " | ".join(cells) + " |")
+    lines.append("")
+    for student in students:
+        score = f", IQM normalized score {float(iqm(scores[student])):.3f}" if has_oracle else ""
+        lines.append(
+            f"- {Path(student).name}: beats mpc on {len(beats_mpc[student])}/{ran[student]} "
+            f"({', '.join(beats_mpc[student]) or 'none'}); loses or is mixed against nn_dsc on "
+            f"{', '.join(loses_nn_dsc[student]) or 'none'}; not run on "
+            f"{', '.join(missing[student]) or 'none'}{score}"
+        )
+    return lines
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0], allow_abbrev=False)
+    parser.add_argument("--root", default="results/student", help="folder of the bench folders")
+    args = parser.parse_args()
+    for name in BENCHES:
+        folder = Path(args.root) / name
+        if (folder / "episodes.csv").is_file():
+            print("\n".join(_table(folder)), end="\n\n")
+
+
+if __name__ == "__main__":
+    main()

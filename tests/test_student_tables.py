@@ -1,0 +1,49 @@
+"""``examples/student/tables.py``: verdicts against mpc and the normalized score."""
+
+from __future__ import annotations
+
+import importlib.util
+from pathlib import Path
+from types import ModuleType
+
+from conftest import ROOT
+
+
+def _tables() -> ModuleType:
+    spec = importlib.util.spec_from_file_location("tables", ROOT / "examples/student/tables.py")
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def _bench(folder: Path, costs: dict[str, list[float]]) -> None:
+    folder.mkdir(parents=True)
+    rows = ["policy,scenario,seed,cost"]
+    for policy, values in costs.items():
+        rows += [f"{policy},bench_mild,{10000 + k},{v}" for k, v in enumerate(values)]
+    (folder / "episodes.csv").write_text("\n".join(rows) + "\n")
+    (folder / "summary.md").write_text(
+        "| policy | scenario | N | cost difference [95 %] | P(beats) [95 %] | verdict |\n"
+        "|---|---|---|---|---|---|\n"
+        "| r/agents/student_s0 | bench_mild | 4 | -1 [-2, -0.5] | 1.00 [0.5, 1.00] | beats |\n"
+    )
+
+
+def test_tables_count_wins_over_mpc_and_the_score(tmp_path: Path) -> None:
+    costs = {
+        "nn_dsc": [100.0, 110.0, 90.0, 100.0],
+        "mpc": [40.0, 44.0, 36.0, 40.0],
+        "oracle": [20.0, 22.0, 18.0, 20.0],
+        "r/agents/student_s0": [30.0, 33.0, 27.0, 30.0],
+    }
+    _bench(tmp_path / "bench_test", costs)
+    lines = _tables()._table(tmp_path / "bench_test")
+    summary = "beats mpc on 1/1 (bench_mild); loses or is mixed against nn_dsc on none; not run"
+    assert summary in lines[-1]
+    assert lines[-1].endswith("IQM normalized score 0.875")  # (100 - 30) / (100 - 20)
+    costs["r/agents/student_s0"] = [41.0, 45.0, 37.0, 41.0]
+    _bench(tmp_path / "again" / "bench_test", costs)
+    worse = _tables()._table(tmp_path / "again" / "bench_test")
+    assert "beats mpc on 0/1 (none)" in worse[-1]
+    assert "loses" in worse[-3]
