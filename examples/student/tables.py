@@ -30,7 +30,7 @@ import numpy as np
 
 from cpf_commands.bench.stats import iqm, paired_difference
 
-BENCHES = ("bench_test", "bench_shift", "bench_procedural")
+BENCHES = ("bench_test", "bench_shift", "bench_procedural", "bench_test_k6", "bench_shift_k6")
 STUDENT = "agents/student"
 
 
