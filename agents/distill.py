@@ -71,7 +71,7 @@ from agents.agent_folder import PolicyNetwork, build_actor, write_agent
 from agents.mixture_env import MixtureVecEnv, split_fleets
 from agents.train_config import TrainConfig
 from agents.vec_env import FleetVecEnv
-from baselines import POLICIES, PRIVILEGED, make_policy
+from baselines import ALL_POLICIES, make_policy
 from cpf_env import scenarios
 from cpf_env.envs.input_statistics import InputStatistics
 from cpf_env.envs.policy import FleetPolicy
@@ -96,13 +96,8 @@ LABEL_MODES = ("force", "force_and_rate")
 WHOLE_BATCH_BASES = ("mpc",)
 
 
-def _teachers() -> tuple[str, ...]:
-    """Every policy name a teacher may have: deployable and privileged."""
-    return tuple(sorted({*POLICIES, *PRIVILEGED}))
-
-
 #: Names a teacher may have: ``baselines.POLICIES`` and ``baselines.PRIVILEGED``.
-TEACHERS = _teachers()
+TEACHERS = tuple(sorted(ALL_POLICIES))
 
 
 @dataclass(frozen=True)

@@ -49,6 +49,7 @@ from baselines.privileged import BacksteppingPrivileged, NNDSCPrivileged, Privil
 from cpf_env.envs.policy import FleetPolicy
 
 __all__ = [
+    "ALL_POLICIES",
     "DIAGNOSTICS",
     "HEADROOM_REFERENCE",
     "POLICIES",
@@ -100,6 +101,8 @@ PRIVILEGED: dict[str, type[FleetPolicy]] = {
         BacksteppingPrivileged,
     )
 }
+#: Every policy class by name: ``POLICIES``, then ``PRIVILEGED``.
+ALL_POLICIES: dict[str, type[FleetPolicy]] = {**POLICIES, **PRIVILEGED}
 #: The headroom bound the benchmark's normalized score is measured against.
 HEADROOM_REFERENCE = OraclePolicy.name
 
@@ -117,9 +120,8 @@ def make_policy(name: str, env: object, **options: Any) -> FleetPolicy:
     Raises:
         ValueError: Unknown name or option (the message lists the valid ones).
     """
-    known: dict[str, type[FleetPolicy]] = {**POLICIES, **PRIVILEGED}
-    if name not in known:
-        raise ValueError(f"unknown policy {name!r}; choose one of {sorted(known)}.")
-    builder: Any = known[name]  # every member takes (env, **options)
+    if name not in ALL_POLICIES:
+        raise ValueError(f"unknown policy {name!r}; choose one of {sorted(ALL_POLICIES)}.")
+    builder: Any = ALL_POLICIES[name]  # every member takes (env, **options)
     policy: FleetPolicy = builder(env, **options)
     return policy

@@ -92,9 +92,9 @@ class TrustedAgentFolder(str):
 
 def baseline_names() -> list[str]:
     """The analytic policies by name: the deployable ones, then the privileged references."""
-    from baselines import POLICIES, PRIVILEGED
+    from baselines import ALL_POLICIES
 
-    return [*POLICIES, *PRIVILEGED]
+    return list(ALL_POLICIES)
 
 
 def registered_policies() -> dict[str, metadata.EntryPoint]:

@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from baselines import POLICIES, PRIVILEGED, NNDSCGains
+from baselines import ALL_POLICIES, NNDSCGains
 from cpf_commands.common.outputs import claim_output_folder
 from cpf_commands.common.rollout import StepObserver
 from cpf_commands.run.experiment import run_episode
@@ -348,7 +348,7 @@ def warm_up(scenario: str | Scenario) -> None:
 
 def policy_options(policy: str, scenario: str, leakage: str | None) -> dict[str, Any]:
     """Options for ``make_policy``: the weight-law reading, for policies that have one."""
-    gains_type = getattr({**POLICIES, **PRIVILEGED}.get(policy), "gains_type", None)
+    gains_type = getattr(ALL_POLICIES.get(policy), "gains_type", None)
     if gains_type is None or "leakage" not in gains_type.option_names():
         if leakage is not None:
             raise ValueError(
@@ -448,7 +448,7 @@ def _reproduce(
         observer=observer,
     )
     metrics = episode_metrics(trajectory)
-    policy_type = {**POLICIES, **PRIVILEGED}.get(policy)
+    policy_type = ALL_POLICIES.get(policy)
     claims: list[Claim] = []
     if resolved.name in PAPER_SCENARIOS:
         gains = NNDSCGains.from_options(options) if "leakage" in options else None
