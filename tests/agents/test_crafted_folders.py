@@ -289,6 +289,41 @@ def test_marl_fields_are_typed_strictly(tmp_path: Path, path: str, value: Any, f
     _refused(folder, "config.json", field)
 
 
+def test_marl_task_overrides_make_the_default_scenario_and_a_named_one_leaves_them_out(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    folder = _copy(MARL, tmp_path)
+    _edit_json(folder, "config.json", _set("task.overrides", {"max_path_error": 3.5}))
+    assert load_policy(folder).scenario.max_path_error == 3.5
+    assert load_policy(MARL).scenario.max_path_error == 10.0
+    assert load_policy(folder, scenario="bench_lossy_links").scenario.max_path_error == 10.0
+    argv = ["--policy", str(folder), "--steps", "2", "--out", str(tmp_path / "r"), "--quiet",
+            "--no-figures"]  # fmt: skip
+    with pytest.raises(SystemExit) as caught:
+        run_main(argv)
+    assert caught.value.code == 2
+    error = capsys.readouterr().err
+    assert "with the scenario overrides {'max_path_error': 3.5}" in error
+    assert "choose one with --scenario" in error and not (tmp_path / "r").exists()
+    assert run_main([*argv, "--scenario", "bench_lossy_links"]) == 0
+
+
+@pytest.mark.parametrize(
+    ("overrides", "pattern"),
+    [
+        ([1.0], "'task.overrides' must be a JSON object"),
+        ({"no_such_field": 1.0}, "'task.overrides' does not apply to scenario 'bench_lossy_links'"),
+        ({"max_path_error": "far"}, "'task.overrides' does not apply"),
+    ],
+)
+def test_marl_task_overrides_its_scenario_refuses_are_refused(
+    tmp_path: Path, overrides: Any, pattern: str
+) -> None:
+    folder = _copy(MARL, tmp_path)
+    _edit_json(folder, "config.json", _set("task.overrides", overrides))
+    _refused(folder, "config.json", pattern)
+
+
 @pytest.mark.parametrize(("key", "text"), [("epsilon", "Infinity"), ("clip", "1e400")])
 def test_infinite_statistics_are_refused(tmp_path: Path, key: str, text: str) -> None:
     folder = _copy(AGENT, tmp_path)
