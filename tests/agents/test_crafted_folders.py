@@ -17,8 +17,6 @@ import os
 import resource
 import shutil
 import signal
-import subprocess
-import sys
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from types import FrameType
@@ -410,24 +408,6 @@ def test_cpf_run_runs_the_marl_folders_cpf_bench_runs(
                          str(tmp_path / algorithm), "--quiet", "--no-figures"]) == 0  # fmt: skip
         assert "bench_lossy_links with" in capsys.readouterr().out
         assert (tmp_path / algorithm / f"bench_lossy_links_{folder.name}/metrics.json").is_file()
-
-
-def test_reading_an_agent_folder_imports_no_learning_algorithm() -> None:
-    code = (
-        "import sys\n"
-        "from agents import load_policy\n"
-        f"load_policy({str(AGENT)!r}).act_batch\n"
-        f"load_policy({str(MARL)!r}).act_batch\n"
-        "print(sorted(m for m in sys.modules if m.split('.')[0] == 'stable_baselines3'\n"
-        "    or m in ('agents.training', 'agents.algorithms', 'agents.run_folder',\n"
-        "             'agents.mixture_env', 'agents.vec_env')))\n"
-    )
-    environment = {**os.environ, "PYTHONPATH": str(ROOT)}
-    done = subprocess.run(
-        [sys.executable, "-c", code], capture_output=True, text=True, env=environment, check=False
-    )
-    assert done.returncode == 0, done.stderr
-    assert done.stdout.strip() == "[]"
 
 
 # ---- cpf-export files: sealed by their own SHA-256, interface checked ---------------------------
