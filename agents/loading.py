@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import dataclasses
 from pathlib import Path
-from typing import Protocol
+from typing import Any, Protocol
 
 import numpy as np
 import torch
@@ -65,7 +65,14 @@ from cpf_env.scenarios import Scenario, make_scenario
 from cpf_env.sim.fleet import observation_layout
 from cpf_env.sim.observation import SLOTS
 
-__all__ = ["Actor", "TorchActor", "TrainedPolicy", "load_policy", "read_config"]
+__all__ = [
+    "Actor",
+    "TorchActor",
+    "TrainedPolicy",
+    "load_policy",
+    "read_config",
+    "read_scenario_overrides",
+]
 
 Array = NDArray[np.float64]
 
@@ -85,7 +92,8 @@ def load_policy(
     Args:
         path: The folder.
         scenario: Evaluation scenario (name or ``Scenario``); default: the training
-            scenario with the training run's overrides. Its observation layout
+            scenario with the training run's overrides (a MARL task's ``overrides``;
+            not its training ``max_steps``: the scenario's own episode). Its observation layout
             must match the training one (the network's input size).
         trust_pickle: Allow unpickling an old SB3 folder. Unpickling runs any code
             its author put in the files: only for folders you made or trust.
@@ -98,8 +106,9 @@ def load_policy(
     """
     folder = Path(path)
     kind = _format(folder)
+    overrides: dict[str, Any] = {}  # a MARL task's Scenario field overrides
     if kind == MARL_FORMAT:  # a BenchMARL actor (agents.marl.policy_folder)
-        config, network, normalization = read_marl_agent(folder)
+        config, network, normalization, overrides = read_marl_agent(folder)
     elif kind == FORMAT:
         record, network, normalization = read_agent(folder)
         config = training_config(record["config"], folder / CONFIG)
@@ -114,7 +123,7 @@ def load_policy(
         record, network, normalization = read_sb3_folder(folder)
         config = training_config(record["config"], folder / CONFIG)
     if scenario is None:
-        resolved = make_scenario(config.home_scenario, **config.scenario_overrides())
+        resolved = make_scenario(config.home_scenario, **config.scenario_overrides(), **overrides)
     else:
         resolved = make_scenario(scenario)
     return TrainedPolicy(folder.name, config, TorchActor(network, normalization), resolved)
@@ -131,14 +140,32 @@ def read_config(path: str | Path) -> TrainConfig:
     folder = Path(path)
     kind = _format(folder)
     if kind == MARL_FORMAT:
-        manifest = read_manifest(folder / MANIFEST, MARL_FORMAT, MARL_FORMAT_VERSION)
-        return marl_config(read_json(folder, CONFIG, manifest), folder / CONFIG)[0]
+        return _marl_record(folder)[0]
     if kind == FORMAT:
         manifest = read_manifest(folder / MANIFEST, FORMAT, FORMAT_VERSIONS)
         record = read_json(folder, CONFIG, manifest)
     else:
         record = parse_json(read_file(folder / CONFIG, MAX_JSON_BYTES, folder), folder / CONFIG)
     return training_config(field(record, "config", folder / CONFIG), folder / CONFIG)
+
+
+def read_scenario_overrides(path: str | Path) -> dict[str, Any]:
+    """The ``Scenario`` field overrides of a MARL folder's task (``{}`` for other agent folders).
+
+    ``load_policy`` applies them when it is given no scenario; a named scenario
+    leaves them out.
+
+    Raises:
+        AgentFolderError: Not an agent folder, or an unreadable or invalid configuration.
+    """
+    folder = Path(path)
+    return _marl_record(folder)[2] if _format(folder) == MARL_FORMAT else {}
+
+
+def _marl_record(folder: Path) -> tuple[TrainConfig, list[int], dict[str, Any]]:
+    """``marl_config`` of a MARL folder's ``config.json``, checked against its manifest."""
+    manifest = read_manifest(folder / MANIFEST, MARL_FORMAT, MARL_FORMAT_VERSION)
+    return marl_config(read_json(folder, CONFIG, manifest), folder / CONFIG)
 
 
 def _format(folder: Path) -> str | None:

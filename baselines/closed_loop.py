@@ -130,9 +130,12 @@ def _run_parallel(
 ) -> None:
     """``_run_fleet`` for fleets ``first`` .. ``first + S - 1`` of one policy, on numba's threads.
 
-    The same bits as one fleet after the other (``_run``).
+    The same bits as one fleet after the other (``_run``). The loop index is made
+    int64, as ``_run``'s: prange's is uint64, which would compile ``_run_fleet`` (the
+    largest kernel of the package) a second time for that type alone.
     """
-    for r in prange(rows.shape[0]):
+    for index in prange(rows.shape[0]):
+        r = int(np.int64(index))  # int() alone would keep the uint64
         _run_fleet(
             a, c, pc, ps, out, obs, known, actions, rows, first + r, r, steps, hold_ended, ended,
             record,

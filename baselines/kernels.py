@@ -343,10 +343,13 @@ def act_rows_parallel(
     """``act_rows_serial`` with the fleets spread over numba's threads (same bits).
 
     Each fleet runs in a call of its own (``_act_fleet`` is not inlined), so its
-    scratch arrays are its own and parfors never reorders inside a fleet.
+    scratch arrays are its own and parfors never reorders inside a fleet. The row
+    index is made int64, as ``act_rows_serial``'s, so that ``_act_fleet`` compiles once
+    (prange's index is uint64).
     """
     hidden = c.input_weights.shape[0]
-    for r in prange(obs.shape[0]):
+    for index in prange(obs.shape[0]):
+        r = int(np.int64(index))  # int() alone would keep the uint64
         _act_fleet(c, s, obs, fleets, known, out, r, np.empty((WORK_ROWS, 3)), np.empty(hidden))
 
 

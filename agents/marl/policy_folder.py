@@ -50,8 +50,9 @@ from agents.folder_files import AgentFolderError, check_fields, field, read_mani
 from agents.train_config import TrainConfig
 from cpf_env.envs.input_statistics import InputStatistics
 from cpf_env.infra import atomic
+from cpf_env.scenarios import make_scenario
 
-__all__ = ["MARL_FORMAT", "marl_config", "read_marl_agent", "save_marl_policy"]
+__all__ = ["MARL_FORMAT", "marl_config", "marl_overrides", "read_marl_agent", "save_marl_policy"]
 
 MARL_FORMAT = "cpf-marl-agent"
 MARL_FORMAT_VERSION = 1
@@ -158,12 +159,17 @@ def save_marl_policy(
     return target
 
 
-def marl_config(record: Any, source: Path) -> tuple[TrainConfig, list[int]]:
-    """The ``TrainConfig`` and layer sizes of a MARL ``config.json`` record, strictly checked.
+def marl_config(record: Any, source: Path) -> tuple[TrainConfig, list[int], dict[str, Any]]:
+    """The ``TrainConfig``, layer sizes and scenario overrides of a MARL ``config.json`` record.
+
+    Every field strictly checked. The overrides (``task.overrides``, ``marl_overrides``)
+    have no ``TrainConfig`` field: ``agents.load_policy`` applies them to the default
+    evaluation scenario.
 
     Raises:
         AgentFolderError: A missing or mistyped field (``scale: "10"``, ``normalize:
-            "false"``), layer sizes that are not >= 1, another algorithm or actor form.
+            "false"``), layer sizes that are not >= 1, another algorithm or actor form,
+            overrides the scenario refuses.
     """
     check_fields(record, RECORD_FIELDS, source, required=True)
     check_fields(field(record, "task", source), TASK_FIELDS, source, "task.", required=True)
@@ -196,21 +202,50 @@ def marl_config(record: Any, source: Path) -> tuple[TrainConfig, list[int]]:
         )
     except ValueError as error:
         raise AgentFolderError(f"{source}: field 'task' is not a valid task: {error}") from None
-    return config, sizes
+    return config, sizes, marl_overrides(task, source)
 
 
-def read_marl_agent(folder: Path) -> tuple[TrainConfig, PolicyNetwork, InputStatistics | None]:
+def marl_overrides(task: dict[str, Any], source: Path) -> dict[str, Any]:
+    """The ``Scenario`` field overrides the task trained with (``task.overrides``), checked.
+
+    A record without the field has none. The overrides are applied to the task's
+    scenario here, so a folder whose overrides the scenario refuses fails to load.
+
+    Raises:
+        AgentFolderError: ``task.overrides`` is not a JSON object, or names a field
+            or a value its scenario refuses (``make_scenario``'s message).
+    """
+    overrides = task.get("overrides", {})
+    if not isinstance(overrides, dict):
+        raise AgentFolderError(
+            f"{source}: field 'task.overrides' must be a JSON object of Scenario fields, "
+            f"got {type(overrides).__name__}."
+        )
+    try:
+        make_scenario(task["scenario"], **overrides)
+    except (TypeError, ValueError) as error:
+        raise AgentFolderError(
+            f"{source}: field 'task.overrides' does not apply to scenario "
+            f"{task['scenario']!r}: {error}"
+        ) from None
+    return dict(overrides)
+
+
+def read_marl_agent(
+    folder: Path,
+) -> tuple[TrainConfig, PolicyNetwork, InputStatistics | None, dict[str, Any]]:
     """Read a folder ``save_marl_policy`` wrote, verifying every file against the manifest.
 
     Returns:
         The task as a ``TrainConfig`` (PPO, the task's base, residual and statistics
-        settings), the actor, and the statistics (or None).
+        settings), the actor, the statistics (or None), and the task's ``Scenario``
+        field overrides (``marl_overrides``).
 
     Raises:
         AgentFolderError: A missing, unreadable, altered or inconsistent file (named).
     """
     manifest = read_manifest(folder / MANIFEST, MARL_FORMAT, MARL_FORMAT_VERSION)
-    config, sizes = marl_config(read_json(folder, CONFIG, manifest), folder / CONFIG)
+    config, sizes, overrides = marl_config(read_json(folder, CONFIG, manifest), folder / CONFIG)
     statistics = read_json(folder, NORMALIZATION, manifest)
     normalization = None
     if statistics is not None:
@@ -221,4 +256,4 @@ def read_marl_agent(folder: Path) -> tuple[TrainConfig, PolicyNetwork, InputStat
             f"config.json says task.normalize={config.normalize_observations}."
         )
     network = network_from_layers(read_weights(folder, manifest), sizes, ACTOR, folder / WEIGHTS)
-    return config, network, normalization
+    return config, network, normalization, overrides

@@ -87,7 +87,7 @@ def _run_parser(prog: str = "cpf-run") -> argparse.ArgumentParser:
         "--out",
         default="outputs",
         help="output directory; the run writes its subfolder <scenario>_<policy> whole at the "
-        "end (default: outputs)",
+        "end, a module:NAME policy's ':' written '+' (default: outputs)",
     )
     parser.add_argument(
         "--force", action="store_true", help="replace the results already in that subfolder"
@@ -135,18 +135,27 @@ def _default_scenario(policy: str) -> str:
 
     Raises:
         ValueError: A folder that is not an agent folder, or whose configuration is unreadable
-            (``agents.loading.read_config``'s message, naming the file and field).
+            (``agents.loading.read_config``'s message, naming the file and field); a MARL
+            folder whose task overrides scenario fields (a name would leave them out).
     """
     if not Path(policy).is_dir():
         return DEFAULT_SCENARIO
     try:
-        from agents.loading import read_config
+        from agents.loading import read_config, read_scenario_overrides
     except ImportError as error:
         raise ValueError(
             f"{policy!r} is a folder, but loading trained agents needs the learning extra: "
             "pip install 'cpf_env[rl]'."
         ) from error
     names = read_config(policy).scenarios
+    overrides = read_scenario_overrides(policy)
+    if overrides:
+        raise ValueError(
+            f"{policy} was trained on {names[0]} with the scenario overrides {overrides}, "
+            "which a registered scenario leaves out: choose one with --scenario (the run "
+            f"is then without them), or evaluate in Python: agents.load_policy({policy!r}) "
+            "runs on the training scenario with its overrides."
+        )
     if len(names) > 1:
         print(
             f"cpf-run: the agent was trained on {len(names)} scenarios; running its first, "

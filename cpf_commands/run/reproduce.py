@@ -420,8 +420,15 @@ def reproduce(
 
 
 def run_folder(out: str | Path, scenario: str, policy: str) -> Path:
-    """The output folder of a cpf-run: ``out/<scenario>_<policy folder's name>``."""
-    return Path(out) / f"{scenario}_{Path(policy).name}"
+    """The output folder of a cpf-run: ``out/<scenario>_<policy folder's name>``.
+
+    The ``:`` of a ``package.module:NAME`` policy becomes ``+``
+    (``bench_mild_my_policy+ProportionalPolicy``): ``:`` is not allowed in
+    Windows file names and is a separator to shells and ``PATH``-like lists,
+    and ``+`` is in no Python module or attribute name, so two specs never
+    share a folder.
+    """
+    return Path(out) / f"{scenario}_{Path(policy).name.replace(':', '+')}"
 
 
 def _reproduce(

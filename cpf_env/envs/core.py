@@ -142,7 +142,9 @@ def checked_actions(
     """
     array = np.asarray(actions)
     if array.dtype.kind not in "iuf":
-        kind = {"b": "bools", "c": "complex values"}.get(array.dtype.kind, "not numbers")
+        kind = {"b": "bools are not commands", "c": "complex values"}.get(
+            array.dtype.kind, "not numbers"
+        )
         raise ValueError(f"actions must be real numbers, got dtype {array.dtype} ({kind}).")
     if array.shape != expected:
         raise ValueError(f"actions must have shape {form} = {expected}, got {array.shape}.")

@@ -50,14 +50,15 @@ def as_real_actions(actions: object, what: str = "actions") -> NDArray[np.float6
     """``actions`` as a float64 array, or ValueError if they are not real numbers.
 
     Complex values are rejected rather than silently losing their imaginary
-    part; so are strings, None and other non-numeric objects.
+    part; so are bools (a force of ``True`` is never meant: every route refuses
+    them), strings, None and other non-numeric objects.
     """
     array = np.asarray(actions)
-    if array.dtype.kind not in "biuf":
-        raise ValueError(
-            f"{what} must be real numbers, got dtype {array.dtype} "
-            f"({'complex values' if array.dtype.kind == 'c' else 'not numbers'})."
+    if array.dtype.kind not in "iuf":
+        kind = {"b": "bools are not commands", "c": "complex values"}.get(
+            array.dtype.kind, "not numbers"
         )
+        raise ValueError(f"{what} must be real numbers, got dtype {array.dtype} ({kind}).")
     return array.astype(np.float64)
 
 
@@ -313,8 +314,8 @@ class FleetSim:
         """Check an action batch and return it as float64 (B, n, act_dim).
 
         Raises:
-            ValueError: Wrong shape, complex values or a non-finite entry (naming fleet,
-                vessel, component).
+            ValueError: Wrong shape, bools, complex values or a non-finite entry (naming
+                fleet, vessel, component).
         """
         array = as_real_actions(actions)
         expected = self._action_shape
@@ -352,7 +353,7 @@ class FleetSim:
         if self._needs_reset:
             raise RuntimeError("call reset() before step().")
         array = np.asarray(actions)
-        if array.dtype.kind not in "biuf" or array.shape != self._action_shape:
+        if array.dtype.kind not in "iuf" or array.shape != self._action_shape:
             self._refuse_diverged_fleets()  # raises first, as it always did, if one diverged
             self.validate_actions(array)  # raises: not real numbers, or the wrong shape
         validated = np.array(array, dtype=np.float64, order="C")  # a copy, as validate_actions

@@ -235,20 +235,28 @@ def test_empty_slots_added_to_an_input_leave_the_action_unchanged(agent: Path) -
     np.testing.assert_allclose(actor(padded.astype(np.float32)), action, rtol=0, atol=1e-6)
 
 
-def test_loading_an_encoder_agent_imports_no_learning_algorithm(agent: Path) -> None:
-    """The encoder and the history are read and run with torch and numpy only."""
+def test_loading_an_agent_folder_imports_no_learning_algorithm(agent: Path) -> None:
+    """Agent folders are read and run with torch and numpy only, in one fresh process.
+
+    An encoder agent with a history, the committed MLP agent and a BenchMARL actor.
+    """
     import os
     import subprocess
     import sys
 
     from conftest import ROOT
 
+    mlp = ROOT / "results/residual_rl/agents/residual_ppo_bench_lossy_links_5m_s0"
+    marl = ROOT / "results/marl/agents/mappo_bench_lossy_links_s0"
     code = (
         "import sys\n"
         "from agents import load_policy\n"
         f"load_policy({str(agent)!r}).act_batch\n"
+        f"load_policy({str(mlp)!r}).act_batch\n"
+        f"load_policy({str(marl)!r}).act_batch\n"
         "print(sorted(m for m in sys.modules if m.split('.')[0] == 'stable_baselines3'\n"
-        "    or m in ('agents.algorithms', 'agents.history_env', 'agents.run_folder')))\n"
+        "    or m in ('agents.training', 'agents.algorithms', 'agents.history_env',\n"
+        "             'agents.run_folder', 'agents.mixture_env', 'agents.vec_env')))\n"
     )
     environment = {**os.environ, "PYTHONPATH": str(ROOT)}
     done = subprocess.run(

@@ -112,11 +112,12 @@ def test_ctrl_c_saves_a_complete_agent_and_resumes_exactly(tmp_path: Path) -> No
     config = _config("ppo")
     whole = train(config, tmp_path / "whole", False, evaluate=_evaluator(), schedule=SCHEDULE)
     parts = tmp_path / "parts"
+    previous = signal.getsignal(signal.SIGINT)  # SIG_IGN when pytest runs as a background job
     with pytest.raises(TrainingInterrupted) as stop:
         train(config, parts, False, callbacks=[_CtrlCAt(170)], evaluate=_evaluator(),
               schedule=SCHEDULE)  # fmt: skip
     assert stop.value.timesteps == 320  # the update in progress finished first
-    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # handler restored
+    assert signal.getsignal(signal.SIGINT) is previous  # handler restored
     record = json.loads((parts / "config.json").read_text())
     assert record["interrupted"] is True and record["timesteps_done"] == 320
     policy = load_policy(parts)  # a complete, verified agent folder

@@ -213,6 +213,7 @@ def test_observations_are_not_aliased_through_steps_and_auto_resets() -> None:
         (np.zeros((3, 20)), "shape"),  # (k, num_envs): transposed, same number of elements
         (np.zeros(60), "shape"),
         (np.zeros((20, 3), dtype=complex), "real numbers"),
+        (np.ones((20, 3), dtype=bool), r"real numbers, got dtype bool \(bools are not commands"),
         (np.full((20, 3), np.inf), "finite"),
         (np.full((20, 3), -np.inf), "finite"),
         (np.full((20, 3), np.nan), "finite"),

@@ -98,10 +98,15 @@ def test_cpf_bench_labels_user_policies_by_their_spec_and_benches_the_template(
     assert all(spec in printed for spec in specs)
 
 
-def test_cpf_run_takes_a_user_policy(user_module, tmp_path, capsys):
+def test_cpf_run_takes_a_user_policy_and_writes_a_folder_without_colon(
+    user_module, tmp_path, capsys
+):
     argv = ["--policy", f"{user_module}:mine", "--scenario", "bench_mild", "--steps", "10"]
     assert run_main([*argv, "--no-figures", "--quiet", "--out", str(tmp_path)]) == 0
     assert "bench_mild with my_factories:mine" in capsys.readouterr().out
+    assert not any(":" in p.name for p in tmp_path.iterdir())
+    assert [p.name for p in tmp_path.iterdir() if p.is_dir()] == ["bench_mild_my_factories+mine"]
+    assert (tmp_path / "bench_mild_my_factories+mine" / "metrics.json").is_file()
 
 
 @pytest.mark.parametrize(

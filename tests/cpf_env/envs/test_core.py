@@ -13,13 +13,17 @@ from cpf_env import scenarios
 from cpf_env.envs.core import EpisodeCore
 from cpf_env.envs.gym_envs import CentralizedFleetEnv, CentralizedFleetVectorEnv
 from cpf_env.envs.residual import ResidualConfig, learner_config
+from cpf_env.sim.fleet import FleetSim
 
 SCENARIO = scenarios.get("bench_lossy_links").replace(max_steps=40)
 
 
 def snapshot(env: Any) -> dict[str, Any]:
-    """Every array of the simulator and every fleet's generator state."""
-    sim = env.core.sim if hasattr(env, "core") else env.sim
+    """Every array of the simulator (``env``, or an env's) and every fleet's generator state."""
+    if isinstance(env, FleetSim):
+        sim = env
+    else:
+        sim = env.core.sim if hasattr(env, "core") else env.sim
     arrays = {key: value.copy() for key, value in sim.arrays._asdict().items()}
     return {"arrays": arrays, "rngs": [rng.bit_generator.state for rng in sim.rngs]}
 
@@ -116,3 +120,45 @@ def test_bad_actions_change_nothing_on_any_route(bad: Any) -> None:
     with pytest.raises(ValueError, match="action"):
         core.step(bad(np.ones((2, SCENARIO.n, 3))))
     assert_same(before, snapshot(core))
+
+
+def test_bool_actions_are_refused_by_fleet_sim_and_every_route_changing_nothing() -> None:
+    """A force of ``True`` is never meant: FleetSim refuses bools as every env route does.
+
+    The SB3 route is in ``tests/agents/test_vec_env.py``, TorchRL's in
+    ``tests/cpf_env/envs/test_torchrl_env.py`` (the same ``EpisodeCore.check_actions``).
+    """
+    message = r"real numbers, got dtype bool \(bools are not commands\)"
+    sim = FleetSim(SCENARIO, num_fleets=2)
+    sim.reset(seeds=[0, 1])
+    before = snapshot(sim)
+    with pytest.raises(ValueError, match=message):
+        sim.step(np.ones((2, SCENARIO.n, 5), dtype=bool))
+    assert_same(before, snapshot(sim))
+    sim.step(np.ones((2, SCENARIO.n, 5), dtype=np.int64))  # integers are numbers
+    assert sim.arrays.step.tolist() == [1, 1]
+    par = cpf_env.parallel_env(SCENARIO)
+    par.reset(seed=0)
+    before = snapshot(par)
+    with pytest.raises(ValueError, match=r"action of vessel_0 .*bools are not commands"):
+        par.step({agent: np.ones(5, dtype=bool) for agent in par.agents})
+    assert_same(before, snapshot(par))
+    aec = cpf_env.env(scenario=SCENARIO)
+    aec.reset(seed=0)
+    before = snapshot(aec.unwrapped)
+    with pytest.raises(ValueError, match="bools are not commands"):
+        aec.step(np.ones(5, dtype=bool))
+    assert_same(before, snapshot(aec.unwrapped))
+    assert aec.agent_selection == "vessel_0"
+    single = CentralizedFleetEnv(SCENARIO)
+    single.reset(seed=0)
+    before = snapshot(single)
+    with pytest.raises(ValueError, match=message):
+        single.step(np.ones(single.action_space.shape, dtype=bool))
+    assert_same(before, snapshot(single))
+    vector = CentralizedFleetVectorEnv(SCENARIO, 3)
+    vector.reset(seed=0)
+    before = snapshot(vector)
+    with pytest.raises(ValueError, match=message):
+        vector.step(np.ones(vector.action_space.shape, dtype=bool))
+    assert_same(before, snapshot(vector))

@@ -199,6 +199,8 @@ def test_bad_actions_raise_and_leave_the_state_untouched() -> None:
     cases.append((nan, "fleet 1, vessel_3, component 2 is nan: actions must be finite"))
     complex_action = torch.zeros(2, 5, 5, dtype=torch.complex64)
     cases.append((complex_action, r"must be real numbers, got dtype complex64 \(complex values\)"))
+    bools = torch.ones(2, 5, 5, dtype=torch.bool)
+    cases.append((bools, r"must be real numbers, got dtype bool \(bools are not commands\)"))
     for action, message in cases:
         with pytest.raises(ValueError, match=message):
             env.step(td.clone().set((GROUP, "action"), action))
