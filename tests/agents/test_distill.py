@@ -203,6 +203,7 @@ def test_cpf_distill_writes_the_agent_and_its_run_files(tmp_path: Path) -> None:
     )
     run = json.loads((log / "run.json").read_text())
     assert run["config"]["seed"] == 3 and run["distill"]["teacher"] == "nn_dsc_privileged"
+    assert run["device"] == "cpu" and run["draws"] == [[], []]  # no procedural fleets
     rows = list(csv.DictReader((log / "rounds.csv").open()))
     assert [int(r["round"]) for r in rows] == [0, 1] and int(rows[1]["samples"]) == 200
     assert load_policy(out).config.mode == "force_and_rate"
