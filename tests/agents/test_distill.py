@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import importlib.util
 import json
 from pathlib import Path
 
@@ -343,6 +344,10 @@ def test_an_encoder_student_is_a_format_2_folder_that_runs_on_any_degree(
     assert observation_layout(star).n_slots == 9
     obs = FleetVecEnv(star, num_fleets=1).sim.reset(seeds=[3])
     assert np.all(np.isfinite(policy.act_batch(obs)))
+    if importlib.util.find_spec("onnxruntime") is not None:  # the onnx extra
+        from cpf_commands.export import export_main
+
+        assert export_main([str(tmp_path / "a"), str(tmp_path / "a.onnx"), "--checks", "50"]) == 0
 
 
 def test_redraw_gives_each_round_its_own_training_draws() -> None:
