@@ -257,14 +257,15 @@ def actor_tensors(model: Any, algo: str) -> dict[str, torch.Tensor]:
     """The deterministic actor's layers of an SB3 PPO or SAC model, as ``PolicyNetwork`` names.
 
     A PPO model whose actor reads a ``DeepSetsExtractor`` gives its encoder's
-    tensors too (``encoder.*``).
+    tensors too (``encoder.*``). The tensors are copies on the CPU, whatever
+    device the model trains on, so the folder written loads on the CPU.
     """
     tensors: dict[str, torch.Tensor] = {}
     extractor = getattr(model.policy, "pi_features_extractor", None) if algo == "ppo" else None
     encoder = getattr(extractor, "encoder", None)
     if isinstance(encoder, NeighbourSetEncoder):
         for name, value in encoder.state_dict().items():
-            tensors[f"encoder.{name}"] = value.detach().clone()
+            tensors[f"encoder.{name}"] = value.detach().cpu().clone()
     if algo == "ppo":
         hidden = model.policy.mlp_extractor.policy_net
         output = model.policy.action_net
@@ -273,10 +274,10 @@ def actor_tensors(model: Any, algo: str) -> dict[str, torch.Tensor]:
         output = model.actor.mu
     layers = [module for module in hidden if isinstance(module, torch.nn.Linear)]
     for i, layer in enumerate(layers):
-        tensors[f"hidden.{i}.weight"] = layer.weight.detach().clone()
-        tensors[f"hidden.{i}.bias"] = layer.bias.detach().clone()
-    tensors["output.weight"] = output.weight.detach().clone()
-    tensors["output.bias"] = output.bias.detach().clone()
+        tensors[f"hidden.{i}.weight"] = layer.weight.detach().cpu().clone()
+        tensors[f"hidden.{i}.bias"] = layer.bias.detach().cpu().clone()
+    tensors["output.weight"] = output.weight.detach().cpu().clone()
+    tensors["output.bias"] = output.bias.detach().cpu().clone()
     return tensors
 
 

@@ -21,6 +21,7 @@ from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
 from stable_baselines3.common.vec_env import VecEnv
 
 from agents.agent_folder import ENCODER_HIDDEN, ENCODER_POOLING
+from agents.device import torch_device
 from agents.encoder import NeighbourSetEncoder
 from agents.mixture_env import MixtureVecEnv
 from agents.train_config import TrainConfig
@@ -92,14 +93,19 @@ def make_env(config: TrainConfig, num_fleets: int | None = None) -> FleetVecEnv 
     )
 
 
-def build_model(config: TrainConfig, env: VecEnv) -> BaseAlgorithm:
+def build_model(config: TrainConfig, env: VecEnv, device: str = "cpu") -> BaseAlgorithm:
     """The untrained PPO or SAC model ``train`` uses, on ``env``; the mean action starts at zero.
 
     Args:
         config: The run (algorithm, network, learning settings, seed).
         env: The (monitored, maybe normalized, maybe with history) ``FleetVecEnv`` from
             ``make_env``.
+        device: The torch device SB3 trains on (``agents.device.torch_device``).
+
+    Raises:
+        ValueError: A device torch does not know or this machine does not have.
     """
+    where = torch_device(device)
     arch = list(config.net_arch)
     if config.algo == "ppo":
         rollout = config.n_steps * env.num_envs
@@ -119,7 +125,7 @@ def build_model(config: TrainConfig, env: VecEnv) -> BaseAlgorithm:
             n_epochs=config.n_epochs,
             gamma=config.gamma,
             seed=config.seed,
-            device="cpu",
+            device=where,
             policy_kwargs={
                 "net_arch": arch,
                 "log_std_init": config.log_std_init,
@@ -138,7 +144,7 @@ def build_model(config: TrainConfig, env: VecEnv) -> BaseAlgorithm:
             learning_starts=0,
             gamma=config.gamma,
             seed=config.seed,
-            device="cpu",
+            device=where,
             policy_kwargs={"net_arch": arch, "log_std_init": config.log_std_init},
         )
         layer = cast(torch.nn.Linear, model.actor.mu)

@@ -6,9 +6,12 @@ or a privileged reference of ``baselines.PRIVILEGED`` (e.g. ``oracle``,
 centralized, told the true model and the coming disturbances; default
 ``nn_dsc_privileged``). It acts on the fleet's true observations (a
 privileged one is bound to the simulator it reads). The student is the
-deployable actor of the agent-folder format (``agents.agent_folder.PolicyNetwork``:
-an MLP with tanh hidden layers and a clipped output, built by ``student_actor``)
-on the vessel's local input, in the residual parameterization of
+deployable actor of the agent-folder format (``agents.agent_folder.PolicyNetwork``,
+built by ``student_actor`` with ``build_actor``, the actor ``cpf-train`` builds
+for the same ``TrainConfig``: an MLP with tanh hidden layers and a clipped
+output, behind a DeepSets neighbour encoder with ``encoder="deepsets"``, so
+one network runs any degree) on the vessel's local input, in the residual
+parameterization of
 ``cpf_env.envs.residual``: the command applied is ``base + scale * limit * a``.
 The teacher's command is turned into the residual that would reproduce it,
 
@@ -24,11 +27,22 @@ rate stays the base's, so a teacher that plans its own rate (``mpc``,
 ``oracle``) is imitated in force only; ``force_and_rate`` imitates both.
 
 Data: one scenario, or a mixture (``TrainConfig.scenario`` a tuple, e.g. the
-suite's training distributions; ``agents.mixture_env.MixtureVecEnv``),
-optionally joined by procedural training fleets
-(``DistillConfig.procedural`` draws of ``cpf_env.scenarios.sampler``, seeds
-0, 1, ...). Held-out scenarios and seeds are refused
-(``splits.check_training``, ``sampler.check_not_held_out``).
+suite's training distributions), optionally joined by procedural training
+fleets (``DistillConfig.procedural`` draws of ``cpf_env.scenarios.sampler``,
+seeds 0, 1, ...; with ``redraw`` fresh draws every round, ``draw_seeds``).
+Each scenario is a group of fleets (``split_fleets``, seeded as
+``MixtureVecEnv`` seeds them), stepped one after the other. Held-out
+scenarios and seeds are refused (``splits.check_training``,
+``sampler.check_not_held_out``).
+
+Inputs. The student reads what ``agents.load_policy`` would give it: the
+learner's local input with, for ``TrainConfig(history=H)``, its own last H
+(own features, action, valid) entries stacked by ``HistoryVecEnv`` (the
+``OwnHistory`` the loaded policy keeps), normalized with the statistics of
+round 0's data (``input_statistics``: with ``shared_slot_statistics`` the
+slots share pooled statistics and, with an encoder, their weights stay raw, as
+``cpf-train`` normalizes). The labels come from the teacher on the fleet's
+true present observation.
 
 DAgger (Ross et al. 2011): round 0 rolls out the teacher's residual (plain
 behaviour cloning data); every later round rolls out the student and labels
@@ -68,17 +82,21 @@ import torch
 from numpy.typing import NDArray
 
 from agents.agent_folder import PolicyNetwork, build_actor, write_agent
-from agents.mixture_env import MixtureVecEnv, split_fleets
+from agents.device import torch_device
+from agents.history_env import HistoryVecEnv
+from agents.mixture_env import split_fleets
+from agents.slot_statistics import shared_slot_statistics
 from agents.train_config import TrainConfig
 from agents.vec_env import FleetVecEnv
 from baselines import ALL_POLICIES, make_policy
 from cpf_env import scenarios
 from cpf_env.envs.input_statistics import InputStatistics
 from cpf_env.envs.policy import FleetPolicy
+from cpf_env.envs.residual import ResidualConfig
 from cpf_env.infra import atomic
 from cpf_env.scenarios import Scenario
 from cpf_env.scenarios.sampler import ScenarioDistribution
-from cpf_env.scenarios.splits import check_training
+from cpf_env.scenarios.splits import EVALUATION_SEED, check_training
 
 __all__ = [
     "TEACHERS",
@@ -86,6 +104,9 @@ __all__ = [
     "DistillReport",
     "check_distillation",
     "distill",
+    "draw_seeds",
+    "input_statistics",
+    "student_actions",
     "student_actor",
 ]
 
@@ -114,6 +135,10 @@ class DistillConfig:
         procedural: Procedural training fleets added to the scenarios, draws
             0 .. procedural - 1 of ``ScenarioDistribution(max_degree=K)`` (K: the
             student's neighbour slots); 0 for none. Each takes one group of fleets.
+        redraw: Draw fresh procedural fleets every round (``draw_seeds``: round r
+            takes draws r x procedural .. (r + 1) x procedural - 1, all below
+            ``splits.EVALUATION_SEED``); their episodes start at the round's start.
+            False: the same draws throughout, their episodes continuing.
     """
 
     teacher: str = "nn_dsc_privileged"
@@ -123,6 +148,7 @@ class DistillConfig:
     batch_size: int = 4096
     learning_rate: float = 1e-3
     procedural: int = 0
+    redraw: bool = False
 
     def __post_init__(self) -> None:
         if self.teacher not in TEACHERS:
@@ -142,6 +168,13 @@ class DistillConfig:
             raise ValueError(
                 f"DistillConfig.procedural must be an integer >= 0 (procedural training fleets), "
                 f"got {self.procedural!r}."
+            )
+        if not isinstance(self.redraw, bool):
+            raise ValueError(f"DistillConfig.redraw must be true or false, got {self.redraw!r}.")
+        if self.redraw and self.procedural == 0:
+            raise ValueError(
+                "DistillConfig.redraw draws fresh procedural fleets each round; set "
+                "procedural >= 1 (fleets per round) or leave redraw out."
             )
         if not (
             isinstance(self.learning_rate, int | float)
@@ -164,6 +197,8 @@ class DistillReport:
         seconds: Wall time (s).
         rounds: Per round: ``round``, ``samples`` (data so far), ``loss``,
             ``zero_loss`` and ``clipped`` (on the data so far), ``seconds`` (since start).
+        draws: Per round, the procedural draw seeds its rollouts ran (``draw_seeds``).
+        device: The torch device the student was fitted on.
     """
 
     folder: Path
@@ -173,6 +208,8 @@ class DistillReport:
     clipped: float
     seconds: float
     rounds: tuple[dict[str, float], ...]
+    draws: tuple[tuple[int, ...], ...]
+    device: str
 
 
 def student_actor(config: TrainConfig, input_size: int, action_size: int) -> PolicyNetwork:
@@ -237,9 +274,23 @@ class FleetwiseBase(FleetPolicy):
             self.policies[int(k)].reset()
 
 
-def _groups(env: FleetVecEnv | MixtureVecEnv) -> list[FleetVecEnv]:
-    """The env's ``FleetVecEnv``s: itself, or a mixture's groups, in slot order."""
-    return [env] if isinstance(env, FleetVecEnv) else list(env.groups)
+@dataclass
+class _Group:
+    """One scenario's fleets in the rollouts: their env, the student's view of it, the teacher.
+
+    Attributes:
+        env: The group's ``FleetVecEnv`` (its simulator, base and residual controller).
+        view: What the student reads: ``env``, or ``HistoryVecEnv(env, H)`` with a history.
+        teacher: The teacher, bound to ``env.sim`` (a privileged one reads it).
+        obs: The student's last inputs (B n, d) of this group.
+        draw: The procedural draw seed, or None for a named scenario.
+    """
+
+    env: FleetVecEnv
+    view: FleetVecEnv | HistoryVecEnv
+    teacher: FleetPolicy
+    obs: NDArray[np.float32]
+    draw: int | None
 
 
 def _labels(env: FleetVecEnv, teacher: FleetPolicy) -> NDArray[np.float64]:
@@ -260,46 +311,61 @@ def _labels(env: FleetVecEnv, teacher: FleetPolicy) -> NDArray[np.float64]:
     return np.concatenate([force, rate[..., None]], axis=-1)
 
 
+def student_actions(
+    network: PolicyNetwork, stats: InputStatistics, inputs: NDArray[np.float32]
+) -> NDArray[np.float32]:
+    """The student's actions (R, k) on raw inputs (R, d), as ``agents.load_policy`` computes them.
+
+    ``inputs`` are the learner's inputs with the history appended
+    (``HistoryVecEnv``), normalized with ``stats`` and run through ``network``
+    on the network's device; float32 on the CPU.
+    """
+    device = next(network.parameters()).device
+    rows = torch.from_numpy(stats.apply(inputs)).to(device)
+    with torch.no_grad():
+        return network(rows).cpu().numpy()
+
+
 def _rollout(
-    env: FleetVecEnv | MixtureVecEnv,
-    obs: NDArray[np.float32],
-    teachers: list[FleetPolicy],
+    groups: list[_Group],
     student: PolicyNetwork | None,
     stats: InputStatistics | None,
     steps: int,
-) -> tuple[NDArray[np.float32], NDArray[np.float64], NDArray[np.float32]]:
-    """Run ``steps`` env steps from the inputs ``obs``, continuing the episodes under way.
+) -> tuple[NDArray[np.float32], NDArray[np.float64]]:
+    """Run ``steps`` env steps of every group, continuing the episodes under way.
+
+    Each group's ``obs`` is updated in place.
 
     Returns:
-        The inputs (S, d) and raw labels (S, k) seen, and the last inputs (num_envs, d).
+        The inputs (S, d) the student read and the raw labels (S, k) of the teacher.
     """
     inputs, labels = [], []
-    groups = _groups(env)
     for _ in range(steps):
         label = np.concatenate(
             [
-                _labels(group, teacher).reshape(-1, group.controller.action_size)
-                for group, teacher in zip(groups, teachers, strict=True)
+                _labels(group.env, group.teacher).reshape(-1, group.env.controller.action_size)
+                for group in groups
             ]
         )
+        obs = np.concatenate([group.obs for group in groups])
         inputs.append(obs)
         labels.append(label)
         if student is None:
-            action = np.clip(label, -1.0, 1.0)
+            action = np.clip(label, -1.0, 1.0).astype(np.float32)
         else:
             assert stats is not None
-            with torch.no_grad():
-                rows = torch.from_numpy(stats.apply(obs).astype(np.float32))
-                action = student(rows).numpy()
-        stepped, _, dones, _ = env.step(action.astype(np.float32))
-        obs = np.asarray(stepped, dtype=np.float32)
+            action = student_actions(student, stats, obs)
         start = 0
-        for group, teacher in zip(groups, teachers, strict=True):
-            ended = np.asarray(dones[start : start + group.num_envs]).reshape(-1, group.n)[:, 0]
-            start += group.num_envs
+        for group in groups:
+            stop = start + group.view.num_envs
+            group.view.step_async(action[start:stop])
+            stepped, _, dones, _ = group.view.step_wait()
+            group.obs = np.asarray(stepped, dtype=np.float32)
+            ended = np.asarray(dones).reshape(-1, group.env.n)[:, 0]
             if ended.any():
-                teacher.reset_fleets(ended)
-    return np.concatenate(inputs), np.concatenate(labels), obs
+                group.teacher.reset_fleets(ended)
+            start = stop
+    return np.concatenate(inputs), np.concatenate(labels)
 
 
 def _fit(
@@ -313,13 +379,13 @@ def _fit(
     optimizer = torch.optim.Adam(network.parameters(), lr=config.learning_rate)
 
     def raw(batch: torch.Tensor) -> torch.Tensor:
-        latent = batch
+        latent = batch if network.encoder is None else network.encoder(batch)
         for layer in network.hidden:
             latent = torch.tanh(layer(latent))
         return network.output(latent)
 
     for _ in range(config.epochs):
-        order = torch.randperm(rows.shape[0], generator=generator)
+        order = torch.randperm(rows.shape[0], generator=generator).to(rows.device)
         for start in range(0, rows.shape[0], config.batch_size):
             index = order[start : start + config.batch_size]
             loss = torch.mean((raw(rows[index]) - targets[index]) ** 2)
@@ -341,47 +407,106 @@ def check_distillation(config: TrainConfig, settings: DistillConfig) -> None:
             f"normalize_observations); got mode={config.mode!r}, algo={config.algo!r}, "
             f"normalize_observations={config.normalize_observations}."
         )
-    if config.encoder is not None or config.history:
-        raise ValueError(
-            "distill trains an MLP student on the vessel's present input; leave out encoder "
-            f"and history (got encoder={config.encoder!r}, history={config.history}), or "
-            "train them with cpf-train."
-        )
     groups = len(config.scenarios) + settings.procedural
     if config.fleets < groups:
         raise ValueError(
             f"distill over {groups} scenarios (training scenarios and procedural draws) needs "
             f"at least one fleet each; got fleets={config.fleets}. Raise fleets."
         )
+    draws = settings.procedural * (settings.rounds if settings.redraw else 1)
+    if draws > EVALUATION_SEED:
+        raise ValueError(
+            f"redraw with procedural={settings.procedural} over {settings.rounds} rounds draws "
+            f"seeds 0 .. {draws - 1}, but training draws must stay below {EVALUATION_SEED} "
+            "(held-out fleets are drawn above it); lower rounds or procedural."
+        )
 
 
-def _environment(config: TrainConfig, settings: DistillConfig) -> FleetVecEnv | MixtureVecEnv:
-    """The rollout env: one scenario, or the mixture of the scenarios and procedural draws."""
+def draw_seeds(settings: DistillConfig, round_: int) -> list[int]:
+    """The procedural draw seeds of DAgger round ``round_``.
+
+    ``0 .. P - 1`` (P = ``procedural``) in every round, or with ``redraw`` the
+    round's own: ``round_ x P .. round_ x P + P - 1``.
+    """
+    first = round_ * settings.procedural if settings.redraw else 0
+    return list(range(first, first + settings.procedural))
+
+
+def _learner_residual(config: TrainConfig) -> ResidualConfig:
+    """The run's residual with its neighbour slots fixed (all groups' inputs share K)."""
     residual = config.residual_config()
-    if len(config.scenarios) == 1 and settings.procedural == 0:
-        scenario = scenarios.make_scenario(config.home_scenario, **config.scenario_overrides())
-        base = None if config.base == "none" else _base(config.base, scenario, config.fleets)
-        return FleetVecEnv(scenario, num_fleets=config.fleets, base_policy=base, residual=residual)
-    slots = residual.neighbour_slots
-    if slots is None:  # one named scenario: its own degree
-        slots = config.learner_slots()[0]
-        residual = dataclasses.replace(residual, neighbour_slots=slots)
-    draws = [
-        ScenarioDistribution(max_degree=max(2, slots)).sample(seed)
-        for seed in range(settings.procedural)
-    ]
+    if residual.neighbour_slots is None:  # one named scenario: its own degree
+        residual = dataclasses.replace(residual, neighbour_slots=config.learner_slots()[0])
+    return residual
+
+
+def _group(
+    config: TrainConfig,
+    settings: DistillConfig,
+    scenario: Scenario,
+    fleets: int,
+    offset: int,
+    draw: int | None,
+) -> _Group:
+    """One group's env (seeded ``config.seed + offset``, reset), the student's view, the teacher."""
+    base = None if config.base == "none" else _base(config.base, scenario, fleets)
+    env = FleetVecEnv(
+        scenario, num_fleets=fleets, base_policy=base, residual=_learner_residual(config)
+    )
+    env.seed(config.seed + offset)
+    view: FleetVecEnv | HistoryVecEnv = env
+    if config.history:
+        view = HistoryVecEnv(env, config.history)
+    obs = np.asarray(view.reset(), dtype=np.float32)
+    teacher = make_policy(settings.teacher, env.sim)
+    teacher.reset()
+    return _Group(env, view, teacher, obs, draw)
+
+
+def _groups(config: TrainConfig, settings: DistillConfig) -> list[_Group]:
+    """Every group of round 0: the named scenarios, then the procedural draws.
+
+    Fleets are shared by ``split_fleets``; group g's fleet k starts from seed
+    ``config.seed + offset_g + k`` (``MixtureVecEnv``'s rule).
+    """
+    slots = _learner_residual(config).neighbour_slots
+    assert slots is not None
     named = [
         scenarios.make_scenario(name, **config.scenario_overrides(name))
         for name in config.scenarios
     ]
-    groups: list[Scenario] = [*named, *draws]
-    if config.base == "none":
-        return MixtureVecEnv(groups, num_fleets=config.fleets, base_policy=None, residual=residual)
-    bases = [
-        _base(config.base, scenario, fleets)
-        for scenario, fleets in zip(groups, split_fleets(config.fleets, len(groups)), strict=True)
+    distribution = ScenarioDistribution(max_degree=max(2, slots))
+    draws = [distribution.sample(seed) for seed in draw_seeds(settings, 0)]
+    fleets = split_fleets(config.fleets, len(named) + len(draws))
+    offsets = np.cumsum([0, *fleets[:-1]]).tolist()
+    seeds: list[int | None] = [None] * len(named) + list(draw_seeds(settings, 0))
+    return [
+        _group(config, settings, scenario, count, int(offset), seed)
+        for scenario, count, offset, seed in zip(
+            [*named, *draws], fleets, offsets, seeds, strict=True
+        )
     ]
-    return MixtureVecEnv(groups, num_fleets=config.fleets, base_policy=bases, residual=residual)
+
+
+def _redraw(
+    groups: list[_Group], config: TrainConfig, settings: DistillConfig, round_: int
+) -> list[_Group]:
+    """``groups`` with the procedural ones replaced by the draws of ``round_`` (fresh episodes)."""
+    slots = _learner_residual(config).neighbour_slots
+    assert slots is not None
+    distribution = ScenarioDistribution(max_degree=max(2, slots))
+    seeds = iter(draw_seeds(settings, round_))
+    offset, replaced = 0, []
+    for group in groups:
+        fleets = group.env.num_fleets
+        if group.draw is None:
+            replaced.append(group)
+        else:
+            seed = next(seeds)
+            scenario = distribution.sample(seed)
+            replaced.append(_group(config, settings, scenario, fleets, offset, seed))
+        offset += fleets
+    return replaced
 
 
 def _base(name: str, scenario: Scenario, num_fleets: int) -> FleetPolicy:
@@ -391,49 +516,71 @@ def _base(name: str, scenario: Scenario, num_fleets: int) -> FleetPolicy:
     return make_policy(name, scenario)
 
 
-def distill(config: TrainConfig, settings: DistillConfig, out: str | Path) -> DistillReport:
+def input_statistics(config: TrainConfig, inputs: NDArray[np.float32]) -> InputStatistics:
+    """The student's input statistics: the mean and variance of ``inputs`` (S, d).
+
+    As ``cpf-train`` normalizes: with ``shared_slot_statistics`` the neighbour
+    slots share pooled statistics (``agents.slot_statistics``), and with an
+    encoder the slots' weights keep mean 0 and variance 1 (an empty slot stays
+    exactly 0, as the encoder's mask needs).
+    """
+    values = inputs.astype(np.float64)
+    mean, var = values.mean(axis=0), values.var(axis=0)
+    if config.shared_slot_statistics:
+        slots, slot_size = config.learner_slots()
+        mean, var = shared_slot_statistics(
+            mean, var, slots, slot_size, raw_weights=config.encoder is not None
+        )
+    return InputStatistics(mean, var)
+
+
+def distill(
+    config: TrainConfig, settings: DistillConfig, out: str | Path, device: str = "cpu"
+) -> DistillReport:
     """Distill a teacher into a local residual student; write its agent folder.
 
     Args:
         config: The student's run: scenario (one, or a tuple: a mixture), base,
             residual (``mode`` ``"force"`` or ``"force_and_rate"``, ``scale``),
-            ``fleets``, ``seed``, ``net_arch`` (``algo`` must be ``ppo``, whose
-            actor format the student takes).
+            ``fleets``, ``seed``, ``net_arch``, ``encoder``, ``history`` (``algo``
+            must be ``ppo``, whose actor format the student takes).
         settings: Teacher, procedural draws and budget.
         out: The agent folder to write (replaced whole if it exists).
+        device: Where torch fits and runs the student (``agents.device.torch_device``:
+            ``"cpu"``, ``"cuda"``, ``"cuda:1"``, ``"auto"``); the folder is written
+            from the CPU and loads on the CPU.
 
     Raises:
         ValueError: A held-out scenario or seed (``splits.check_training``), a
             residual mode other than ``force`` or ``force_and_rate``, ``sac``, no
-            base, ``normalize_observations=False``, or fewer fleets than scenarios.
+            base, ``normalize_observations=False``, fewer fleets than scenarios,
+            redrawn seeds beyond the training draws, or a device torch cannot use.
     """
     started = time.perf_counter()
     check_distillation(config, settings)
-    env = _environment(config, settings)
-    env.seed(config.seed)
-    teachers = [make_policy(settings.teacher, group.sim) for group in _groups(env)]
+    where = torch_device(device)
     torch.manual_seed(config.seed)
     generator = torch.Generator().manual_seed(config.seed)
-    size = env.observation_space.shape[0]  # type: ignore[index]
-    action_size = _groups(env)[0].controller.action_size
-    network = student_actor(config, size, action_size)
+    groups = _groups(config, settings)
+    size = groups[0].obs.shape[1]
+    action_size = groups[0].env.controller.action_size
+    network = student_actor(config, size, action_size).to(where)
     stats: InputStatistics | None = None
     data: list[tuple[NDArray[np.float32], NDArray[np.float64]]] = []
     rounds: list[dict[str, float]] = []
-    obs = env.reset()
-    for teacher in teachers:
-        teacher.reset()
+    draws: list[list[int]] = []
     for round_ in range(settings.rounds):
+        if settings.redraw and round_ > 0:
+            groups = _redraw(groups, config, settings, round_)
+        draws.append(draw_seeds(settings, round_))
         student = None if round_ == 0 else network
-        inputs, labels, obs = _rollout(env, obs, teachers, student, stats, settings.steps)
-        data.append((inputs, labels))
+        data.append(_rollout(groups, student, stats, settings.steps))
         if stats is None:
-            first = data[0][0].astype(np.float64)
-            stats = InputStatistics(first.mean(axis=0), first.var(axis=0))
+            stats = input_statistics(config, data[0][0])
         inputs = np.concatenate([d[0] for d in data])
         labels = np.concatenate([d[1] for d in data])
-        rows = torch.from_numpy(stats.apply(inputs).astype(np.float32))
-        targets = torch.from_numpy(np.clip(labels, -1.0, 1.0).astype(np.float32))
+        rows = torch.from_numpy(stats.apply(inputs)).to(where)
+        targets = torch.from_numpy(np.clip(labels, -1.0, 1.0).astype(np.float32)).to(where)
         loss = _fit(network, rows, targets, settings, generator)
         rounds.append(
             {
@@ -452,6 +599,7 @@ def distill(config: TrainConfig, settings: DistillConfig, out: str | Path) -> Di
         "config": config.to_json(),
         "distillation": {
             **dataclasses.asdict(settings),
+            "draws": draws,
             "samples": int(final["samples"]),
             "losses": losses,
             "zero_loss": final["zero_loss"],
@@ -461,8 +609,9 @@ def distill(config: TrainConfig, settings: DistillConfig, out: str | Path) -> Di
         "timesteps_done": int(final["samples"]),
         "interrupted": False,
     }
+    assert stats is not None
     with atomic.staged_folder(out) as staging:
-        write_agent(staging, record, network, stats)
+        write_agent(staging, record, network.cpu(), stats)
     return DistillReport(
         Path(out),
         int(final["samples"]),
@@ -471,4 +620,6 @@ def distill(config: TrainConfig, settings: DistillConfig, out: str | Path) -> Di
         final["clipped"],
         seconds,
         tuple(rounds),
+        tuple(tuple(d) for d in draws),
+        str(where),
     )

@@ -86,18 +86,24 @@ RUN_RECORD = "run.json"
 
 
 def write_run_record(
-    folder: Path, config: TrainConfig, schedule: RunSchedule, evaluation: Any = None
+    folder: Path,
+    config: TrainConfig,
+    schedule: RunSchedule,
+    evaluation: Any = None,
+    device: str = "cpu",
 ) -> None:
-    """Write ``run.json``: the configuration, schedule and evaluation settings of a run.
+    """Write ``run.json``: the configuration, schedule, evaluation settings and device of a run.
 
     Args:
         folder: The run folder.
         config: The run's configuration.
         schedule: Its periods.
         evaluation: The evaluator's JSON-ready ``settings`` (if it has any), or None.
+        device: The torch device the run trains on (a resumed run may name another).
     """
     record = {
         "config": config.to_json(),
+        "device": device,
         "evaluation": evaluation,
         "schedule": {
             "eval_every": schedule.eval_every,
@@ -241,9 +247,11 @@ class TrainingRun:
         checkpoint: The checkpoint folder to resume from, or None (a fresh run).
         tensorboard_log: Parent folder of the TensorBoard event files, or None.
         destination: The run folder (claimed by the caller's lock); None: ``folder``.
+        device: The torch device SB3 trains on (``agents.device.torch_device``).
 
     Raises:
-        ValueError: Too little free space for the run's outputs.
+        ValueError: Too little free space for the run's outputs, or a device this
+            machine does not have.
     """
 
     def __init__(
@@ -255,6 +263,7 @@ class TrainingRun:
         checkpoint: Path | None,
         tensorboard_log: str | Path | None,
         destination: Path | None = None,
+        device: str = "cpu",
     ) -> None:
         self.config, self.folder = config, folder
         self.destination = folder if destination is None else destination
@@ -284,7 +293,7 @@ class TrainingRun:
                 self.env = VecNormalize(
                     self.env, norm_obs=True, norm_reward=False, gamma=config.gamma
                 )
-        self.model = build_model(config, self.env)
+        self.model = build_model(config, self.env, device)
         atomic.check_writable(self.destination, _bytes_needed(self.model))
         previous = ""
         if checkpoint is not None and (checkpoint / PROGRESS).is_file():

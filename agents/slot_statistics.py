@@ -36,7 +36,7 @@ from stable_baselines3.common.vec_env import VecEnv, VecNormalize
 
 from cpf_env.sim.observation import SLOT_WEIGHT, SLOTS
 
-__all__ = ["SlotSharedVecNormalize", "pool_slot_statistics"]
+__all__ = ["SlotSharedVecNormalize", "pool_slot_statistics", "shared_slot_statistics"]
 
 
 def pool_slot_statistics(
@@ -63,6 +63,32 @@ def pool_slot_statistics(
     mean, var = mean.copy(), var.copy()
     mean[SLOTS:stop] = np.tile(pooled_mean, n_slots)
     var[SLOTS:stop] = np.tile(pooled_var, n_slots)
+    return mean, var
+
+
+def shared_slot_statistics(
+    mean: NDArray[np.float64],
+    var: NDArray[np.float64],
+    n_slots: int,
+    slot_size: int,
+    raw_weights: bool = False,
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The statistics ``SlotSharedVecNormalize`` normalizes with: pooled, weights kept raw.
+
+    Args:
+        mean: (k,) per-component means of the learner's input.
+        var: (k,) per-component variances.
+        n_slots: K, the slots starting at index ``SLOTS``.
+        slot_size: Components per slot (3 + m).
+        raw_weights: Give the slots' weights a_ij mean 0 and variance 1.
+
+    Returns:
+        (mean, var), shape (k,) (``pool_slot_statistics``, then the raw weights).
+    """
+    mean, var = pool_slot_statistics(mean, var, n_slots, slot_size)
+    if raw_weights:
+        weights = slice(SLOTS + SLOT_WEIGHT, SLOTS + n_slots * slot_size, slot_size)
+        mean[weights], var[weights] = 0.0, 1.0
     return mean, var
 
 
@@ -94,9 +120,7 @@ class SlotSharedVecNormalize(VecNormalize):
         """Pool the slots' running statistics, then normalize as ``VecNormalize`` does."""
         rms = self.obs_rms
         assert isinstance(rms, RunningMeanStd)
-        rms.mean, rms.var = pool_slot_statistics(rms.mean, rms.var, self.n_slots, self.slot_size)
-        if self.raw_weights:
-            stop = SLOTS + self.n_slots * self.slot_size
-            weights = slice(SLOTS + SLOT_WEIGHT, stop, self.slot_size)
-            rms.mean[weights], rms.var[weights] = 0.0, 1.0
+        rms.mean, rms.var = shared_slot_statistics(
+            rms.mean, rms.var, self.n_slots, self.slot_size, self.raw_weights
+        )
         return super().normalize_obs(obs)

@@ -41,6 +41,7 @@ from pathlib import Path
 
 from stable_baselines3.common.callbacks import BaseCallback
 
+from agents.device import torch_device
 from agents.run_folder import TrainingRun, prepare_resume, write_run_record
 from agents.schedule import Evaluator, RunSchedule
 from agents.train_config import TrainConfig
@@ -61,6 +62,7 @@ def train(
     resume: bool = False,
     tensorboard_log: str | Path | None = None,
     run_files: Mapping[str, str] | None = None,
+    device: str = "cpu",
 ) -> Path:
     """Train an agent into the run folder ``out`` (see the module docstring).
 
@@ -81,6 +83,10 @@ def train(
         tensorboard_log: Also write TensorBoard event files to ``tensorboard_log/<out name>``.
         run_files: File name -> text, written into ``out`` when the run (or its resumed
             part) starts (``cpf-train`` saves its resolved ``hyperparameters.toml`` so).
+        device: The torch device SB3 trains on: ``"cpu"`` (default), ``"auto"``, ``"cuda"``,
+            ``"cuda:N"`` (``agents.device.torch_device``); recorded in ``run.json``, not in
+            the ``TrainConfig``. The agent folder loads on the CPU whatever trained it;
+            resuming is bit for bit on the CPU (torch's GPU generators are not checkpointed).
 
     Returns:
         The output folder.
@@ -88,14 +94,15 @@ def train(
     Raises:
         FileExistsError: ``out`` holds files and neither ``overwrite`` nor ``resume``.
         ValueError: ``out`` is empty, a file, a symbolic link, not writable or short of
-            space for the run, a held-out evaluation scenario or seed
-            (``splits.check_training``), nothing to resume, or a configuration that
-            differs from the run's own.
+            space for the run, a device this machine does not have, a held-out
+            evaluation scenario or seed (``splits.check_training``), nothing to resume,
+            or a configuration that differs from the run's own.
         TrainingInterrupted: Ctrl-C; the checkpoint and the agent so far are written.
         cpf_env.infra.atomic.FolderLockedError: Another run is writing ``out``.
     """
     for name in config.scenarios:
         check_training(name, range(config.seed, config.seed + config.fleets))
+    where = str(torch_device(device))
     folder = _output_folder(out)
     schedule = schedule or RunSchedule()
     if tensorboard_log is not None:
@@ -127,11 +134,20 @@ def train(
         try:
             try:
                 workdir.mkdir(parents=True, exist_ok=True)
-                write_run_record(workdir, config, schedule, getattr(evaluate, "settings", None))
+                write_run_record(
+                    workdir, config, schedule, getattr(evaluate, "settings", None), where
+                )
                 for name, text in (run_files or {}).items():
                     atomic.write_text(workdir / name, text)
                 run = TrainingRun(
-                    config, workdir, schedule, evaluate, resume_state, tensorboard_log, folder
+                    config,
+                    workdir,
+                    schedule,
+                    evaluate,
+                    resume_state,
+                    tensorboard_log,
+                    folder,
+                    where,
                 )
             except BaseException:  # refused before training (no space, say): nothing left
                 if fresh:

@@ -4,18 +4,26 @@ The run is one TOML file: its top-level keys are ``agents.TrainConfig`` fields
 (the student: ``scenario``, a name, a list of names or ``"suite"``; ``base``,
 ``mode``, ``scale``, ``fleets``, ``net_arch``, ...) and its ``[distill]`` table
 holds ``agents.distill.DistillConfig`` fields (``teacher``, ``rounds``,
-``steps``, ``epochs``, ``batch_size``, ``learning_rate``, ``procedural``).
+``steps``, ``epochs``, ``batch_size``, ``learning_rate``, ``procedural``,
+``redraw``). The student may be an MLP over K neighbour slots or, with
+``encoder = "deepsets"`` (and ``shared_slot_statistics = true``), a
+permutation-invariant encoder that runs on any degree; ``history = H`` gives
+it its own last H inputs and actions (``agents.history``).
 ``--seed`` sets ``TrainConfig.seed`` (the student's weights, the fleets'
 seeds and the data order). ``--out`` receives an ordinary agent folder
 (``agents.load_policy``, ``cpf-bench --policies DIR``) plus the run files:
 
 - ``run.json``: the configuration, the distillation settings, the package
-  versions, the wall time and the per-round record;
+  versions, the torch device, the wall time, the per-round record and the
+  procedural draw seeds of every round (``draws``);
 - ``rounds.csv``: per DAgger round, ``round``, ``samples`` (labelled
   vessel-steps so far), ``loss`` (the student's mean squared error on them),
   ``zero_loss`` (the base's, a = 0), ``clipped`` (share of label components
   beyond the residual's reach) and ``seconds`` (since the start).
 
+``--device`` (default ``cpu``; ``auto``, ``cuda``, ``cuda:N``) is where torch
+fits the student; it is recorded in ``run.json``, not in the agent's
+``TrainConfig`` (the folder loads on the CPU whatever fitted it).
 ``--log DIR`` writes the run files to DIR instead. An existing ``--out`` (or
 ``--log``) is refused unless ``--force``; everything is written atomically.
 
@@ -152,6 +160,11 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument(
         "--force", action="store_true", help="replace an existing --out (and --log)"
     )
+    parser.add_argument(
+        "--device", default="cpu",
+        help="torch device that fits the student: cpu (default), auto, cuda or cuda:N; the "
+        "agent folder loads on the CPU whatever fitted it",
+    )  # fmt: skip
     return parser
 
 
@@ -166,9 +179,11 @@ def distill_main(argv: Sequence[str] | None = None) -> int:
             parser.error(f"{folder} exists; pass --force to replace it, or choose another --out.")
     try:
         config, settings = read_distill_config(args.config, args.seed)
+        from agents.device import torch_device
         from agents.distill import check_distillation
 
         check_distillation(config, settings)
+        torch_device(args.device)
     except ValueError as error:
         parser.error(str(error))
     import torch
@@ -178,16 +193,18 @@ def distill_main(argv: Sequence[str] | None = None) -> int:
     if config.torch_threads is not None:
         torch.set_num_threads(config.torch_threads)
     started = time.perf_counter()
-    report = distill(config, settings, out)
+    report = distill(config, settings, out, device=args.device)
     record = {
         "config": config.to_json(),
         "distill": dataclasses.asdict(settings),
         "command": ["cpf-distill", *(sys.argv[1:] if argv is None else argv)],
         "versions": _versions(),
+        "device": report.device,
         "wall_clock_seconds": round(time.perf_counter() - started, 1),
         "samples": report.samples,
         "clipped": report.clipped,
         "rounds": list(report.rounds),
+        "draws": [list(seeds) for seeds in report.draws],
     }
     files = {RUN_RECORD: json.dumps(record, indent=2) + "\n", ROUNDS: _rounds_csv(report.rounds)}
     if log == out:
@@ -200,7 +217,8 @@ def distill_main(argv: Sequence[str] | None = None) -> int:
     print(
         f"distilled {settings.teacher} into a {config.mode} residual on {config.base} over "
         f"{' + '.join(config.scenarios)}"
-        f"{f' + {settings.procedural} procedural fleets' if settings.procedural else ''}: "
+        f"{f' + {settings.procedural} procedural fleets' if settings.procedural else ''}"
+        f"{' (redrawn every round)' if settings.redraw else ''}: "
         f"{report.samples:,} samples, loss {report.losses[-1]:.4g} (base {report.zero_loss:.4g}), "
         f"{report.clipped:.1%} of label components clipped, {record['wall_clock_seconds']} s; "
         f"saved to {out}/\n"

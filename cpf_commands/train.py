@@ -243,6 +243,11 @@ def _parser() -> argparse.ArgumentParser:
         "checkpoint_every); flags given override it; the resolved values are saved as "
         "--out/hyperparameters.toml",
     )  # fmt: skip
+    parser.add_argument(
+        "--device", default="cpu",
+        help="torch device SB3 trains on: cpu, auto (a GPU if torch sees one), cuda or cuda:N; "
+        "recorded in run.json; the agent folder loads on the CPU whatever trained it",
+    )  # fmt: skip
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     parser.add_argument(
         "--force", action="store_true", help="delete a run already in --out and start afresh"
@@ -259,11 +264,11 @@ def _given(parser: argparse.ArgumentParser, argv: Sequence[str] | None) -> set[s
 
 
 #: Options that may be given with --resume (the rest come from the run's run.json).
-RESUME_OPTIONS = {"out", "resume", "timesteps", "quiet", "tensorboard_log"}
+RESUME_OPTIONS = {"out", "resume", "timesteps", "quiet", "tensorboard_log", "device"}
 
 
 #: Option destinations that are not hyperparameters (what to do, not how to learn).
-NOT_HYPERPARAMETERS = {"out", "resume", "quiet", "force", "config", "tensorboard_log"}
+NOT_HYPERPARAMETERS = {"out", "resume", "quiet", "force", "config", "tensorboard_log", "device"}
 #: Options whose ``TrainConfig`` field has another name or form: destination -> (field,
 #: conversion of the parsed value or None). Every other hyperparameter option's destination
 #: is its field's name and its value the field's value (``hyperparameters.toml`` keys).
@@ -346,6 +351,7 @@ def train_main(argv: Sequence[str] | None = None) -> int:
     """``cpf-train``: see ``cpf-train --help``."""
     parser = _parser()
     args = parser.parse_args(argv)
+    from agents.device import torch_device
     from agents.schedule import TrainingInterrupted
     from agents.training import train
     from cpf_env.infra.atomic import FolderLockedError
@@ -359,6 +365,7 @@ def train_main(argv: Sequence[str] | None = None) -> int:
             steps = None
         for name in config.scenarios:
             check_training(name, range(config.seed, config.seed + config.fleets))
+        torch_device(args.device)
     except ValueError as error:
         parser.error(str(error))
     evaluate = TestSplitEvaluator(config.scenarios, seeds, steps)
@@ -375,6 +382,7 @@ def train_main(argv: Sequence[str] | None = None) -> int:
             resume=args.resume,
             tensorboard_log=args.tensorboard_log,
             run_files={HYPERPARAMETERS: _hyperparameters(config, schedule, seeds)},
+            device=args.device,
         )
     except TrainingInterrupted as stop:
         print(

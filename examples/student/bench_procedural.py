@@ -3,9 +3,14 @@ r"""Bench policies on held-out procedural fleets: draws no training run sees.
 The suite's seven fleets are what students are distilled on; this runs
 policies on fleets of ``cpf_env.scenarios.sampler.ScenarioDistribution`` drawn
 with ``sample(seed, evaluation=True)`` (draw seeds 10000 and up, which no
-training draw uses), capped at the students' neighbour slots, with
-``cpf-bench``'s own runner (``cpf_commands.bench.run.run_bench``: paired
-episode seeds from 10000, the same tables, ranking and verdicts).
+training draw uses), capped at ``--max-degree`` neighbours (default 4, the
+4-slot students' input), with ``cpf-bench``'s own runner
+(``cpf_commands.bench.run.run_bench``: paired episode seeds from 10000, the
+same tables, ranking and verdicts). ``cpf-bench`` does not run a fixed-slot
+student on a fleet of higher degree than its slots; an encoder student
+(``TrainConfig(encoder="deepsets")``) runs on any degree, so larger fleets
+and degrees (``--sizes 8 12 --max-degree 11``) show it on graphs no
+training draw had.
 
 Example (what results/student/bench_procedural holds)::
 
@@ -25,8 +30,10 @@ from cpf_commands.bench.run import run_bench
 from cpf_env.scenarios.sampler import ScenarioDistribution
 from cpf_env.scenarios.splits import EVALUATION_SEED
 
-#: The students' neighbour slots: the suite's largest degree (bench_switching's star).
+#: The 4-slot students' neighbour slots: the suite's largest degree (bench_switching's star).
 MAX_DEGREE = 4
+#: Fleet sizes drawn by default (``ScenarioDistribution``'s).
+SIZES = ScenarioDistribution().sizes
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -35,6 +42,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--policies", nargs="+", required=True, help="as cpf-bench --policies")
     parser.add_argument("--draws", type=int, default=8, help="held-out fleets (draw seeds 10000+)")
     parser.add_argument("--seeds", type=int, default=5, help="episodes per policy and fleet")
+    parser.add_argument(
+        "--max-degree", type=int, default=MAX_DEGREE,
+        help="largest neighbour count of a drawn fleet (ScenarioDistribution.max_degree)",
+    )  # fmt: skip
+    parser.add_argument(
+        "--sizes", type=int, nargs=2, default=list(SIZES), metavar=("LO", "HI"),
+        help="fleet size range, vessels (ScenarioDistribution.sizes)",
+    )  # fmt: skip
     parser.add_argument("--out", required=True, help="output folder, as cpf-bench --out")
     parser.add_argument("--force", action="store_true", help="replace an existing --out")
     args = parser.parse_args(argv)
@@ -42,7 +57,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.error("--draws and --seeds must be >= 1.")
     if Path(args.out).exists() and not args.force:
         parser.error(f"{args.out} exists; pass --force to replace it.")
-    distribution = ScenarioDistribution(max_degree=MAX_DEGREE)
+    try:
+        distribution = ScenarioDistribution(sizes=tuple(args.sizes), max_degree=args.max_degree)
+    except ValueError as error:
+        parser.error(str(error))
     fleets = [distribution.sample(EVALUATION_SEED + k, evaluation=True) for k in range(args.draws)]
     for fleet in fleets:
         print(distribution.describe(fleet))

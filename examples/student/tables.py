@@ -3,8 +3,9 @@ r"""Print results/student/README.md's tables from the committed benchmark episod
     python examples/student/tables.py                       # results/student
     python examples/student/tables.py --root results/student
 
-For each of ``bench_test``, ``bench_shift`` and ``bench_procedural`` (those
-that exist), one row per scenario: the mean episode cost of ``nn_dsc``,
+For each of ``bench_test``, ``bench_shift`` and ``bench_procedural``, and
+their ``_k6`` (6-slot students) and ``_deepsets`` (encoder and history
+students) versions (those that exist), one row per scenario: the mean episode cost of ``nn_dsc``,
 ``mpc`` and ``oracle`` (where it ran) and of each student (one per training
 seed), each student's paired cost difference to ``mpc`` (mean over seeds
 with its 95 % bootstrap interval, ``cpf_commands.bench.stats``) and its
@@ -30,7 +31,16 @@ import numpy as np
 
 from cpf_commands.bench.stats import iqm, paired_difference
 
-BENCHES = ("bench_test", "bench_shift", "bench_procedural", "bench_test_k6", "bench_shift_k6")
+BENCHES = (
+    "bench_test",
+    "bench_shift",
+    "bench_procedural",
+    "bench_test_k6",
+    "bench_shift_k6",
+    "bench_test_deepsets",
+    "bench_shift_deepsets",
+    "bench_procedural_deepsets",
+)
 STUDENT = "agents/student"
 
 

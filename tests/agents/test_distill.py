@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import importlib.util
 import json
 from pathlib import Path
 
@@ -12,7 +13,17 @@ import torch
 from safetensors.torch import load_file
 
 from agents import load_policy
-from agents.distill import DistillConfig, FleetwiseBase, _labels, distill, student_actor
+from agents.agent_folder import build_actor, read_agent
+from agents.distill import (
+    DistillConfig,
+    FleetwiseBase,
+    _group,
+    _labels,
+    distill,
+    draw_seeds,
+    student_actions,
+    student_actor,
+)
 from agents.train_config import TrainConfig
 from agents.vec_env import FleetVecEnv
 from baselines import make_policy
@@ -20,6 +31,8 @@ from cpf_commands.distill import distill_main
 from cpf_env import scenarios
 from cpf_env.envs.residual import ResidualConfig
 from cpf_env.scenarios.sampler import ScenarioDistribution
+from cpf_env.sim.fleet import observation_layout
+from cpf_env.sim.observation import SLOTS
 
 TINY = DistillConfig(rounds=2, steps=30, epochs=3, batch_size=256)
 
@@ -46,6 +59,10 @@ def test_teacher_names_are_checked() -> None:
         DistillConfig(teacher="mpc_oracle")
     with pytest.raises(ValueError, match="procedural must be an integer >= 0"):
         DistillConfig(procedural=-1)
+    with pytest.raises(ValueError, match="set procedural >= 1"):
+        DistillConfig(redraw=True)
+    with pytest.raises(ValueError, match="redraw must be true or false"):
+        DistillConfig(procedural=1, redraw=1)  # type: ignore[arg-type]
 
 
 @pytest.mark.parametrize("teacher", ["nn_dsc_privileged", "mpc", "oracle"])
@@ -147,10 +164,12 @@ def test_distill_refuses_what_it_cannot_do(tmp_path: Path) -> None:
         distill(_config(algo="sac"), TINY, tmp_path / "x")
     with pytest.raises(ValueError, match="mode='kinematic'"):
         distill(_config(mode="kinematic"), TINY, tmp_path / "x")
-    with pytest.raises(ValueError, match=r"encoder and history \(got encoder=None, history=2"):
-        distill(_config(history=2), TINY, tmp_path / "x")
-    with pytest.raises(ValueError, match="got encoder='deepsets'"):
-        distill(_config(encoder="deepsets", shared_slot_statistics=True), TINY, tmp_path / "x")
+    with pytest.raises(ValueError, match="must stay below 10000"):
+        distill(
+            _config(scenario=("bench_mild", "bench_switching"), fleets=4),
+            DistillConfig(rounds=5_001, procedural=2, redraw=True),
+            tmp_path / "x",
+        )
     with pytest.raises(ValueError, match="at least one fleet each; got fleets=2"):
         distill(
             _config(scenario=("bench_mild", "bench_switching")),
@@ -185,6 +204,7 @@ def test_cpf_distill_writes_the_agent_and_its_run_files(tmp_path: Path) -> None:
     )
     run = json.loads((log / "run.json").read_text())
     assert run["config"]["seed"] == 3 and run["distill"]["teacher"] == "nn_dsc_privileged"
+    assert run["device"] == "cpu" and run["draws"] == [[], []]  # no procedural fleets
     rows = list(csv.DictReader((log / "rounds.csv").open()))
     assert [int(r["round"]) for r in rows] == [0, 1] and int(rows[1]["samples"]) == 200
     assert load_policy(out).config.mode == "force_and_rate"
@@ -226,3 +246,119 @@ def test_cpf_distill_refuses_an_existing_out(
     with pytest.raises(SystemExit):
         distill_main(["--config", str(path), "--seed", "10000", "--out", str(tmp_path / "p")])
     assert "evaluation seeds" in capsys.readouterr().err
+
+
+def _encoder_config(**changes: object) -> TrainConfig:
+    fields: dict[str, object] = {
+        "scenario": "bench_mild",
+        "fleets": 2,
+        "net_arch": (16,),
+        "encoder": "deepsets",
+        "history": 2,
+        "shared_slot_statistics": True,
+        "neighbour_slots": 3,
+    }
+    fields.update(changes)
+    return _config(**fields)
+
+
+class _Recorder:
+    """A ``TorchActor`` that keeps the inputs it was given and the actions it gave."""
+
+    def __init__(self, actor: object) -> None:
+        self.actor = actor
+        self.input_size = actor.input_size  # type: ignore[attr-defined]
+        self.action_size = actor.action_size  # type: ignore[attr-defined]
+        self.calls: list[tuple[np.ndarray, np.ndarray]] = []
+
+    def __call__(self, rows: np.ndarray) -> np.ndarray:
+        action = self.actor(rows)  # type: ignore[operator]
+        self.calls.append((rows.copy(), action.copy()))
+        return action
+
+
+def test_an_encoder_history_student_acts_in_rollouts_as_load_policy_runs_it(
+    tmp_path: Path,
+) -> None:
+    config = _encoder_config()
+    distill(config, DistillConfig(rounds=2, steps=12, epochs=2, batch_size=64), tmp_path / "a")
+    _, network, stats = read_agent(tmp_path / "a")
+    assert network.encoder is not None and stats is not None
+    short = scenarios.make_scenario("bench_mild", max_steps=7)  # episodes end in the run
+    group = _group(config, DistillConfig(teacher="nn_dsc"), short, 2, 0, None)
+    policy = load_policy(tmp_path / "a", scenario=short)
+    recorder = _Recorder(policy.actor)
+    policy.actor = recorder
+    ends = 0
+    for _ in range(16):
+        rows = group.obs.copy()
+        action = student_actions(network, stats, rows)  # what the rollouts apply
+        policy.act_batch(group.env.sim.arrays.obs)
+        seen, acted = recorder.calls[-1]
+        np.testing.assert_array_equal(seen, rows)  # the same input, history stacked alike
+        np.testing.assert_array_equal(acted, action)  # the same action, bit for bit
+        group.view.step_async(action)
+        obs, _, dones, _ = group.view.step_wait()
+        group.obs = np.asarray(obs, dtype=np.float32)
+        ended = np.asarray(dones).reshape(2, 5)[:, 0]
+        ends += int(ended.sum())
+        policy.reset_fleets(ended)
+    assert ends >= 2  # the histories were cleared across episode boundaries
+    assert rows[:, -1].any()  # and the history was in use: the oldest entry is valid
+
+
+def test_an_encoder_student_is_a_format_2_folder_that_runs_on_any_degree(
+    tmp_path: Path,
+) -> None:
+    config = _encoder_config(
+        scenario=("bench_mild", "bench_switching"), fleets=3, neighbour_slots=4
+    )
+    settings = DistillConfig(rounds=3, steps=6, epochs=2, procedural=1, redraw=True)
+    report = distill(config, settings, tmp_path / "a")
+    again = distill(config, settings, tmp_path / "b")
+    assert report.draws == ((0,), (1,), (2,)) and report.device == "cpu"
+    assert again.losses == report.losses
+    first = load_file(str(tmp_path / "a" / "policy.safetensors"))
+    second = load_file(str(tmp_path / "b" / "policy.safetensors"))
+    assert all(np.array_equal(first[k].numpy(), second[k].numpy()) for k in first)
+    assert "encoder.phi.0.weight" in first
+    manifest = json.loads((tmp_path / "a" / "manifest.json").read_text())
+    record = json.loads((tmp_path / "a" / "config.json").read_text())
+    assert manifest["format_version"] == 2
+    assert record["actor"]["encoder"] == "deepsets" and record["actor"]["history"] == 2
+    assert record["distillation"]["draws"] == [[0], [1], [2]]
+    # cpf-train's actor of the same TrainConfig has the same tensors and shapes
+    size = config.learner_input_size()
+    built = build_actor(config, size, 3).state_dict()
+    assert {k: tuple(v.shape) for k, v in built.items()} == {
+        k: tuple(v.shape) for k, v in first.items()
+    }
+    # the slots' weights stay raw (an empty slot is 0), the slots share statistics
+    stats = json.loads((tmp_path / "a" / "normalization.json").read_text())
+    weights = slice(SLOTS, SLOTS + 4 * 4, 4)
+    assert stats["mean"][weights] == [0.0] * 4 and stats["var"][weights] == [1.0] * 4
+    star = ScenarioDistribution(sizes=(10, 10), graph_families=("star",)).sample(
+        10_000, evaluation=True
+    )  # a held-out 10-vessel star: its centre has 9 neighbours, more than the 4 slots trained
+    policy = load_policy(tmp_path / "a", scenario=star)
+    assert observation_layout(star).n_slots == 9
+    obs = FleetVecEnv(star, num_fleets=1).sim.reset(seeds=[3])
+    assert np.all(np.isfinite(policy.act_batch(obs)))
+    if importlib.util.find_spec("onnxruntime") is not None:  # the onnx extra
+        from cpf_commands.export import export_main
+
+        assert export_main([str(tmp_path / "a"), str(tmp_path / "a.onnx"), "--checks", "50"]) == 0
+
+
+def test_redraw_gives_each_round_its_own_training_draws() -> None:
+    assert draw_seeds(DistillConfig(procedural=3), 2) == [0, 1, 2]
+    assert draw_seeds(DistillConfig(procedural=3, redraw=True), 0) == [0, 1, 2]
+    assert draw_seeds(DistillConfig(procedural=3, redraw=True), 2) == [6, 7, 8]
+
+
+def test_distill_refuses_a_device_it_does_not_have(tmp_path: Path) -> None:
+    if torch.cuda.is_available():
+        pytest.skip("this machine has a GPU")
+    with pytest.raises(ValueError, match=r"sees none.*--device cpu"):
+        distill(_config(), TINY, tmp_path / "x", device="cuda")
+    assert not (tmp_path / "x").exists()

@@ -76,6 +76,7 @@ def test_cpf_train_prints_the_rounding_and_the_bar_shows_the_evaluation_cost(
     run = json.loads((out / "run.json").read_text())
     assert run["evaluation"] == {"split": "test", "scenarios": ["bench_mild"], "seeds": 2,
                                  "steps": None}  # fmt: skip
+    assert run["device"] == "cpu"  # the default, recorded beside the configuration
 
 
 def test_cpf_train_tensorboard_log_and_resume_flags(
@@ -90,7 +91,9 @@ def test_cpf_train_tensorboard_log_and_resume_flags(
     with pytest.raises(SystemExit):
         train_main(["--resume", "--out", str(out), "--fleets", "3"])
     assert "drop --fleets" in capsys.readouterr().err
-    assert train_main(["--resume", "--out", str(out), "-n", "320", "--quiet"]) == 0
+    assert (
+        train_main(["--resume", "--out", str(out), "-n", "320", "--quiet", "--device", "auto"]) == 0
+    )
     assert "for 320 vessel-steps" in capsys.readouterr().out
     assert json.loads((out / "run.json").read_text())["config"]["timesteps"] == 320
 
@@ -100,7 +103,7 @@ def test_cpf_train_help_lists_the_new_options(capsys: pytest.CaptureFixture[str]
         train_main(["--help"])
     text = capsys.readouterr().out
     for flag in ("--eval-every", "--eval-seeds", "--checkpoint-every", "--resume",
-                 "--tensorboard-log"):  # fmt: skip
+                 "--tensorboard-log", "--device"):  # fmt: skip
         assert flag in text
 
 
