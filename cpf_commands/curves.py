@@ -281,10 +281,16 @@ def _parser() -> argparse.ArgumentParser:
     return parser
 
 
-def _when(x: float | None, unit: str) -> str:
-    if x is None:
-        return "never within the runs' evaluations"
+def _amount(x: float, unit: str) -> str:
+    """A point of an axis as printed: whole vessel-steps, seconds to 0.1."""
     return f"{x:,.0f} {unit}" if unit == "vessel-steps" else f"{x:,.1f} {unit}"
+
+
+def _when(x: float | None, end: float, unit: str) -> str:
+    """``from X unit``, or that it never happened up to the runs' last point ``end``."""
+    if x is None:
+        return f"never within the runs' evaluations (to {_amount(end, unit)})"
+    return f"from {_amount(x, unit)}"
 
 
 def curves_main(argv: Sequence[str] | None = None) -> int:
@@ -311,11 +317,11 @@ def curves_main(argv: Sequence[str] | None = None) -> int:
     for curve, unit in ((steps, "vessel-steps"), (seconds, "s")):
         below, surely = first_below(curve, base_cost)
         if single:
-            print(f"  cost below the base from {_when(below, unit)}")
+            print(f"  cost below the base {_when(below, float(curve.x[-1]), unit)}")
         else:
             print(
-                f"  IQM below the base from {_when(below, unit)}; whole 95 % interval below "
-                f"from {_when(surely, unit)}"
+                f"  IQM below the base {_when(below, float(curve.x[-1]), unit)}; whole 95 % "
+                f"interval below {_when(surely, float(curve.x[-1]), unit)}"
             )
     final = (
         f"  final cost {steps.iqm[-1]:.6g} (one run: no interval; train several seeds for one)"

@@ -106,6 +106,22 @@ def test_one_run_prints_its_cost_without_an_interval(
     assert "final cost 5 (one run: no interval; train several seeds for one)" in printed
 
 
+def test_a_run_that_never_beats_the_base_says_so(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    folder = tmp_path / "worse"
+    folder.mkdir()
+    (folder / "evaluations.csv").write_text(
+        "vessel_steps,wall_clock_seconds,evaluation_seconds,mean_cost,cost_bench_mild\n"
+        "0,1.0,0.1,10.0,10.0\n100,2.5,0.1,12.0,12.0\n"
+    )
+    (folder / "run.json").write_text(json.dumps({"config": {"base": "nn_dsc"}}))
+    assert curves_main([str(folder), "--out", str(tmp_path / "c")]) == 0
+    printed = capsys.readouterr().out
+    assert "never within the runs' evaluations (to 100 vessel-steps)" in printed
+    assert "never within the runs' evaluations (to 2.5 s)" in printed
+
+
 STUDENT = """
 scenario = "bench_mild"
 fleets = 2
