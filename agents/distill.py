@@ -56,7 +56,10 @@ actually applied), and restarts with the fleets the vector env restarts.
 The result is an ordinary agent folder (``agents.load_policy``,
 ``cpf-bench --policies FOLDER``): the ``TrainConfig`` it was distilled for,
 the input statistics of round 0's data, the actor, and a ``distillation``
-record (settings, per-round losses, clipped share, wall time).
+record (settings, per-round losses, clipped share, wall time). With an
+evaluator (``distill(..., evaluate=)``, ``cpf-distill --eval-seeds``) the
+student is also evaluated before round 0 and after each round, into the
+rows of ``evaluations.csv`` (``DistillReport.evaluations``).
 ``cpf-distill`` (``cpf_commands.distill``) runs it from a TOML file.
 
 Example (a tiny budget):
@@ -71,7 +74,9 @@ Example (a tiny budget):
 
 from __future__ import annotations
 
+import copy
 import dataclasses
+import functools
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -85,6 +90,7 @@ from agents.agent_folder import PolicyNetwork, build_actor, write_agent
 from agents.device import torch_device
 from agents.history_env import HistoryVecEnv
 from agents.mixture_env import split_fleets
+from agents.schedule import EvaluationLog, Evaluator
 from agents.slot_statistics import shared_slot_statistics
 from agents.train_config import TrainConfig
 from agents.vec_env import FleetVecEnv
@@ -196,9 +202,13 @@ class DistillReport:
         clipped: Fraction of the labels' components clipped to [-1, 1].
         seconds: Wall time (s).
         rounds: Per round: ``round``, ``samples`` (data so far), ``loss``,
-            ``zero_loss`` and ``clipped`` (on the data so far), ``seconds`` (since start).
+            ``zero_loss`` and ``clipped`` (on the data so far), ``seconds`` (since start,
+            evaluations included).
         draws: Per round, the procedural draw seeds its rollouts ran (``draw_seeds``).
         device: The torch device the student was fitted on.
+        evaluations: The rows of ``evaluations.csv`` (``agents.schedule.EvaluationLog``):
+            the student before round 0 (its output is zero: the base policy) and after
+            each round, at the labelled vessel-steps so far; empty without an evaluator.
     """
 
     folder: Path
@@ -210,6 +220,7 @@ class DistillReport:
     rounds: tuple[dict[str, float], ...]
     draws: tuple[tuple[int, ...], ...]
     device: str
+    evaluations: tuple[dict[str, float], ...]
 
 
 def student_actor(config: TrainConfig, input_size: int, action_size: int) -> PolicyNetwork:
@@ -534,10 +545,52 @@ def input_statistics(config: TrainConfig, inputs: NDArray[np.float32]) -> InputS
     return InputStatistics(mean, var)
 
 
+def _agent_record(
+    config: TrainConfig,
+    settings: DistillConfig,
+    draws: list[list[int]],
+    rounds: list[dict[str, float]],
+    seconds: float,
+) -> dict[str, Any]:
+    """The ``config.json`` record of the student after ``rounds`` (none yet: the base)."""
+    final = rounds[-1] if rounds else {"samples": 0, "zero_loss": 0.0, "clipped": 0.0}
+    return {
+        "config": config.to_json(),
+        "distillation": {
+            **dataclasses.asdict(settings),
+            "draws": draws,
+            "samples": int(final["samples"]),
+            "losses": [r["loss"] for r in rounds],
+            "zero_loss": final["zero_loss"],
+            "clipped": final["clipped"],
+            "seconds": seconds,
+        },
+        "timesteps_done": int(final["samples"]),
+        "interrupted": False,
+    }
+
+
 def distill(
-    config: TrainConfig, settings: DistillConfig, out: str | Path, device: str = "cpu"
+    config: TrainConfig,
+    settings: DistillConfig,
+    out: str | Path,
+    device: str = "cpu",
+    evaluate: Evaluator | None = None,
 ) -> DistillReport:
     """Distill a teacher into a local residual student; write its agent folder.
+
+    With ``evaluate`` (``cpf-distill --eval-seeds``: ``cpf-train``'s evaluator
+    on the benchmark's ``test`` split) the student is evaluated before round 0
+    and after each round (``agents.schedule.EvaluationLog``, no ``best/``: the
+    student is the last round's). Before round 0 its output is exactly zero
+    (``student_actor``), so the first row is the base policy (the folder
+    evaluated then holds identity input statistics, which a zero output
+    ignores). Each row's ``vessel_steps`` is the labelled vessel-steps so far,
+    which are the simulated ones (every vessel-step of the rollouts is
+    labelled), ``cpf-train``'s axis; ``wall_clock_seconds`` counts from the
+    start, teacher, base, simulator and evaluations included. The evaluation
+    runs on its own envs, in a fork of torch's random state, on a copy of the
+    student: it changes nothing the training computes.
 
     Args:
         config: The student's run: scenario (one, or a tuple: a mixture), base,
@@ -549,6 +602,7 @@ def distill(
         device: Where torch fits and runs the student (``agents.device.torch_device``:
             ``"cpu"``, ``"cuda"``, ``"cuda:1"``, ``"auto"``); the folder is written
             from the CPU and loads on the CPU.
+        evaluate: Agent folder -> mean cost per scenario, or None (no evaluation).
 
     Raises:
         ValueError: A held-out scenario or seed (``splits.check_training``), a
@@ -569,6 +623,25 @@ def distill(
     data: list[tuple[NDArray[np.float32], NDArray[np.float64]]] = []
     rounds: list[dict[str, float]] = []
     draws: list[list[int]] = []
+    evaluations = None if evaluate is None else EvaluationLog(evaluate, best=None)
+
+    def clock() -> float:
+        return time.perf_counter() - started
+
+    def evaluation(statistics: InputStatistics) -> None:
+        """Evaluate a copy of the student as it is now (see above)."""
+        if evaluations is None:
+            return
+        record = _agent_record(config, settings, draws, rounds, clock())
+        student = copy.deepcopy(network).cpu()
+        samples = int(rounds[-1]["samples"]) if rounds else 0
+        write = functools.partial(
+            write_agent, record=record, network=student, normalization=statistics
+        )
+        with torch.random.fork_rng(devices=[]):
+            evaluations.run(write, samples, clock)
+
+    evaluation(InputStatistics(np.zeros(size), np.ones(size)))
     for round_ in range(settings.rounds):
         if settings.redraw and round_ > 0:
             groups = _redraw(groups, config, settings, round_)
@@ -589,37 +662,26 @@ def distill(
                 "loss": loss,
                 "zero_loss": float(np.mean(np.clip(labels, -1.0, 1.0) ** 2)),
                 "clipped": float(np.mean(np.abs(labels) > 1.0)),
-                "seconds": time.perf_counter() - started,
+                "seconds": clock(),
             }
         )
+        evaluation(stats)
     final = rounds[-1]
-    losses = [r["loss"] for r in rounds]
-    seconds = time.perf_counter() - started
-    record = {
-        "config": config.to_json(),
-        "distillation": {
-            **dataclasses.asdict(settings),
-            "draws": draws,
-            "samples": int(final["samples"]),
-            "losses": losses,
-            "zero_loss": final["zero_loss"],
-            "clipped": final["clipped"],
-            "seconds": seconds,
-        },
-        "timesteps_done": int(final["samples"]),
-        "interrupted": False,
-    }
+    seconds = clock()
     assert stats is not None
     with atomic.staged_folder(out) as staging:
-        write_agent(staging, record, network.cpu(), stats)
+        write_agent(
+            staging, _agent_record(config, settings, draws, rounds, seconds), network.cpu(), stats
+        )
     return DistillReport(
         Path(out),
         int(final["samples"]),
-        tuple(losses),
+        tuple(r["loss"] for r in rounds),
         final["zero_loss"],
         final["clipped"],
         seconds,
         tuple(rounds),
         tuple(tuple(d) for d in draws),
         str(where),
+        () if evaluations is None else tuple(evaluations.rows),
     )

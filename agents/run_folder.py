@@ -394,7 +394,7 @@ class TrainingRun:
                 rms.mean.copy(), rms.var.copy(), self.env.epsilon, self.env.clip_obs
             )
         seconds = self.schedule.seconds()
-        training = seconds - self.schedule.eval_seconds
+        training = seconds - self.schedule.evaluations.seconds
         steps = int(self.model.num_timesteps)
         record: dict[str, Any] = {
             "config": self.config.to_json(),
@@ -402,7 +402,7 @@ class TrainingRun:
             "timesteps_done": steps,
             "train_seconds": round(training, 1),  # held-out evaluations excluded
             "vessel_steps_per_second": round(steps / training) if training > 0 else 0,
-            "evaluation_seconds": round(self.schedule.eval_seconds, 1),
+            "evaluation_seconds": round(self.schedule.evaluations.seconds, 1),
             "wall_clock_seconds": round(seconds, 1),
             "versions": _versions(),
         }

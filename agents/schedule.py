@@ -11,9 +11,10 @@ taken there resumes bit for bit), in this order:
    passes the benchmark's own evaluation on the ``test`` split, so the number
    is the one ``cpf-bench --split test`` prints for that folder). A new best
    mean cost replaces ``best/``. ``evaluations.csv`` gets a row (rewritten
-   atomically): vessel-steps, wall-clock seconds since the run started
-   (evaluations included; summed over resumed parts), the evaluation's own
-   seconds, the mean cost over scenarios and one ``cost_<scenario>`` column each;
+   atomically; ``EvaluationLog``, which ``cpf-distill`` uses too):
+   vessel-steps, wall-clock seconds since the run started (evaluations
+   included; summed over resumed parts), the evaluation's own seconds, the
+   mean cost over scenarios and one ``cost_<scenario>`` column each;
 2. a checkpoint, when due or when Ctrl-C was pressed (``checkpoint/``, replaced
    whole: ``agents.checkpoint``'s files, a copy of ``progress.csv``, ``best/``
    and this schedule's state);
@@ -52,6 +53,7 @@ __all__ = [
     "BEST",
     "CHECKPOINT",
     "EVALUATIONS",
+    "EvaluationLog",
     "Evaluator",
     "GracefulInterrupt",
     "ProgressBar",
@@ -151,6 +153,93 @@ def evaluations_csv(rows: list[dict[str, float]]) -> str:
     return buffer.getvalue()
 
 
+class EvaluationLog:
+    """A run's held-out evaluations: the rows of ``evaluations.csv``, and ``best/``.
+
+    ``cpf-train`` (through ``ScheduleCallback``) and ``cpf-distill`` (through
+    ``agents.distill``) evaluate with it. Each evaluation writes the current
+    agent as an agent folder in a scratch folder, hands it to ``evaluate``
+    and appends a row: ``vessel_steps``, ``wall_clock_seconds`` (the run's
+    clock after the evaluation, evaluations included), ``evaluation_seconds``
+    (this one's own, writing the folder included), ``mean_cost`` (over the
+    scenarios) and one ``cost_<scenario>`` column each.
+
+    Args:
+        evaluate: Agent folder -> mean cost per scenario; None for a run that does not
+            evaluate (it keeps the log's state for its checkpoints, and ``run`` is refused).
+        best: The folder a new lowest mean cost replaces (a copy of the agent
+            evaluated), or None to keep none.
+        rows: Earlier rows (a resumed run).
+        best_cost: The lowest mean cost so far (a resumed run), or None.
+        seconds: Seconds spent evaluating so far (a resumed run).
+
+    Attributes:
+        rows: The rows, oldest first.
+        best_cost: The lowest mean cost so far (inf before the first evaluation).
+        seconds: Seconds spent evaluating in all.
+    """
+
+    def __init__(
+        self,
+        evaluate: Evaluator | None,
+        best: Path | None,
+        rows: list[dict[str, float]] | None = None,
+        best_cost: float | None = None,
+        seconds: float = 0.0,
+    ) -> None:
+        self.evaluate, self.best = evaluate, best
+        self.rows: list[dict[str, float]] = list(rows or [])
+        self.best_cost = np.inf if best_cost is None else float(best_cost)
+        self.seconds = float(seconds)
+
+    @property
+    def latest_cost(self) -> float | None:
+        """Mean cost of the latest evaluation, or None before the first."""
+        return self.rows[-1]["mean_cost"] if self.rows else None
+
+    def run(
+        self,
+        write_agent: Callable[[Path], None],
+        vessel_steps: int,
+        clock: Callable[[], float],
+        scratch: Path | None = None,
+    ) -> dict[str, float]:
+        """Evaluate the agent ``write_agent`` writes; keep it if best; append and return its row.
+
+        Args:
+            write_agent: Writes the agent into an existing, empty folder.
+            vessel_steps: The run's vessel-steps so far (the row's ``vessel_steps``).
+            clock: The run's wall-clock seconds so far, read after the evaluation.
+            scratch: Where the agent folder is written for the evaluation (removed
+                after it); None: the system's temporary folder.
+        """
+        if self.evaluate is None:
+            raise ValueError("this run has no evaluator; give one to evaluate.")
+        start = time.perf_counter()
+        with tempfile.TemporaryDirectory(dir=scratch, prefix=".evaluating-") as folder:
+            agent = Path(folder)
+            write_agent(agent)
+            costs = {name: float(cost) for name, cost in self.evaluate(agent).items()}
+            mean = float(np.mean(list(costs.values())))
+            if mean < self.best_cost:
+                self.best_cost = mean
+                if self.best is not None:
+                    with atomic.staged_folder(self.best) as staging:
+                        for path in agent.iterdir():
+                            shutil.copy2(path, staging / path.name)
+        spent = time.perf_counter() - start
+        self.seconds += spent
+        row = {
+            "vessel_steps": int(vessel_steps),
+            "wall_clock_seconds": round(clock(), 3),
+            "evaluation_seconds": round(spent, 3),
+            "mean_cost": mean,
+            **{f"cost_{name}": cost for name, cost in costs.items()},
+        }
+        self.rows.append(row)
+        return row
+
+
 class ScheduleCallback(BaseCallback):
     """Evaluates, keeps the best agent and checkpoints a run (see the module docstring).
 
@@ -177,20 +266,18 @@ class ScheduleCallback(BaseCallback):
         self._write_agent = write_agent
         self._interrupt = interrupt
         state = state or {}
-        self.rows: list[dict[str, float]] = list(state.get("rows", []))
-        best = state.get("best_cost")
-        self.best_cost = np.inf if best is None else float(best)
+        self.evaluations = EvaluationLog(
+            evaluate,
+            folder / BEST,
+            state.get("rows", []),
+            state.get("best_cost"),
+            state.get("eval_seconds", 0.0),
+        )
         self.next_eval = int(state.get("next_eval", 0))
         self.next_checkpoint = int(state.get("next_checkpoint", schedule.checkpoint_every))
         self.last_checkpoint = int(state.get("last_checkpoint", -1))
         self.seconds_before = float(state.get("seconds", 0.0))
-        self.eval_seconds = float(state.get("eval_seconds", 0.0))
         self._start = time.perf_counter()
-
-    @property
-    def latest_cost(self) -> float | None:
-        """Mean cost of the latest evaluation, or None before the first."""
-        return self.rows[-1]["mean_cost"] if self.rows else None
 
     def seconds(self) -> float:
         """Wall-clock seconds of the run so far (earlier resumed parts included)."""
@@ -198,21 +285,23 @@ class ScheduleCallback(BaseCallback):
 
     def state(self) -> dict[str, Any]:
         """JSON-ready state, stored in each checkpoint."""
+        evaluations = self.evaluations
         return {
-            "rows": self.rows,
-            "best_cost": self.best_cost if np.isfinite(self.best_cost) else None,
+            "rows": evaluations.rows,
+            "best_cost": evaluations.best_cost if np.isfinite(evaluations.best_cost) else None,
             "next_eval": self.next_eval,
             "next_checkpoint": self.next_checkpoint,
             "last_checkpoint": self.last_checkpoint,
             "seconds": self.seconds(),
-            "eval_seconds": self.eval_seconds,
+            "eval_seconds": evaluations.seconds,
         }
 
     def _on_step(self) -> bool:
         return True
 
     def _on_training_start(self) -> None:
-        last = self.rows[-1] if self.rows else None
+        rows = self.evaluations.rows
+        last = rows[-1] if rows else None
         if last is not None and last["vessel_steps"] == self.model.num_timesteps:
             self._log(last)  # resumed right after this evaluation: not yet in progress.csv
 
@@ -237,7 +326,8 @@ class ScheduleCallback(BaseCallback):
 
     def _on_training_end(self) -> None:
         steps = self.model.num_timesteps
-        if self._evaluating() and (not self.rows or self.rows[-1]["vessel_steps"] != steps):
+        rows = self.evaluations.rows
+        if self._evaluating() and (not rows or rows[-1]["vessel_steps"] != steps):
             self.run_evaluation()
         if self.schedule.checkpoint_every > 0 and self.last_checkpoint != steps:
             self.write_checkpoint()
@@ -247,31 +337,11 @@ class ScheduleCallback(BaseCallback):
 
     def run_evaluation(self) -> None:
         """Evaluate the current agent, log it, keep it if best, rewrite evaluations.csv."""
-        assert self.evaluate is not None
-        start = time.perf_counter()
-        with tempfile.TemporaryDirectory(dir=self.folder, prefix=".evaluating-") as scratch:
-            agent = Path(scratch)
-            self._write_agent(agent)
-            costs = {name: float(cost) for name, cost in self.evaluate(agent).items()}
-            mean = float(np.mean(list(costs.values())))
-            if mean < self.best_cost:
-                self.best_cost = mean
-                with atomic.staged_folder(self.folder / BEST) as staging:
-                    for path in agent.iterdir():
-                        shutil.copy2(path, staging / path.name)
-        spent = time.perf_counter() - start
-        self.eval_seconds += spent
-        row = {
-            "vessel_steps": int(self.model.num_timesteps),
-            "wall_clock_seconds": round(self.seconds(), 3),
-            "evaluation_seconds": round(spent, 3),
-            "mean_cost": mean,
-            **{f"cost_{name}": cost for name, cost in costs.items()},
-        }
-        self.rows.append(row)
+        steps = int(self.model.num_timesteps)
+        row = self.evaluations.run(self._write_agent, steps, self.seconds, scratch=self.folder)
         every = self.schedule.eval_every
-        self.next_eval = (int(self.model.num_timesteps) // every + 1) * every
-        atomic.write_text(self.folder / EVALUATIONS, evaluations_csv(self.rows))
+        self.next_eval = (steps // every + 1) * every
+        atomic.write_text(self.folder / EVALUATIONS, evaluations_csv(self.evaluations.rows))
         self._log(row)
 
     def write_checkpoint(self) -> None:
@@ -313,10 +383,10 @@ class ProgressBar(BaseCallback):
 
     def _on_rollout_end(self) -> None:
         schedule = self._schedule
-        if schedule is not None and schedule.latest_cost is not None:
+        if schedule is not None and schedule.evaluations.latest_cost is not None:
             self._bar.set_postfix(
-                eval_cost=f"{schedule.latest_cost:.4g}",
-                eval_s=f"{schedule.eval_seconds:.0f}",
+                eval_cost=f"{schedule.evaluations.latest_cost:.4g}",
+                eval_s=f"{schedule.evaluations.seconds:.0f}",
                 refresh=False,
             )
 

@@ -1,7 +1,11 @@
 """``cpf-curves``: learning curves of several training runs, IQM over training seeds.
 
-Reads the ``evaluations.csv`` of each ``cpf-train`` run folder (one per
-training seed; the cost on the benchmark's held-out ``test`` seeds) and
+Reads the ``evaluations.csv`` of each run folder (one per training seed; the
+cost on the benchmark's held-out ``test`` seeds): a ``cpf-train --out``
+folder, or a ``cpf-distill`` run (``--out``, or ``--log`` where given) with
+``--eval-seeds N``, whose rows are the student before round 0 (its base) and
+after each DAgger round at the labelled vessel-steps so far (the simulated
+ones, as ``cpf-train`` counts them; the seconds include the teacher's). It
 writes to ``--out``:
 
 - ``curves.csv``: one row per point of either axis: ``axis`` (``vessel_steps``
@@ -111,7 +115,8 @@ def read_run(folder: Path) -> RunCurve:
     path = folder / "evaluations.csv"
     if not path.is_file():
         raise ValueError(
-            f"{folder} has no evaluations.csv; train with cpf-train --eval-every N (> 0)."
+            f"{folder} has no evaluations.csv; train with cpf-train --eval-every N (> 0) or "
+            "cpf-distill --eval-seeds N (> 0)."
         )
     rows = list(csv.DictReader(io.StringIO(path.read_text())))
     if not rows:
@@ -122,7 +127,9 @@ def read_run(folder: Path) -> RunCurve:
             for key in ("vessel_steps", "wall_clock_seconds", "mean_cost")
         ]
     except (KeyError, ValueError) as error:
-        raise ValueError(f"{path} is not a cpf-train evaluations.csv: {error}") from None
+        raise ValueError(
+            f"{path} is not an evaluations.csv of cpf-train or cpf-distill: {error}"
+        ) from None
     return RunCurve(folder.name, *columns)
 
 
@@ -148,7 +155,10 @@ def steps_curve(runs: Sequence[RunCurve]) -> Curve:
     """
     common = sorted(set.intersection(*(set(run.steps.tolist()) for run in runs)))
     if not common:
-        raise ValueError("the runs share no evaluation vessel-step count; use one --eval-every.")
+        raise ValueError(
+            "the runs share no evaluation vessel-step count; train them with one --eval-every "
+            "(cpf-train) or one rounds, steps and fleets (cpf-distill)."
+        )
     values = np.array(
         [[run.cost[np.flatnonzero(run.steps == x)[-1]] for run in runs] for x in common]
     )
@@ -251,12 +261,17 @@ def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         allow_abbrev=False,
         prog="cpf-curves",
-        description="Learning curves of cpf-train runs (one per training seed): IQM of the "
+        description="Learning curves of cpf-train or cpf-distill runs (one per training seed): "
+        "IQM of the "
         "held-out evaluation cost with 95 % bootstrap intervals vs vessel-steps and vs "
         "wall-clock seconds; writes curves.csv and curves.png and prints when the IQM first "
         "beats the base policy.",
     )
-    parser.add_argument("runs", nargs="+", metavar="RUN_DIR", help="cpf-train --out folders")
+    parser.add_argument(
+        "runs", nargs="+", metavar="RUN_DIR",
+        help="cpf-train --out folders, or cpf-distill run folders (--out, or --log if given) "
+        "of runs with --eval-seeds",
+    )  # fmt: skip
     parser.add_argument("--out", required=True, help="output folder (curves.csv, curves.png)")
     parser.add_argument(
         "--base", default=None,
@@ -266,10 +281,16 @@ def _parser() -> argparse.ArgumentParser:
     return parser
 
 
-def _when(x: float | None, unit: str) -> str:
-    if x is None:
-        return "never within the runs' evaluations"
+def _amount(x: float, unit: str) -> str:
+    """A point of an axis as printed: whole vessel-steps, seconds to 0.1."""
     return f"{x:,.0f} {unit}" if unit == "vessel-steps" else f"{x:,.1f} {unit}"
+
+
+def _when(x: float | None, end: float, unit: str) -> str:
+    """``from X unit``, or that it never happened up to the runs' last point ``end``."""
+    if x is None:
+        return f"never within the runs' evaluations (to {_amount(end, unit)})"
+    return f"from {_amount(x, unit)}"
 
 
 def curves_main(argv: Sequence[str] | None = None) -> int:
@@ -296,11 +317,11 @@ def curves_main(argv: Sequence[str] | None = None) -> int:
     for curve, unit in ((steps, "vessel-steps"), (seconds, "s")):
         below, surely = first_below(curve, base_cost)
         if single:
-            print(f"  cost below the base from {_when(below, unit)}")
+            print(f"  cost below the base {_when(below, float(curve.x[-1]), unit)}")
         else:
             print(
-                f"  IQM below the base from {_when(below, unit)}; whole 95 % interval below "
-                f"from {_when(surely, unit)}"
+                f"  IQM below the base {_when(below, float(curve.x[-1]), unit)}; whole 95 % "
+                f"interval below {_when(surely, float(curve.x[-1]), unit)}"
             )
     final = (
         f"  final cost {steps.iqm[-1]:.6g} (one run: no interval; train several seeds for one)"

@@ -19,7 +19,14 @@ seeds and the data order). ``--out`` receives an ordinary agent folder
 - ``rounds.csv``: per DAgger round, ``round``, ``samples`` (labelled
   vessel-steps so far), ``loss`` (the student's mean squared error on them),
   ``zero_loss`` (the base's, a = 0), ``clipped`` (share of label components
-  beyond the residual's reach) and ``seconds`` (since the start).
+  beyond the residual's reach) and ``seconds`` (since the start);
+- with ``--eval-seeds N`` (N > 0; default 0, none), ``evaluations.csv`` in
+  ``cpf-train``'s columns (``agents.schedule.EvaluationLog``, the evaluator
+  ``cpf_commands.train_eval.TestSplitEvaluator`` on the training scenarios'
+  ``test`` split, N seeds each): the student before round 0 (exactly the
+  base) and after each round, at the labelled vessel-steps so far, and
+  ``run.json``'s ``evaluation`` (the settings, as ``cpf-train`` records
+  them), so ``cpf-curves`` reads the run as it reads ``cpf-train``'s.
 
 ``--device`` (default ``cpu``; ``auto``, ``cuda``, ``cuda:N``) is where torch
 fits the student; it is recorded in ``run.json``, not in the agent's
@@ -46,6 +53,8 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from cpf_commands.common.arguments import non_negative_int
+from cpf_commands.train_eval import TestSplitEvaluator
 from cpf_env.infra import atomic
 from cpf_env.scenarios.suite import SUITE
 
@@ -122,6 +131,18 @@ def _rounds_csv(rounds: Sequence[dict[str, float]]) -> str:
     return buffer.getvalue()
 
 
+def _evaluated(rows: Sequence[dict[str, float]], log: Path) -> str:
+    """The line on the evaluations (none: empty)."""
+    if not rows:
+        return ""
+    costs = ", ".join(f"{row['mean_cost']:.4g}" for row in rows)
+    seconds = sum(row["evaluation_seconds"] for row in rows)
+    return (
+        f"test-split cost before round 0 (the base) and after each round: {costs} "
+        f"({seconds:.0f} s of evaluation; {log}/{'evaluations.csv'})\n"
+    )
+
+
 def _versions() -> dict[str, str]:
     """Versions of the packages the student depends on."""
     import numpy
@@ -161,6 +182,12 @@ def _parser() -> argparse.ArgumentParser:
         "--force", action="store_true", help="replace an existing --out (and --log)"
     )
     parser.add_argument(
+        "--eval-seeds", type=non_negative_int, default=0,
+        help="evaluate the student before round 0 (the base) and after each round on the "
+        "training scenarios' test split, this many episodes each (cpf-bench --seeds), into "
+        "evaluations.csv (cpf-train's columns; cpf-curves reads it); 0: none",
+    )  # fmt: skip
+    parser.add_argument(
         "--device", default="cpu",
         help="torch device that fits the student: cpu (default), auto, cuda or cuda:N; the "
         "agent folder loads on the CPU whatever fitted it",
@@ -192,11 +219,17 @@ def distill_main(argv: Sequence[str] | None = None) -> int:
 
     if config.torch_threads is not None:
         torch.set_num_threads(config.torch_threads)
+    from agents.schedule import EVALUATIONS, evaluations_csv
+
+    evaluate = (
+        None if args.eval_seeds == 0 else TestSplitEvaluator(config.scenarios, args.eval_seeds)
+    )
     started = time.perf_counter()
-    report = distill(config, settings, out, device=args.device)
+    report = distill(config, settings, out, device=args.device, evaluate=evaluate)
     record = {
         "config": config.to_json(),
         "distill": dataclasses.asdict(settings),
+        "evaluation": None if evaluate is None else evaluate.settings,
         "command": ["cpf-distill", *(sys.argv[1:] if argv is None else argv)],
         "versions": _versions(),
         "device": report.device,
@@ -207,6 +240,8 @@ def distill_main(argv: Sequence[str] | None = None) -> int:
         "draws": [list(seeds) for seeds in report.draws],
     }
     files = {RUN_RECORD: json.dumps(record, indent=2) + "\n", ROUNDS: _rounds_csv(report.rounds)}
+    if report.evaluations:
+        files[EVALUATIONS] = evaluations_csv(list(report.evaluations))
     if log == out:
         for name, text in files.items():
             atomic.write_text(out / name, text)
@@ -222,6 +257,7 @@ def distill_main(argv: Sequence[str] | None = None) -> int:
         f"{report.samples:,} samples, loss {report.losses[-1]:.4g} (base {report.zero_loss:.4g}), "
         f"{report.clipped:.1%} of label components clipped, {record['wall_clock_seconds']} s; "
         f"saved to {out}/\n"
+        f"{_evaluated(report.evaluations, log)}"
         f"evaluate: cpf-bench --policies {config.base} {settings.teacher} {out} --split test"
     )
     return 0

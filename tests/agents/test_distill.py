@@ -27,7 +27,9 @@ from agents.distill import (
 from agents.train_config import TrainConfig
 from agents.vec_env import FleetVecEnv
 from baselines import make_policy
+from cpf_commands.bench.run import run_bench
 from cpf_commands.distill import distill_main
+from cpf_commands.train_eval import TestSplitEvaluator
 from cpf_env import scenarios
 from cpf_env.envs.residual import ResidualConfig
 from cpf_env.scenarios.sampler import ScenarioDistribution
@@ -205,6 +207,7 @@ def test_cpf_distill_writes_the_agent_and_its_run_files(tmp_path: Path) -> None:
     run = json.loads((log / "run.json").read_text())
     assert run["config"]["seed"] == 3 and run["distill"]["teacher"] == "nn_dsc_privileged"
     assert run["device"] == "cpu" and run["draws"] == [[], []]  # no procedural fleets
+    assert run["evaluation"] is None and not (log / "evaluations.csv").exists()  # no --eval-seeds
     rows = list(csv.DictReader((log / "rounds.csv").open()))
     assert [int(r["round"]) for r in rows] == [0, 1] and int(rows[1]["samples"]) == 200
     assert load_policy(out).config.mode == "force_and_rate"
@@ -362,3 +365,31 @@ def test_distill_refuses_a_device_it_does_not_have(tmp_path: Path) -> None:
     with pytest.raises(ValueError, match=r"sees none.*--device cpu"):
         distill(_config(), TINY, tmp_path / "x", device="cuda")
     assert not (tmp_path / "x").exists()
+
+
+def test_evaluation_rows_are_cpf_trains_and_leave_the_student_unchanged(tmp_path: Path) -> None:
+    evaluate = TestSplitEvaluator(["bench_current_waves"], seeds=1, steps=20)
+    evaluated = distill(_config(), TINY, tmp_path / "a", evaluate=evaluate)
+    plain = distill(_config(), TINY, tmp_path / "b")
+    assert plain.evaluations == () and plain.losses == evaluated.losses
+    first = load_file(str(tmp_path / "a" / "policy.safetensors"))
+    second = load_file(str(tmp_path / "b" / "policy.safetensors"))
+    assert all(np.array_equal(first[k].numpy(), second[k].numpy()) for k in first)
+    rows = evaluated.evaluations
+    # cpf-train's columns (tests/agents/test_schedule.py), one row before round 0 and one a round.
+    assert [list(row) for row in rows] == [
+        ["vessel_steps", "wall_clock_seconds", "evaluation_seconds", "mean_cost",
+         "cost_bench_current_waves"]
+    ] * 3  # fmt: skip
+    assert [row["vessel_steps"] for row in rows] == [0, *(r["samples"] for r in evaluated.rounds)]
+    seconds = [row["wall_clock_seconds"] for row in rows]
+    assert seconds == sorted(seconds) and seconds[-1] <= evaluated.seconds + 5e-4  # rounded
+    # Row 0 is the base itself; the last row is the student written to the folder.
+    base = run_bench(["nn_dsc"], ["bench_current_waves"], seeds=1, steps=20, split="test")
+    assert rows[0]["mean_cost"] == float(np.mean(base[0].metrics["cost"]))
+    final = run_bench(
+        {"s": tmp_path / "a"}, ["bench_current_waves"], seeds=1, steps=20, reference="s",
+        split="test",
+    )  # fmt: skip
+    assert rows[-1]["mean_cost"] == float(np.mean(final[0].metrics["cost"]))
+    assert rows[-1]["mean_cost"] != rows[0]["mean_cost"]

@@ -3,14 +3,18 @@
 from __future__ import annotations
 
 import csv
+import functools
 import json
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from cpf_commands import distill as distill_command
 from cpf_commands.bench.run import run_bench
 from cpf_commands.curves import curves_main
+from cpf_commands.distill import distill_main
+from cpf_commands.train_eval import TestSplitEvaluator
 
 #: Four runs (training seeds): (vessel_steps, wall_clock_seconds, mean_cost) per evaluation.
 RUNS = {
@@ -100,3 +104,68 @@ def test_one_run_prints_its_cost_without_an_interval(
     assert "[5, 5]" not in printed and "IQM" not in printed
     assert "cost below the base from 100 vessel-steps" in printed  # s0: 8 < 10
     assert "final cost 5 (one run: no interval; train several seeds for one)" in printed
+
+
+def test_a_run_that_never_beats_the_base_says_so(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    folder = tmp_path / "worse"
+    folder.mkdir()
+    (folder / "evaluations.csv").write_text(
+        "vessel_steps,wall_clock_seconds,evaluation_seconds,mean_cost,cost_bench_mild\n"
+        "0,1.0,0.1,10.0,10.0\n100,2.5,0.1,12.0,12.0\n"
+    )
+    (folder / "run.json").write_text(json.dumps({"config": {"base": "nn_dsc"}}))
+    assert curves_main([str(folder), "--out", str(tmp_path / "c")]) == 0
+    printed = capsys.readouterr().out
+    assert "never within the runs' evaluations (to 100 vessel-steps)" in printed
+    assert "never within the runs' evaluations (to 2.5 s)" in printed
+
+
+STUDENT = """
+scenario = "bench_mild"
+fleets = 2
+net_arch = [16]
+mode = "force_and_rate"
+scale = 1.0
+
+[distill]
+teacher = "nn_dsc_privileged"
+rounds = 2
+steps = 10
+epochs = 2
+"""
+
+
+def test_cpf_curves_reads_cpf_distill_runs(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # Evaluation episodes of 20 steps (cpf-distill evaluates whole episodes), to keep it fast.
+    monkeypatch.setattr(
+        distill_command, "TestSplitEvaluator", functools.partial(TestSplitEvaluator, steps=20)
+    )
+    config = tmp_path / "student.toml"
+    config.write_text(STUDENT)
+    logs = []
+    for seed in (0, 1):
+        out, log = tmp_path / f"agent_s{seed}", tmp_path / f"run_s{seed}"
+        argv = ["--config", str(config), "--seed", str(seed), "--out", str(out), "--log", str(log)]
+        assert distill_main([*argv, "--eval-seeds", "1"]) == 0
+        logs.append(str(log))
+    record = json.loads((tmp_path / "run_s0" / "run.json").read_text())
+    assert record["evaluation"] == {
+        "split": "test", "scenarios": ["bench_mild"], "seeds": 1, "steps": 20
+    }  # fmt: skip
+    rows = list(csv.DictReader((tmp_path / "run_s0" / "evaluations.csv").open()))
+    assert list(rows[0]) == ["vessel_steps", "wall_clock_seconds", "evaluation_seconds",
+                             "mean_cost", "cost_bench_mild"]  # cpf-train's  # fmt: skip
+    assert [int(r["vessel_steps"]) for r in rows] == [0, 100, 200]  # labelled vessel-steps
+    capsys.readouterr()
+    assert curves_main([*logs, "--out", str(tmp_path / "c")]) == 0  # the base: row 0
+    assert "2 runs; base policy cost" in capsys.readouterr().out
+    assert curves_main([*logs, "--out", str(tmp_path / "d"), "--base", "nn_dsc"]) == 0
+    by_row, by_name = _curves(tmp_path / "c"), _curves(tmp_path / "d")
+    assert [r["x"] for r in by_row["vessel_steps"]] == [0, 100, 200]
+    # Row 0 of a student is exactly its base, nn_dsc, benched on the runs' settings.
+    assert by_row["vessel_steps"][0]["base_cost"] == by_name["vessel_steps"][0]["base_cost"]
+    assert by_name["vessel_steps"][0]["base_cost"] == float(rows[0]["mean_cost"])
