@@ -37,6 +37,7 @@ BENCHES = (
     "bench_procedural",
     "bench_test_k6",
     "bench_shift_k6",
+    "bench_procedural_k6",
     "bench_test_deepsets",
     "bench_shift_deepsets",
     "bench_procedural_deepsets",
