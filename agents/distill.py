@@ -89,6 +89,7 @@ from numpy.typing import NDArray
 from agents.agent_folder import PolicyNetwork, build_actor, write_agent
 from agents.device import torch_device
 from agents.history_env import HistoryVecEnv
+from agents.loading import one_torch_thread
 from agents.mixture_env import split_fleets
 from agents.schedule import EvaluationLog, Evaluator
 from agents.slot_statistics import shared_slot_statistics
@@ -329,11 +330,11 @@ def student_actions(
 
     ``inputs`` are the learner's inputs with the history appended
     (``HistoryVecEnv``), normalized with ``stats`` and run through ``network``
-    on the network's device; float32 on the CPU.
+    on the network's device on one torch thread; float32 on the CPU.
     """
     device = next(network.parameters()).device
     rows = torch.from_numpy(stats.apply(inputs)).to(device)
-    with torch.no_grad():
+    with one_torch_thread(), torch.no_grad():
         return network(rows).cpu().numpy()
 
 

@@ -21,7 +21,9 @@ Example (with a folder written by ``cpf-train --out runs/ppo``)::
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any, Protocol
 
@@ -216,14 +218,30 @@ class Actor(Protocol):
         """(R, input_size) float32 inputs -> (R, action_size) float32 actions."""
 
 
+@contextlib.contextmanager
+def one_torch_thread() -> Iterator[None]:
+    """Run the block on one torch thread, then restore the process's thread count.
+
+    torch's multi-threaded matrix products sum in an order that depends on the
+    thread count; on one thread a network's outputs are the same bits whatever
+    the process's setting. The count is process-wide: not safe to use from
+    several Python threads at once.
+    """
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(threads)
+
+
 class TorchActor:
     """``PolicyNetwork`` behind the saved normalization, on one torch thread.
 
-    torch's multi-threaded matrix products sum in an order that depends on the
-    thread count, so the outputs would otherwise differ in the last bits
-    between a laptop, a Ray worker (one thread) and a cluster node. torch's
-    thread count is process-wide: it is set and restored around each forward
-    pass, so calling it from several Python threads at once is not safe.
+    One thread (``one_torch_thread``) so that the outputs do not differ in the
+    last bits between a laptop, a Ray worker (one thread) and a cluster node;
+    it is set and restored around each forward pass, so calling it from
+    several Python threads at once is not safe.
 
     With a neighbour encoder the inputs may have any number K' of slots: the
     statistics (saved for the training K, slots pooled) are given to every
@@ -257,13 +275,8 @@ class TorchActor:
         normalization = self._normalization(rows.shape[-1])
         if normalization is not None:
             rows = normalization.apply(rows)
-        threads = torch.get_num_threads()
-        torch.set_num_threads(1)  # the same bits whatever the process's thread setting
-        try:
-            with torch.no_grad():
-                return self.network(torch.from_numpy(rows)).numpy()
-        finally:
-            torch.set_num_threads(threads)
+        with one_torch_thread(), torch.no_grad():
+            return self.network(torch.from_numpy(rows)).numpy()
 
 
 class TrainedPolicy(FleetPolicy):
