@@ -69,7 +69,7 @@ class InitSource:
     """An agent folder checked to start a run: its actor, statistics and identity.
 
     Attributes:
-        folder: The agent folder (absolute).
+        folder: The agent folder, as given (recorded so; the digest identifies it).
         manifest_sha256: SHA-256 of its ``manifest.json`` (which lists every file's hash).
         network: Its actor.
         normalization: Its observation statistics, or None.
@@ -130,7 +130,7 @@ def read_init_source(folder: str | Path, config: TrainConfig) -> InitSource:
             f"--init-from starts a PPO run from an agent folder; this run is {config.algo!r} "
             "(use --algo ppo)."
         )
-    path = Path(folder).absolute()
+    path = Path(folder)
     if not (path / MANIFEST).is_file():
         raise ValueError(
             f"--init-from {folder}: not an agent folder (no {MANIFEST}); give a folder "
