@@ -19,9 +19,12 @@ folder's (``tests/agents/test_init_from.py``). What is not the folder's:
   of the residual range, 4 % of the force limits at ``scale = 0.5``) instead of
   -1, whose noise (0.37 of the range) would move the student far from what it
   learned;
-- the normalization statistics go on updating, weighted as
-  ``timesteps_done`` samples of the folder's record (a student's labelled
-  vessel-steps), so the first rollouts shift them a little, not all at once.
+- nothing else changes during the run but the weights: the observation
+  statistics stay frozen at the folder's (``VecNormalize.training`` off, in
+  resumed parts too). Updated on the fine-tuning scenario they drift by
+  several standard deviations from the distilled statistics, which moves the
+  actor's inputs away from what it learned (measured in
+  ``docs/residual_rl.md``, "Fine-tuning a distilled student with PPO").
 
 The run records the folder and the SHA-256 of its ``manifest.json``
 (``InitSource.record``) in ``run.json`` and in the agent's ``config.json``
@@ -73,14 +76,12 @@ class InitSource:
         manifest_sha256: SHA-256 of its ``manifest.json`` (which lists every file's hash).
         network: Its actor.
         normalization: Its observation statistics, or None.
-        samples: The statistics' weight when they go on updating (``timesteps_done``, >= 1).
     """
 
     folder: Path
     manifest_sha256: str
     network: PolicyNetwork
     normalization: Normalization | None
-    samples: int
 
     def record(self) -> dict[str, str]:
         """The JSON-ready record kept in ``run.json`` and ``config.json`` (``init_from``)."""
@@ -113,7 +114,6 @@ class InitSource:
             rms = cast(RunningMeanStd, env.obs_rms)
             rms.mean = np.array(self.normalization.mean, dtype=np.float64)
             rms.var = np.array(self.normalization.var, dtype=np.float64)
-            rms.count = float(self.samples)
             env.epsilon, env.clip_obs = self.normalization.epsilon, self.normalization.clip
 
 
@@ -158,5 +158,4 @@ def read_init_source(folder: str | Path, config: TrainConfig) -> InitSource:
             "(its config.json)."
         )
     digest = hashlib.sha256((path / MANIFEST).read_bytes()).hexdigest()
-    samples = max(1, int(record.get("timesteps_done", 1)))
-    return InitSource(path, digest, network, normalization, samples)
+    return InitSource(path, digest, network, normalization)

@@ -320,6 +320,8 @@ class TrainingRun:
         self.model = build_model(config, self.env, device)
         if isinstance(init_from, InitSource) and checkpoint is None:
             init_from.apply(self.model, self.env)
+        if init_from is not None and isinstance(self.env, VecNormalize):
+            self.env.training = False  # the folder's statistics stay (agents.init_from)
         atomic.check_writable(self.destination, _bytes_needed(self.model))
         previous = ""
         if checkpoint is not None and (checkpoint / PROGRESS).is_file():

@@ -76,6 +76,9 @@ def test_cpf_train_init_from_on_mpc_records_the_folder_and_resumes_exactly(
     capsys.readouterr()
     for name in ("policy.safetensors", "normalization.json"):
         assert (whole / name).read_bytes() == (parts / name).read_bytes(), name
+    frozen = json.loads((MLP / "normalization.json").read_text())
+    assert json.loads((whole / "normalization.json").read_text()) == frozen
+    assert (whole / "policy.safetensors").read_bytes() != (MLP / "policy.safetensors").read_bytes()
     digest = hashlib.sha256((MLP / "manifest.json").read_bytes()).hexdigest()
     wanted = {"folder": str(MLP), "manifest_sha256": digest}
     for folder in (whole, parts):
