@@ -12,8 +12,8 @@ folder's (``tests/agents/test_init_from.py``). What is not the folder's:
 - the critic (and, with an encoder, the critic's own encoder) is freshly
   initialised, as in any run: an agent folder holds no value function. Its
   first estimates are poor, so the first updates' advantages are noisy; the
-  small exploration noise below and PPO's clipped steps keep the actor near the
-  student meanwhile;
+  small exploration noise below and PPO's clipped steps are what limits how
+  far the actor moves from the student meanwhile;
 - the exploration noise: ``TrainConfig.log_std_init``, for which ``cpf-train
   --init-from`` defaults to ``agents.train_config.INIT_LOG_STD`` (-2.5: a standard deviation of 0.08
   of the residual range, 4 % of the force limits at ``scale = 0.5``) instead of

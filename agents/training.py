@@ -94,8 +94,8 @@ def train(
             resuming is bit for bit on the CPU (torch's GPU generators are not checkpointed).
         init_from: An agent folder (a ``cpf-distill`` student, say) to start PPO's actor
             and observation statistics from (``agents.init_from``: same recipe, critic
-            fresh); recorded in ``run.json`` and ``config.json``. A resumed run keeps
-            its own record and may not name another.
+            fresh, statistics frozen); recorded in ``run.json`` and ``config.json``. A
+            resumed run keeps its own record and may not name another.
 
     Returns:
         The output folder.

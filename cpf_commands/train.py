@@ -252,7 +252,8 @@ def _parser() -> argparse.ArgumentParser:
         "--init-from", metavar="FOLDER", default=None,
         help="start PPO's actor and observation statistics from this agent folder (a "
         "cpf-distill student, say) of the same recipe (base, mode, scale, slots, encoder, "
-        "history, net_arch; a differing one is refused), the critic fresh; --log-std-init "
+        "history, net_arch; a differing one is refused), the critic fresh, the statistics "
+        "frozen; --log-std-init "
         f"then defaults to {INIT_LOG_STD}; recorded in run.json and config.json",
     )  # fmt: skip
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
