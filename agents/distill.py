@@ -119,9 +119,6 @@ __all__ = [
 
 #: Residual modes a student can be distilled in (the teacher's command maps onto them).
 LABEL_MODES = ("force", "force_and_rate")
-#: Bases that act for every row they are given (no ``act_batch(obs, fleets)``): the
-#: rollouts run them fleet by fleet (``FleetwiseBase``), as the env restarts single fleets.
-WHOLE_BATCH_BASES = ("mpc",)
 
 
 #: Names a teacher may have: ``baselines.POLICIES`` and ``baselines.PRIVILEGED``.
@@ -240,50 +237,6 @@ def student_actor(config: TrainConfig, input_size: int, action_size: int) -> Pol
         network.output.weight.zero_()
         network.output.bias.zero_()
     return network
-
-
-class FleetwiseBase(FleetPolicy):
-    """A base policy that acts on whole batches only, run as one instance per fleet.
-
-    The vector env restarts single fleets and then asks the base to act for
-    them alone (``act_batch(obs, fleets)``); ``mpc`` acts for all the rows it is
-    given. Each fleet here has its own instance (B = 1); ``mpc``'s plans depend
-    on the fleet's own episode alone, so the actions are those of one batched
-    instance. Slower than one batched call (B calls a step); for training only.
-
-    Args:
-        name: A policy name of ``baselines.POLICIES``.
-        scenario: The scenario the fleets run.
-        num_fleets: B.
-    """
-
-    def __init__(self, name: str, scenario: Scenario, num_fleets: int) -> None:
-        self.policies = [make_policy(name, scenario) for _ in range(num_fleets)]
-        first = self.policies[0]
-        self.name, self.n, self.obs_dim = name, first.n, first.obs_dim
-        self.act_dim, self.agents = first.act_dim, first.agents
-        self.diagnostics: dict[str, NDArray[np.float64]] = {}
-
-    def act_batch(self, obs: Any, fleets: Any = None) -> NDArray[np.float64]:
-        """Actions (rows, n, 4 + m) of all fleets, or of the listed ``fleets`` (index array)."""
-        given = np.asarray(obs, dtype=np.float64)
-        rows = range(len(self.policies)) if fleets is None else np.asarray(fleets).tolist()
-        actions = [self.policies[k].act_batch(given[i : i + 1]) for i, k in enumerate(rows)]
-        keys = self.policies[0].diagnostics.keys()
-        self.diagnostics = {
-            key: np.concatenate([self.policies[k].diagnostics[key] for k in rows]) for key in keys
-        }
-        return np.concatenate(actions)
-
-    def reset(self, seed: int | None = None) -> None:
-        """Forget every fleet's states."""
-        for policy in self.policies:
-            policy.reset(seed)
-
-    def reset_fleets(self, fleets: Any) -> None:
-        """Forget the states of the fleets in a (B,) mask or index list."""
-        for k in np.arange(len(self.policies))[np.asarray(fleets)]:
-            self.policies[int(k)].reset()
 
 
 @dataclass
@@ -461,7 +414,7 @@ def _group(
     draw: int | None,
 ) -> _Group:
     """One group's env (seeded ``config.seed + offset``, reset), the student's view, the teacher."""
-    base = None if config.base == "none" else _base(config.base, scenario, fleets)
+    base = None if config.base == "none" else config.base  # mpc runs fleet by fleet
     env = FleetVecEnv(
         scenario, num_fleets=fleets, base_policy=base, residual=_learner_residual(config)
     )
@@ -519,13 +472,6 @@ def _redraw(
             replaced.append(_group(config, settings, scenario, fleets, offset, seed))
         offset += fleets
     return replaced
-
-
-def _base(name: str, scenario: Scenario, num_fleets: int) -> FleetPolicy:
-    """The base policy of one group of fleets; ``WHOLE_BATCH_BASES`` fleet by fleet."""
-    if name in WHOLE_BATCH_BASES:
-        return FleetwiseBase(name, scenario, num_fleets)
-    return make_policy(name, scenario)
 
 
 def input_statistics(config: TrainConfig, inputs: NDArray[np.float32]) -> InputStatistics:

@@ -7,7 +7,9 @@ its episodes through ``make_core``:
 - the scenario: a registered name or a ``Scenario``, with field overrides
   (``cpf_env.scenarios.make_scenario``);
 - the base policy: a name of ``baselines.POLICIES`` (built with
-  ``policy_options``), ``None`` or ``"none"`` (no base: the learner commands
+  ``policy_options``; a base of ``agents.fleetwise.WHOLE_BATCH_BASES``, ``mpc``,
+  as a ``FleetwiseBase``, one instance per fleet, since the vector envs restart
+  single fleets), ``None`` or ``"none"`` (no base: the learner commands
   everything), or a policy object;
 - the residual: ``ResidualConfig()`` unless given; with no base policy the
   rule of ``cpf_env.envs.residual.learner_config`` (forces and rate as
@@ -26,6 +28,7 @@ from __future__ import annotations
 
 from typing import Any
 
+from agents.fleetwise import WHOLE_BATCH_BASES, FleetwiseBase
 from baselines import POLICIES, make_policy
 from cpf_env.envs.core import EpisodeCore
 from cpf_env.envs.policy import FleetPolicy
@@ -74,6 +77,9 @@ def make_core(
 ) -> EpisodeCore:
     """The episode core of a learning route: always the residual form (see the module)."""
     resolved = make_scenario(scenario, **overrides)
-    base = resolve_base_policy(base_policy, resolved, policy_options)
+    if isinstance(base_policy, str) and base_policy in WHOLE_BATCH_BASES:
+        base: FleetPolicy | None = FleetwiseBase(base_policy, resolved, num_fleets, policy_options)
+    else:
+        base = resolve_base_policy(base_policy, resolved, policy_options)
     config = ResidualConfig() if residual is None else residual
     return EpisodeCore(resolved, num_fleets, base, config, stagger)

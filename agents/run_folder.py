@@ -61,6 +61,7 @@ from agents.algorithms import DeepSetsExtractor, build_model, make_env, planned_
 from agents.checkpoint import checkpoint_timesteps, load_checkpoint
 from agents.folder_files import AgentFolderError
 from agents.history_env import HistoryVecEnv
+from agents.init_from import InitSource
 from agents.mixture_env import BalancedRewards, MixtureVecEnv
 from agents.schedule import (
     BEST,
@@ -80,7 +81,14 @@ from agents.slot_statistics import SlotSharedVecNormalize
 from agents.train_config import TrainConfig
 from cpf_env.infra import atomic
 
-__all__ = ["RUN_RECORD", "TrainingRun", "prepare_resume", "read_run_record", "write_run_record"]
+__all__ = [
+    "RUN_RECORD",
+    "TrainingRun",
+    "prepare_resume",
+    "read_init_record",
+    "read_run_record",
+    "write_run_record",
+]
 
 RUN_RECORD = "run.json"
 
@@ -91,6 +99,7 @@ def write_run_record(
     schedule: RunSchedule,
     evaluation: Any = None,
     device: str = "cpu",
+    init_from: dict[str, str] | None = None,
 ) -> None:
     """Write ``run.json``: the configuration, schedule, evaluation settings and device of a run.
 
@@ -100,8 +109,9 @@ def write_run_record(
         schedule: Its periods.
         evaluation: The evaluator's JSON-ready ``settings`` (if it has any), or None.
         device: The torch device the run trains on (a resumed run may name another).
+        init_from: The agent folder the run started from (``agents.init_from``), or None.
     """
-    record = {
+    record: dict[str, Any] = {
         "config": config.to_json(),
         "device": device,
         "evaluation": evaluation,
@@ -110,6 +120,8 @@ def write_run_record(
             "checkpoint_every": schedule.checkpoint_every,
         },
     }
+    if init_from is not None:
+        record["init_from"] = init_from
     atomic.write_text(folder / RUN_RECORD, json.dumps(record, indent=2) + "\n")
 
 
@@ -131,6 +143,14 @@ def read_run_record(folder: Path) -> tuple[TrainConfig, RunSchedule, Any]:
         return config, RunSchedule(**record["schedule"]), record.get("evaluation")
     except (OSError, json.JSONDecodeError, KeyError, TypeError) as error:
         raise ValueError(f"{path} is not a readable run record: {error}") from None
+
+
+def read_init_record(folder: Path) -> dict[str, str] | None:
+    """The ``init_from`` record of the run in ``folder`` (``run.json``), or None."""
+    try:
+        return json.loads((folder / RUN_RECORD).read_text()).get("init_from")
+    except (OSError, json.JSONDecodeError, AttributeError):
+        return None
 
 
 def prepare_resume(folder: Path, config: TrainConfig) -> Path:
@@ -248,6 +268,8 @@ class TrainingRun:
         tensorboard_log: Parent folder of the TensorBoard event files, or None.
         destination: The run folder (claimed by the caller's lock); None: ``folder``.
         device: The torch device SB3 trains on (``agents.device.torch_device``).
+        init_from: The agent folder a fresh run starts from (``agents.init_from``), or
+            its record for a resumed one (the checkpoint holds the weights); None: neither.
 
     Raises:
         ValueError: Too little free space for the run's outputs, or a device this
@@ -264,8 +286,10 @@ class TrainingRun:
         tensorboard_log: str | Path | None,
         destination: Path | None = None,
         device: str = "cpu",
+        init_from: InitSource | dict[str, str] | None = None,
     ) -> None:
         self.config, self.folder = config, folder
+        self.init_record = init_from.record() if isinstance(init_from, InitSource) else init_from
         self.destination = folder if destination is None else destination
         self.resumed = checkpoint is not None
         torch.manual_seed(config.seed)
@@ -294,6 +318,10 @@ class TrainingRun:
                     self.env, norm_obs=True, norm_reward=False, gamma=config.gamma
                 )
         self.model = build_model(config, self.env, device)
+        if isinstance(init_from, InitSource) and checkpoint is None:
+            init_from.apply(self.model, self.env)
+        if init_from is not None and isinstance(self.env, VecNormalize):
+            self.env.training = False  # the folder's statistics stay (agents.init_from)
         atomic.check_writable(self.destination, _bytes_needed(self.model))
         previous = ""
         if checkpoint is not None and (checkpoint / PROGRESS).is_file():
@@ -406,6 +434,8 @@ class TrainingRun:
             "wall_clock_seconds": round(seconds, 1),
             "versions": _versions(),
         }
+        if self.init_record is not None:
+            record["init_from"] = self.init_record
         if interrupted:
             record["interrupted"] = True
         write_agent(folder, record, network, normalization)

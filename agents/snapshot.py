@@ -229,11 +229,21 @@ class _Restore:
         self.at[path] = current
         if "array" in node or "tensor" in node:
             saved = decode_value(node, self.arrays)
-            if (
+            same_form = (
                 isinstance(current, np.ndarray)
                 and isinstance(saved, np.ndarray)
                 and current.shape == saved.shape
                 and current.dtype == saved.dtype
+            )
+            if (
+                same_form
+                and not current.flags.writeable
+                and np.array_equal(current, saved, equal_nan=True)
+            ):
+                return current  # a read-only constant (a policy's parameters), as saved
+            if (
+                same_form
+                and current.flags.writeable
                 and id(current) not in self.written  # shared in the fresh graph only: split
             ):
                 np.copyto(current, saved)

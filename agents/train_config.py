@@ -24,6 +24,7 @@ from cpf_env.sim.observation import SLOTS
 __all__ = [
     "ALGORITHM_NAMES",
     "ENCODERS",
+    "INIT_LOG_STD",
     "LOG_STD_RANGE",
     "MAX_SEED",
     "SINCE_FORMAT_2",
@@ -41,6 +42,10 @@ MAX_SEED = 2**32 - 1
 #: Accepted initial log standard deviations: exp(-20) is no noise, exp(5) = 148 already
 #: saturates every action; outside, the Gaussian's density under- or overflows.
 LOG_STD_RANGE = (-20.0, 5.0)
+#: Initial log standard deviation of a run started from an agent folder
+#: (``agents.init_from``; ``cpf-train --init-from`` unless one is given): 0.08 of the
+#: residual range, small enough to keep the folder's behaviour (default -1: 0.37).
+INIT_LOG_STD = -2.5
 
 
 def _is_real(value: Any) -> bool:

@@ -20,6 +20,9 @@ Ctrl-C) the agent itself:
   never read by evaluation nor by ``resume``);
 - ``progress.csv`` (and TensorBoard event files with ``tensorboard_log``).
 
+``init_from`` starts PPO from an agent folder of the same recipe (a distilled
+student, say) instead of the zero residual: ``agents.init_from``.
+
 Residual-learning defaults (Johannink et al. 2019, Silver et al. 2018, and
 our measurements in ``docs/residual_rl.md``): the policy's mean action starts
 at exactly zero (its output layer is zeroed), so training starts from the
@@ -42,7 +45,8 @@ from pathlib import Path
 from stable_baselines3.common.callbacks import BaseCallback
 
 from agents.device import torch_device
-from agents.run_folder import TrainingRun, prepare_resume, write_run_record
+from agents.init_from import InitSource, read_init_source
+from agents.run_folder import TrainingRun, prepare_resume, read_init_record, write_run_record
 from agents.schedule import Evaluator, RunSchedule
 from agents.train_config import TrainConfig
 from cpf_env.infra import atomic
@@ -63,6 +67,7 @@ def train(
     tensorboard_log: str | Path | None = None,
     run_files: Mapping[str, str] | None = None,
     device: str = "cpu",
+    init_from: str | Path | None = None,
 ) -> Path:
     """Train an agent into the run folder ``out`` (see the module docstring).
 
@@ -87,6 +92,10 @@ def train(
             ``"cuda:N"`` (``agents.device.torch_device``); recorded in ``run.json``, not in
             the ``TrainConfig``. The agent folder loads on the CPU whatever trained it;
             resuming is bit for bit on the CPU (torch's GPU generators are not checkpointed).
+        init_from: An agent folder (a ``cpf-distill`` student, say) to start PPO's actor
+            and observation statistics from (``agents.init_from``: same recipe, critic
+            fresh, statistics frozen); recorded in ``run.json`` and ``config.json``. A
+            resumed run keeps its own record and may not name another.
 
     Returns:
         The output folder.
@@ -96,7 +105,8 @@ def train(
         ValueError: ``out`` is empty, a file, a symbolic link, not writable or short of
             space for the run, a device this machine does not have, a held-out
             evaluation scenario or seed (``splits.check_training``), nothing to resume,
-            or a configuration that differs from the run's own.
+            a configuration that differs from the run's own, or an ``init_from``
+            folder of another recipe (nothing is written then).
         TrainingInterrupted: Ctrl-C; the checkpoint and the agent so far are written.
         cpf_env.infra.atomic.FolderLockedError: Another run is writing ``out``.
     """
@@ -104,6 +114,12 @@ def train(
         check_training(name, range(config.seed, config.seed + config.fleets))
     where = str(torch_device(device))
     folder = _output_folder(out)
+    if resume and init_from is not None:
+        raise ValueError(
+            "--init-from starts a run; --resume continues one from its checkpoint (the run "
+            "keeps the init folder it started from): drop --init-from."
+        )
+    source = None if init_from is None else read_init_source(init_from, config)
     schedule = schedule or RunSchedule()
     if tensorboard_log is not None:
         try:
@@ -114,9 +130,11 @@ def train(
             ) from error
     atomic.check_writable(folder)  # the space is checked once the model exists
     with atomic.FolderLock(folder, "another training run"):  # recovers a killed swap first
+        init: InitSource | dict[str, str] | None = source
         if resume:
             resume_state = prepare_resume(folder, config)
             workdir = folder
+            init = read_init_record(folder)
         else:
             replacing = folder.is_dir() and any(folder.iterdir())
             if replacing and not overwrite:
@@ -135,7 +153,12 @@ def train(
             try:
                 workdir.mkdir(parents=True, exist_ok=True)
                 write_run_record(
-                    workdir, config, schedule, getattr(evaluate, "settings", None), where
+                    workdir,
+                    config,
+                    schedule,
+                    getattr(evaluate, "settings", None),
+                    where,
+                    init.record() if isinstance(init, InitSource) else init,
                 )
                 for name, text in (run_files or {}).items():
                     atomic.write_text(workdir / name, text)
@@ -148,6 +171,7 @@ def train(
                     tensorboard_log,
                     folder,
                     where,
+                    init,
                 )
             except BaseException:  # refused before training (no space, say): nothing left
                 if fresh:

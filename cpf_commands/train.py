@@ -91,7 +91,7 @@ def _encoder(value: str) -> str | None:
 
 
 def _parser() -> argparse.ArgumentParser:
-    from agents.train_config import ENCODERS, TrainConfig
+    from agents.train_config import ENCODERS, INIT_LOG_STD, TrainConfig
     from baselines import POLICIES
     from cpf_env.envs.residual import EXTRAS, RESIDUAL_MODES
     from cpf_env.scenarios.reward_weights import REWARD_FORMS
@@ -248,6 +248,14 @@ def _parser() -> argparse.ArgumentParser:
         help="torch device SB3 trains on: cpu, auto (a GPU if torch sees one), cuda or cuda:N; "
         "recorded in run.json; the agent folder loads on the CPU whatever trained it",
     )  # fmt: skip
+    parser.add_argument(
+        "--init-from", metavar="FOLDER", default=None,
+        help="start PPO's actor and observation statistics from this agent folder (a "
+        "cpf-distill student, say) of the same recipe (base, mode, scale, slots, encoder, "
+        "history, net_arch; a differing one is refused), the critic fresh, the statistics "
+        "frozen; --log-std-init "
+        f"then defaults to {INIT_LOG_STD}; recorded in run.json and config.json",
+    )  # fmt: skip
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     parser.add_argument(
         "--force", action="store_true", help="delete a run already in --out and start afresh"
@@ -268,7 +276,16 @@ RESUME_OPTIONS = {"out", "resume", "timesteps", "quiet", "tensorboard_log", "dev
 
 
 #: Option destinations that are not hyperparameters (what to do, not how to learn).
-NOT_HYPERPARAMETERS = {"out", "resume", "quiet", "force", "config", "tensorboard_log", "device"}
+NOT_HYPERPARAMETERS = {
+    "out",
+    "resume",
+    "quiet",
+    "force",
+    "config",
+    "tensorboard_log",
+    "device",
+    "init_from",
+}
 #: Options whose ``TrainConfig`` field has another name or form: destination -> (field,
 #: conversion of the parsed value or None). Every other hyperparameter option's destination
 #: is its field's name and its value the field's value (``hyperparameters.toml`` keys).
@@ -288,13 +305,15 @@ def _resolve(args: argparse.Namespace, given: set[str]) -> tuple[TrainConfig, Ru
         ValueError: A bad hyperparameter file or value.
     """
     from agents.schedule import RunSchedule
-    from agents.train_config import TrainConfig
+    from agents.train_config import INIT_LOG_STD, TrainConfig
 
     values = {} if args.config is None else read_hyperparameters(args.config)
     for dest in sorted(given - NOT_HYPERPARAMETERS):
         field, convert = FLAG_FIELDS.get(dest, (dest, None))
         value = getattr(args, dest)
         values[field] = value if convert is None else convert(value)
+    if args.init_from is not None and "log_std_init" not in values:
+        values["log_std_init"] = INIT_LOG_STD  # the distilled actor's behaviour, barely perturbed
     fields = {k: v for k, v in values.items() if k not in SCHEDULE_KEYS}
     if "scenario" in fields:  # from the file or the flag: a name, names, or "suite"
         named = fields["scenario"]
@@ -383,6 +402,7 @@ def train_main(argv: Sequence[str] | None = None) -> int:
             tensorboard_log=args.tensorboard_log,
             run_files={HYPERPARAMETERS: _hyperparameters(config, schedule, seeds)},
             device=args.device,
+            init_from=args.init_from,
         )
     except TrainingInterrupted as stop:
         print(

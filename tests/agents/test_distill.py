@@ -16,7 +16,6 @@ from agents import load_policy
 from agents.agent_folder import build_actor, read_agent
 from agents.distill import (
     DistillConfig,
-    FleetwiseBase,
     _group,
     _labels,
     distill,
@@ -88,18 +87,6 @@ def test_force_labels_leave_the_rate_to_the_base() -> None:
     env = _env_after(5, ResidualConfig(mode="force", scale=1.0))
     label = _labels(env, make_policy("mpc", env.sim))
     assert label.shape == (2, 5, 3)
-
-
-def test_fleetwise_base_acts_as_the_batched_policy() -> None:
-    scenario = scenarios.get("bench_current_waves")
-    env = _env_after(3, ResidualConfig())
-    obs = env.sim.arrays.obs
-    batched, fleetwise = make_policy("mpc", scenario), FleetwiseBase("mpc", scenario, 2)
-    for _ in range(2):
-        np.testing.assert_array_equal(fleetwise.act_batch(obs), batched.act_batch(obs))
-    fleetwise.reset_fleets(np.array([False, True]))
-    alone = fleetwise.act_batch(obs[1:], fleets=np.array([1]))
-    np.testing.assert_array_equal(alone, make_policy("mpc", scenario).act_batch(obs[1:]))
 
 
 def test_the_student_starts_as_the_base() -> None:

@@ -10,9 +10,11 @@ import pytest
 import torch
 
 from agents.algorithms import make_env
+from agents.fleetwise import FleetwiseBase
 from agents.snapshot import SnapshotError, capture, decode_value, encode_value, restore
 from agents.train_config import TrainConfig
 from agents.vec_env import FleetVecEnv
+from cpf_env import scenarios
 
 
 def test_values_round_trip_exactly() -> None:
@@ -65,3 +67,19 @@ def test_an_object_of_an_unknown_library_is_refused_with_its_path() -> None:
     env.scratch = threading.Lock()  # type: ignore[attr-defined]
     with pytest.raises(SnapshotError, match=r"env\.scratch is a _thread\.lock"):
         capture(env, "env", {})
+
+
+def test_a_read_only_constant_restores_as_it_is() -> None:
+    """``mpc``'s parameters are read-only arrays: kept when equal (run fleet by fleet here)."""
+    scenario = scenarios.get("bench_saturation")
+    env = FleetVecEnv(scenario, num_fleets=2)
+    env.reset()
+    saved, fresh = FleetwiseBase("mpc", scenario, 2), FleetwiseBase("mpc", scenario, 2)
+    for policy in (saved, fresh):
+        policy.act_batch(env.sim.arrays.obs)  # sizes its parameters
+    arrays: dict[str, object] = {}
+    tree = capture(saved, "base", arrays)
+    constant = fresh.policies[1]._params
+    assert not constant.flags.writeable
+    restore(fresh, tree, "base", arrays)
+    assert fresh.policies[1]._params is constant
