@@ -25,6 +25,21 @@ ROOT = FilePath(__file__).resolve().parents[1]
 
 NO_DISTURBANCES = Disturbances(unmodeled_scale=0.0)
 
+#: A cpf-distill config file small enough for a test (two 10-step rounds on bench_mild).
+STUDENT_TOML = """
+scenario = "bench_mild"
+fleets = 2
+net_arch = [16]
+mode = "force_and_rate"
+scale = 1.0
+
+[distill]
+teacher = "nn_dsc_privileged"
+rounds = 2
+steps = 10
+epochs = 2
+"""
+
 #: Per-vessel, asymmetric saturation limits for the five vessels of wang2014 (N, N, N m).
 TAU_MAX = ((9.2, 4.5, 3.0), (5.0, 2.0, 1.0), (12.0, 6.0, 4.0), (1.0, 1.0, 1.0), (3.0, 8.0, 0.5))
 TAU_MIN = (

@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
+from conftest import STUDENT_TOML
 from safetensors.torch import load_file
 
 from agents import load_policy
@@ -166,21 +167,6 @@ def test_distill_refuses_what_it_cannot_do(tmp_path: Path) -> None:
             tmp_path / "x",
         )
     assert not (tmp_path / "x").exists()
-
-
-STUDENT_TOML = """
-scenario = "bench_mild"
-fleets = 2
-net_arch = [16]
-mode = "force_and_rate"
-scale = 1.0
-
-[distill]
-teacher = "nn_dsc_privileged"
-rounds = 2
-steps = 10
-epochs = 2
-"""
 
 
 def test_cpf_distill_writes_the_agent_and_its_run_files(tmp_path: Path) -> None:

@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import STUDENT_TOML
 
 from cpf_commands import distill as distill_command
 from cpf_commands.bench.run import run_bench
@@ -122,21 +123,6 @@ def test_a_run_that_never_beats_the_base_says_so(
     assert "never within the runs' evaluations (to 2.5 s)" in printed
 
 
-STUDENT = """
-scenario = "bench_mild"
-fleets = 2
-net_arch = [16]
-mode = "force_and_rate"
-scale = 1.0
-
-[distill]
-teacher = "nn_dsc_privileged"
-rounds = 2
-steps = 10
-epochs = 2
-"""
-
-
 def test_cpf_curves_reads_cpf_distill_runs(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
@@ -145,7 +131,7 @@ def test_cpf_curves_reads_cpf_distill_runs(
         distill_command, "TestSplitEvaluator", functools.partial(TestSplitEvaluator, steps=20)
     )
     config = tmp_path / "student.toml"
-    config.write_text(STUDENT)
+    config.write_text(STUDENT_TOML)
     logs = []
     for seed in (0, 1):
         out, log = tmp_path / f"agent_s{seed}", tmp_path / f"run_s{seed}"
