@@ -177,13 +177,17 @@ class PolicyNetwork(torch.nn.Module):
         self.input_size = sizes[0] if encoder is None else None
         self.action_size = sizes[-1]
 
-    def forward(self, rows: torch.Tensor) -> torch.Tensor:
-        """Deterministic actions (R, a) in [-1, 1]."""
+    def unbounded(self, rows: torch.Tensor) -> torch.Tensor:
+        """The output layer's values (R, a), before the output transform bounds them."""
         act = torch.tanh if self.activation == "tanh" else torch.relu
         latent = rows if self.encoder is None else self.encoder(rows)
         for layer in self.hidden:
             latent = act(layer(latent))
-        action = self.output(latent)
+        return self.output(latent)
+
+    def forward(self, rows: torch.Tensor) -> torch.Tensor:
+        """Deterministic actions (R, a) in [-1, 1]."""
+        action = self.unbounded(rows)
         if self.output_transform == "clip":
             return torch.clamp(action, -1.0, 1.0)
         return -1.0 + 0.5 * (torch.tanh(action) + 1.0) * 2.0  # SB3's unscale_action on [-1, 1]

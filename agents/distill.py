@@ -343,17 +343,11 @@ def _fit(
     """Fit the actor's pre-clip output to ``targets`` (in [-1, 1]); return the final MSE."""
     optimizer = torch.optim.Adam(network.parameters(), lr=config.learning_rate)
 
-    def raw(batch: torch.Tensor) -> torch.Tensor:
-        latent = batch if network.encoder is None else network.encoder(batch)
-        for layer in network.hidden:
-            latent = torch.tanh(layer(latent))
-        return network.output(latent)
-
     for _ in range(config.epochs):
         order = torch.randperm(rows.shape[0], generator=generator).to(rows.device)
         for start in range(0, rows.shape[0], config.batch_size):
             index = order[start : start + config.batch_size]
-            loss = torch.mean((raw(rows[index]) - targets[index]) ** 2)
+            loss = torch.mean((network.unbounded(rows[index]) - targets[index]) ** 2)
             optimizer.zero_grad()
             loss.backward()
             optimizer.step()
@@ -405,6 +399,13 @@ def _learner_residual(config: TrainConfig) -> ResidualConfig:
     return residual
 
 
+def _training_fleets(config: TrainConfig) -> ScenarioDistribution:
+    """The procedural fleets' distribution: degrees up to the learner's slots (at least 2)."""
+    slots = _learner_residual(config).neighbour_slots
+    assert slots is not None
+    return ScenarioDistribution(max_degree=max(2, slots))
+
+
 def _group(
     config: TrainConfig,
     settings: DistillConfig,
@@ -434,13 +435,11 @@ def _groups(config: TrainConfig, settings: DistillConfig) -> list[_Group]:
     Fleets are shared by ``split_fleets``; group g's fleet k starts from seed
     ``config.seed + offset_g + k`` (``MixtureVecEnv``'s rule).
     """
-    slots = _learner_residual(config).neighbour_slots
-    assert slots is not None
     named = [
         scenarios.make_scenario(name, **config.scenario_overrides(name))
         for name in config.scenarios
     ]
-    distribution = ScenarioDistribution(max_degree=max(2, slots))
+    distribution = _training_fleets(config)
     draws = [distribution.sample(seed) for seed in draw_seeds(settings, 0)]
     fleets = split_fleets(config.fleets, len(named) + len(draws))
     offsets = np.cumsum([0, *fleets[:-1]]).tolist()
@@ -457,9 +456,7 @@ def _redraw(
     groups: list[_Group], config: TrainConfig, settings: DistillConfig, round_: int
 ) -> list[_Group]:
     """``groups`` with the procedural ones replaced by the draws of ``round_`` (fresh episodes)."""
-    slots = _learner_residual(config).neighbour_slots
-    assert slots is not None
-    distribution = ScenarioDistribution(max_degree=max(2, slots))
+    distribution = _training_fleets(config)
     seeds = iter(draw_seeds(settings, round_))
     offset, replaced = 0, []
     for group in groups:
