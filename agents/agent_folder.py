@@ -110,6 +110,7 @@ __all__ = [
     "read_agent",
     "read_json",
     "read_weights",
+    "sb3_actor_layers",
     "training_config",
     "write_agent",
     "write_with_manifest",
@@ -257,6 +258,27 @@ def encoder_layout(encoder: NeighbourSetEncoder) -> dict[str, Any]:
     }
 
 
+def sb3_actor_layers(
+    model: Any, algo: str
+) -> tuple[NeighbourSetEncoder | None, list[torch.nn.Linear], torch.nn.Linear]:
+    """The deterministic actor's modules in an SB3 PPO or SAC model (``PolicyNetwork``'s parts).
+
+    Returns:
+        The PPO actor's neighbour encoder (of its ``DeepSetsExtractor``) or None,
+        the hidden linear layers in order, and the output layer.
+    """
+    extractor = getattr(model.policy, "pi_features_extractor", None) if algo == "ppo" else None
+    encoder = getattr(extractor, "encoder", None)
+    if algo == "ppo":
+        hidden = model.policy.mlp_extractor.policy_net
+        output = model.policy.action_net
+    else:
+        hidden = model.actor.latent_pi
+        output = model.actor.mu
+    layers = [module for module in hidden if isinstance(module, torch.nn.Linear)]
+    return (encoder if isinstance(encoder, NeighbourSetEncoder) else None), layers, output
+
+
 def actor_tensors(model: Any, algo: str) -> dict[str, torch.Tensor]:
     """The deterministic actor's layers of an SB3 PPO or SAC model, as ``PolicyNetwork`` names.
 
@@ -265,18 +287,10 @@ def actor_tensors(model: Any, algo: str) -> dict[str, torch.Tensor]:
     device the model trains on, so the folder written loads on the CPU.
     """
     tensors: dict[str, torch.Tensor] = {}
-    extractor = getattr(model.policy, "pi_features_extractor", None) if algo == "ppo" else None
-    encoder = getattr(extractor, "encoder", None)
-    if isinstance(encoder, NeighbourSetEncoder):
+    encoder, layers, output = sb3_actor_layers(model, algo)
+    if encoder is not None:
         for name, value in encoder.state_dict().items():
             tensors[f"encoder.{name}"] = value.detach().cpu().clone()
-    if algo == "ppo":
-        hidden = model.policy.mlp_extractor.policy_net
-        output = model.policy.action_net
-    else:
-        hidden = model.actor.latent_pi
-        output = model.actor.mu
-    layers = [module for module in hidden if isinstance(module, torch.nn.Linear)]
     for i, layer in enumerate(layers):
         tensors[f"hidden.{i}.weight"] = layer.weight.detach().cpu().clone()
         tensors[f"hidden.{i}.bias"] = layer.bias.detach().cpu().clone()

@@ -42,11 +42,16 @@ import numpy as np
 import torch
 from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.running_mean_std import RunningMeanStd
-from stable_baselines3.common.torch_layers import MlpExtractor
 from stable_baselines3.common.vec_env import VecEnv, VecNormalize
 
-from agents.agent_folder import MANIFEST, Normalization, PolicyNetwork, read_agent, training_config
-from agents.algorithms import DeepSetsExtractor
+from agents.agent_folder import (
+    MANIFEST,
+    Normalization,
+    PolicyNetwork,
+    read_agent,
+    sb3_actor_layers,
+    training_config,
+)
 from agents.train_config import TrainConfig
 
 __all__ = ["RECIPE", "InitSource", "read_init_source"]
@@ -95,19 +100,16 @@ class InitSource:
             env: The model's env (its outermost wrapper, ``VecNormalize`` when the run
                 normalizes).
         """
-        policy = model.policy
-        extractor = cast(MlpExtractor, policy.mlp_extractor)
-        hidden = [m for m in extractor.policy_net if isinstance(m, torch.nn.Linear)]
+        encoder, hidden, output = sb3_actor_layers(model, "ppo")
         with torch.no_grad():
             sources = [cast(torch.nn.Linear, layer) for layer in self.network.hidden]
             for layer, source in zip(hidden, sources, strict=True):
                 layer.weight.copy_(source.weight)
                 layer.bias.copy_(source.bias)
-            output = cast(torch.nn.Linear, policy.action_net)
             output.weight.copy_(self.network.output.weight)
             output.bias.copy_(self.network.output.bias)
             if self.network.encoder is not None:
-                encoder = cast(DeepSetsExtractor, policy.pi_features_extractor).encoder
+                assert encoder is not None  # the encoder is in RECIPE
                 encoder.load_state_dict(self.network.encoder.state_dict())
         if self.normalization is not None:
             assert isinstance(env, VecNormalize)  # normalize_observations is in RECIPE
