@@ -42,6 +42,7 @@ import argparse
 import csv
 import io
 import json
+import sys
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -330,3 +331,7 @@ def curves_main(argv: Sequence[str] | None = None) -> int:
     )
     print(f"{final} at {steps.x[-1]:,.0f} vessel-steps; wrote {args.out}/curves.csv, curves.png")
     return 0
+
+
+if __name__ == "__main__":
+    sys.exit(curves_main())

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import shlex
+import sys
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -95,3 +96,7 @@ def export_main(argv: Sequence[str] | None = None) -> int:
         f"{difference:.3g}"
     )
     return 0
+
+
+if __name__ == "__main__":
+    sys.exit(export_main())

@@ -365,3 +365,7 @@ def speed_main(argv: Sequence[str] | None = None) -> int:
             f"{row['steps_per_s']:>12,.0f} {row['vessel_steps_per_s']:>16,.0f} {seconds}"
         )
     return 0
+
+
+if __name__ == "__main__":
+    sys.exit(speed_main())

@@ -450,3 +450,7 @@ def train_main(argv: Sequence[str] | None = None) -> int:
         f"{folder} --scenarios {' '.join(config.scenarios)} --split test"
     )
     return 0
+
+
+if __name__ == "__main__":
+    sys.exit(train_main())

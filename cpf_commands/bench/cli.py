@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 import os
 import shlex
+import sys
 import time
 from collections.abc import Sequence
 
@@ -292,3 +293,7 @@ def bench_main(argv: Sequence[str] | None = None) -> int:
         "episodes.csv)"
     )
     return 0
+
+
+if __name__ == "__main__":
+    sys.exit(bench_main())

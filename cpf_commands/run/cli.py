@@ -253,3 +253,7 @@ def run_main(argv: Sequence[str] | None = None, prog: str = "cpf-run") -> int:
             written = "Figures, " + written
         print(f"{written} in {metrics['output_directory']}/")
     return 0
+
+
+if __name__ == "__main__":
+    sys.exit(run_main())

@@ -319,3 +319,7 @@ def sweep_main(argv: Sequence[str] | None = None) -> int:
     failed = sum(1 for row in rows if row["status"] != "done")
     print(f"cpf-sweep: {len(rows) - failed}/{len(rows)} trials done; results in {args.out}/")
     return 1 if failed else 0
+
+
+if __name__ == "__main__":
+    sys.exit(sweep_main())
