@@ -13,6 +13,8 @@ name                        policy
 ``backstepping_delay_comp`` ``backstepping`` with the same delay compensation
 ``mpc``                     receding-horizon control per vessel on the benchmark's
                             stage cost, from its local observation (``baselines.mpc``)
+``mpc_tuned``               ``mpc`` with a fast, rate-limited v0 estimator tuned on the
+                            training seeds (``baselines.mpc_tuned``)
 ==========================  ===========================================================
 
 Privileged references, not deployable (``PRIVILEGED``): ``nn_dsc_global_v0``,
@@ -47,6 +49,7 @@ from baselines.delay_compensated import BacksteppingDelayCompensated, NNDSCDelay
 from baselines.gains import BacksteppingGains, CooperativeGains, NNDSCGains
 from baselines.mpc import MPCPolicy, MPCPrivileged, OraclePolicy, RecedingHorizonGains
 from baselines.mpc_told import MPCToldDynamics, MPCToldLinks, MPCToldV0
+from baselines.mpc_tuned import MPCTuned
 from baselines.nn_dsc import DSCPolicy, GlobalSpeedPolicy, NNDSCPolicy, NoAuxPolicy
 from baselines.policy import DIAGNOSTICS, AnalyticPolicy
 from baselines.privileged import BacksteppingPrivileged, NNDSCPrivileged, PrivilegedPolicy
@@ -71,6 +74,7 @@ __all__ = [
     "MPCToldDynamics",
     "MPCToldLinks",
     "MPCToldV0",
+    "MPCTuned",
     "NNDSCDelayCompensated",
     "NNDSCGains",
     "NNDSCPolicy",
@@ -93,6 +97,7 @@ POLICIES: dict[str, type[FleetPolicy]] = {
         NNDSCDelayCompensated,
         BacksteppingDelayCompensated,
         MPCPolicy,
+        MPCTuned,
     )
 }
 

@@ -47,3 +47,34 @@ def test_tables_count_wins_over_mpc_and_the_score(tmp_path: Path) -> None:
     worse = _tables()._table(tmp_path / "again" / "bench_test")
     assert "beats mpc on 0/1 (none)" in worse[-1]
     assert "loses" in worse[-3]
+
+
+def test_guarded_verdicts_flag_a_physical_regression_and_read_the_deployable_table(
+    tmp_path: Path,
+) -> None:
+    """Cheaper than mpc but with 3x its final-window heading error: mixed, not beats; against
+    mpc_tuned (from another table, paired on the seeds both ran) it loses."""
+    import numpy as np
+
+    from cpf_commands.bench.episodes import METRICS
+    from cpf_commands.bench.report import CellResult, episodes_csv
+
+    seeds = tuple(range(10000, 10008))
+    rng = np.random.default_rng(1)
+
+    def cell(policy: str, cost: float, heading: float, on: tuple[int, ...] = seeds) -> CellResult:
+        metrics = {m: np.full(len(on), 1e-3) for m in METRICS}
+        metrics["progress"] = np.ones(len(on))
+        metrics["cost"] = cost + rng.normal(0.0, 0.1, len(on))
+        metrics["heading_error_rms_window"] = np.full(len(on), heading)
+        return CellResult(policy, "bench_mild", on, False, metrics)
+
+    folder = tmp_path / "bench_test"
+    folder.mkdir()
+    student = "r/agents/student_s0"
+    text = episodes_csv([cell("mpc", 50.0, 0.01), cell(student, 45.0, 0.03)])
+    (folder / "episodes.csv").write_text(text)
+    tuned = [cell("mpc_tuned", 40.0, 0.01, seeds + (10008, 10009))]
+    lines = _tables()._guarded(folder, tuned, ["mpc_tuned"])
+    assert "| bench_mild | mpc | mixed (worse: heading) (N 8) |" in lines
+    assert "| bench_mild | mpc_tuned | loses (N 8) |" in lines

@@ -36,6 +36,7 @@ __all__ = [
     "CellResult",
     "episodes_csv",
     "normalized_score",
+    "read_episodes_csv",
     "summarize",
     "summary_csv",
 ]
@@ -347,6 +348,36 @@ def episodes_csv(cells: Sequence[CellResult]) -> str:
         for k, seed in enumerate(cell.seeds)
     ]
     return _table(("policy", "scenario", "seed", "deterministic", *METRICS), rows)
+
+
+def read_episodes_csv(text: str) -> list[CellResult]:
+    """The cells of an ``episodes.csv`` (``episodes_csv``'s inverse), in their first-row order.
+
+    Raises:
+        ValueError: A column of ``METRICS`` or of the row key is missing (the file is
+            not a ``cpf-bench`` episodes table, or of another version of it).
+    """
+    reader = csv.DictReader(io.StringIO(text))
+    missing = [c for c in ("policy", "scenario", "seed", "deterministic", *METRICS)
+               if c not in (reader.fieldnames or ())]  # fmt: skip
+    if missing:
+        raise ValueError(
+            f"not a cpf-bench episodes.csv: missing column(s) {missing}; regenerate it "
+            "with cpf-bench --out."
+        )
+    grouped: dict[tuple[str, str], list[dict[str, str]]] = {}
+    for row in reader:
+        grouped.setdefault((row["policy"], row["scenario"]), []).append(row)
+    return [
+        CellResult(
+            policy,
+            scenario,
+            tuple(int(row["seed"]) for row in rows),
+            rows[0]["deterministic"] == "True",
+            {metric: np.array([float(row[metric] or "nan") for row in rows]) for metric in METRICS},
+        )
+        for (policy, scenario), rows in grouped.items()
+    ]
 
 
 def summary_csv(rows: Sequence[dict[str, object]]) -> str:

@@ -18,6 +18,16 @@ which it beats ``mpc``, those on which it loses to ``nn_dsc`` or is mixed
 score (J_nn_dsc - J) / (J_nn_dsc - J_oracle) of the mean costs, over the
 scenarios it ran on (``cpf-bench`` does not run a student on a graph of more
 neighbours than its input has slots).
+
+Then, per bench folder, every student's guarded verdict (``cpf-bench``'s rule,
+``cpf_commands.bench.verdict``: the cost and the final-window physical
+metrics) against ``mpc`` and against each policy of ``--against`` (default
+``mpc_tuned``, the strongest deployable design) whose episodes on the same
+scenarios and seeds are in a ``--deployable`` episodes table, e.g. the
+results page's::
+
+    python examples/student/tables.py --deployable results/bench_test/episodes.csv \
+        results/bench_shift/episodes.csv
 """
 
 from __future__ import annotations
@@ -29,7 +39,9 @@ from pathlib import Path
 
 import numpy as np
 
+from cpf_commands.bench.report import CellResult, read_episodes_csv
 from cpf_commands.bench.stats import iqm, paired_difference
+from cpf_commands.bench.verdict import verdicts
 
 BENCHES = (
     "bench_test",
@@ -131,14 +143,66 @@ def _table(folder: Path) -> list[str]:
     return lines
 
 
+def _on_seeds(cell: CellResult, seeds: set[int]) -> CellResult:
+    """``cell`` restricted to ``seeds`` (in its own order)."""
+    keep = [k for k, seed in enumerate(cell.seeds) if seed in seeds]
+    metrics = {name: values[keep] for name, values in cell.metrics.items()}
+    return CellResult(cell.policy, cell.scenario, tuple(cell.seeds[k] for k in keep),
+                      cell.deterministic, metrics)  # fmt: skip
+
+
+def _guarded(folder: Path, deployable: list[CellResult], against: list[str]) -> list[str]:
+    """Each student's guarded verdict against ``mpc`` and the ``against`` policies.
+
+    A reference's cells come from the folder itself or from ``deployable``, and
+    both sides are restricted to the seeds both ran (paired episodes).
+    """
+    cells = read_episodes_csv((folder / "episodes.csv").read_text())
+    students = [c for c in cells if STUDENT in c.policy]
+    references = ["mpc", *against]
+    found = {(c.policy, c.scenario): c for c in [*deployable, *cells] if c.policy in references}
+    names = sorted({Path(c.policy).name for c in students})
+    lines = [
+        f"{folder.name}: guarded verdicts (cost and final-window physical metrics) against "
+        + ", ".join(references),
+        "",
+        "| scenario | reference | " + " | ".join(names) + " |",
+        "|---|---|" + "---|" * len(names),
+    ]
+    for scenario in dict.fromkeys(c.scenario for c in students):
+        for reference in references:
+            base = found.get((reference, scenario))
+            if base is None:
+                continue
+            row = []
+            for name in names:
+                cell = next((c for c in students if Path(c.policy).name == name
+                             and c.scenario == scenario), None)  # fmt: skip
+                if cell is None:
+                    row.append("not run")
+                    continue
+                seeds = set(cell.seeds) & set(base.seeds)
+                judged = verdicts([_on_seeds(cell, seeds), _on_seeds(base, seeds)], reference)
+                row.append(f"{judged[0].label} (N {len(seeds)})")
+            lines.append(f"| {scenario} | {reference} | " + " | ".join(row) + " |")
+    return lines
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0], allow_abbrev=False)
     parser.add_argument("--root", default="results/student", help="folder of the bench folders")
+    parser.add_argument("--deployable", nargs="*", default=[], metavar="EPISODES_CSV",
+                        help="episodes tables of the --against policies")  # fmt: skip
+    parser.add_argument("--against", nargs="*", default=["mpc_tuned"], metavar="POLICY",
+                        help="references besides mpc for the guarded verdicts")  # fmt: skip
     args = parser.parse_args()
+    deployable = [cell for path in args.deployable
+                  for cell in read_episodes_csv(Path(path).read_text())]  # fmt: skip
     for name in BENCHES:
         folder = Path(args.root) / name
         if (folder / "episodes.csv").is_file():
             print("\n".join(_table(folder)), end="\n\n")
+            print("\n".join(_guarded(folder, deployable, args.against)), end="\n\n")
 
 
 if __name__ == "__main__":

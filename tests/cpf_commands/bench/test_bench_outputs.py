@@ -124,3 +124,33 @@ def test_a_second_bench_on_the_same_out_is_refused(
     finally:
         holder.kill()
         holder.wait()
+
+
+def test_episodes_csv_reads_back_bit_for_bit() -> None:
+    """``read_episodes_csv`` inverts ``episodes_csv``: every cell, seed and metric (NaN too)."""
+    import numpy as np
+
+    from cpf_commands.bench.episodes import METRICS
+    from cpf_commands.bench.report import CellResult, episodes_csv, read_episodes_csv
+
+    rng = np.random.default_rng(0)
+    cells = [
+        CellResult(
+            policy, scenario, seeds, False, {m: rng.normal(size=len(seeds)) for m in METRICS}
+        )
+        for policy, scenario, seeds in (
+            ("mpc", "bench_mild", (10000, 10001)),
+            ("a/agents/s0", "bench_mild", (10000, 10001)),
+            ("mpc", "wang2014", (7,)),
+        )
+    ]
+    cells[1].metrics["progress"][0] = np.nan
+    back = read_episodes_csv(episodes_csv(cells))
+    assert [(c.policy, c.scenario, c.seeds) for c in back] == [
+        (c.policy, c.scenario, c.seeds) for c in cells
+    ]
+    for mine, theirs in zip(cells, back, strict=True):
+        for metric in METRICS:
+            np.testing.assert_array_equal(mine.metrics[metric], theirs.metrics[metric])
+    with pytest.raises(ValueError, match="missing column"):
+        read_episodes_csv("policy,scenario,seed,cost\nmpc,bench_mild,0,1.0\n")

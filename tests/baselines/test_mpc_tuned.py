@@ -1,0 +1,64 @@
+"""``mpc_tuned``: ``mpc`` with a fast, rate-limited v0 estimator and nothing else changed."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import baselines
+from baselines.mpc import MPCPolicy
+from baselines.mpc_tuned import K5, K6, MPCTuned
+from cpf_commands.common.rollout import rollout
+from cpf_env import FleetSim, scenarios
+
+#: Small plans for short tests: one knot of 5 steps, no tail, 4 samples.
+SHORT = {"horizon": 0.25, "tail": 0.0, "knot": 5, "samples": 4}
+
+
+def test_it_is_deployable_and_defaults_to_the_tuned_gains():
+    assert baselines.POLICIES["mpc_tuned"] is MPCTuned
+    assert "mpc_tuned" not in baselines.PRIVILEGED
+    policy = baselines.make_policy("mpc_tuned", "bench_mild", **SHORT)
+    assert not policy.privileged
+    assert (policy.gains.k5, policy.gains.k6) == (K5, K6)
+    assert baselines.make_policy("mpc_tuned", "bench_mild", k5=2.0).gains.k5 == 2.0
+
+
+def test_without_the_rate_limit_at_mpcs_gains_it_is_mpc_bit_for_bit():
+    scenario = scenarios.get("bench_lossy_links")
+    seeds = [10000, 10001]
+    unlimited = MPCTuned(scenario, speed_rate=np.inf, k5=1.0, k6=1.0, **SHORT)
+    tuned = rollout(unlimited, scenario, seeds, steps=60)
+    plain = rollout(MPCPolicy(scenario, **SHORT), scenario, seeds, steps=60)
+    for metric in ("cost", "cross_track_error_rms", "formation_error_rms"):
+        np.testing.assert_array_equal(tuned[metric], plain[metric])
+
+
+def test_the_speed_estimate_moves_at_most_its_rate_limit_per_step():
+    """Over 300 steps of the tight force limits, the estimate climbs toward v0 at the
+    limit (tau_max_u / (m - X_udot) x speed_rate x dt per step) and never faster."""
+    scenario = scenarios.get("bench_saturation")
+    sim = FleetSim(scenario, num_fleets=2)
+    obs = sim.reset(seeds=[0, 1])
+    policy = MPCTuned(sim, **SHORT)
+    vessel = scenario.vessel_models[0]
+    expected = 0.25 * scenario.dt * scenario.tau_max[0][0] / (vessel.mass - vessel.X_udot)
+    np.testing.assert_allclose(policy.speed_step[0], expected, rtol=1e-12)
+    speed = np.zeros((2, scenario.n))
+    steps_at_limit = 0
+    for _ in range(300):
+        obs = sim.step(policy.act_batch(obs))
+        estimate = policy.diagnostics["speed_estimate"]
+        change = np.abs(estimate - speed)
+        assert np.all(change <= policy.speed_step * (1 + 1e-12))
+        steps_at_limit += int(np.any(np.isclose(change, policy.speed_step, rtol=1e-9)))
+        speed = estimate
+    assert steps_at_limit > 10  # the limit binds: the check above is not vacuous
+    v0 = scenario.v0_schedule.values[0]
+    np.testing.assert_allclose(speed, v0, atol=0.02)  # and the estimate still reaches v0
+
+
+@pytest.mark.parametrize("rate", [0.0, -1.0, float("nan")])
+def test_a_rate_limit_that_is_not_positive_is_refused(rate):
+    with pytest.raises(ValueError, match="speed_rate must be > 0"):
+        MPCTuned("bench_mild", speed_rate=rate)
