@@ -8,6 +8,12 @@ nothing else (plan, model, observer, neighbours as received are ``mpc``'s):
 
 * gains ``k5 = k6 = 5`` /s (``K5``, ``K6``), so the estimate reaches what
   the leader-linked vessels hear within about a second;
+* the step is kept stable on any graph: where dt (k5 d_i + k6 l_i) > 1 (d_i
+  the vessel's weighted degree as received, l_i its leader link), the step
+  is divided by that number, so the new estimate is a convex combination of
+  the old one, the neighbours' messages and v0 (at 5 /s and dt = 0.05 s,
+  from a weighted degree of 4 with a leader link; the 7-vessel star of
+  ``bench_large_fleet_shift`` has a hub of degree 6);
 * the estimate's rate of change is limited to ``speed_rate`` (``SPEED_RATE``,
   0.25) times the surge acceleration the vessel's own force limit gives its
   nominal model at rest, ``tau_max_u / (m - X_udot)`` (m/s^2). A speed the
@@ -15,10 +21,10 @@ nothing else (plan, model, observer, neighbours as received are ``mpc``'s):
   fleet with tight force limits (``bench_saturation``) chases a speed it
   cannot reach and costs more than ``mpc``.
 
-Both use only what a vessel has on board (its neighbours' messages, what it
-hears of v0, its own force limits and nominal model): deployable
-(``baselines.POLICIES``). The values were chosen on the suite's training
-seeds (0-4), never on the evaluation seeds: ``examples/mpc_tuning.py``
+All use only what a vessel has on board (its neighbours' messages and link
+weights, what it hears of v0, its own force limits and nominal model):
+deployable (``baselines.POLICIES``). The values were chosen on the suite's
+training seeds (0-4), never on the evaluation seeds: ``examples/mpc_tuning.py``
 prints the sweep (docs/benchmark.md has it).
 """
 
@@ -30,6 +36,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from baselines.mpc import MPCPolicy
+from cpf_env.sim.observation import LEADER, SLOT_WEIGHT, SLOTS
 
 __all__ = ["K5", "K6", "SPEED_RATE", "MPCTuned"]
 
@@ -73,5 +80,10 @@ class MPCTuned(MPCPolicy):
 
     def _update_knowledge(self, obs: NDArray[np.float64]) -> None:
         before = self._speed.copy()
-        super()._update_knowledge(obs)
-        self._speed = before + np.clip(self._speed - before, -self.speed_step, self.speed_step)
+        super()._update_knowledge(obs)  # the observer, and mpc's estimator step at the gains
+        g = self.gains
+        slots = SLOTS + self._slot_width * np.arange(self._slots)
+        degree = obs[..., slots + SLOT_WEIGHT].sum(axis=-1)
+        weight = self.scenario.dt * (g.k5 * degree + g.k6 * obs[..., LEADER])  # the old one's
+        change = (self._speed - before) / np.maximum(weight, 1.0)
+        self._speed = before + np.clip(change, -self.speed_step, self.speed_step)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -10,6 +12,9 @@ from baselines.mpc import MPCPolicy
 from baselines.mpc_tuned import K5, K6, MPCTuned
 from cpf_commands.common.rollout import rollout
 from cpf_env import FleetSim, scenarios
+from cpf_env.model.graph import Graph
+from cpf_env.model.paths import Sinusoid
+from cpf_env.scenarios import splits
 
 #: Small plans for short tests: one knot of 5 steps, no tail, 4 samples.
 SHORT = {"horizon": 0.25, "tail": 0.0, "knot": 5, "samples": 4}
@@ -62,3 +67,42 @@ def test_the_speed_estimate_moves_at_most_its_rate_limit_per_step():
 def test_a_rate_limit_that_is_not_positive_is_refused(rate):
     with pytest.raises(ValueError, match="speed_rate must be > 0"):
         MPCTuned("bench_mild", speed_rate=rate)
+
+
+def _star(n: int) -> scenarios.Scenario:
+    """``bench_large_fleet_shift``'s star with n vessels, the hub in the middle."""
+    base = splits.split_scenario("bench_large_fleet", "shift")
+    offsets = [4.0 * (k - n // 2) for k in range(n)]
+    eta = tuple((0.0, y + 1.0, 0.0) for y in offsets)
+    initial = dataclasses.replace(base.initial, eta=eta, nu=None, theta=None)
+    return base.replace(
+        paths=tuple(Sinusoid(y0=y, amplitude=2.0, wavenumber=0.2) for y in offsets),
+        topology=Graph.star(n, center=n // 2, leaders=(n // 2,)),
+        initial=initial,
+        tau_max=(base.tau_max[0],) * n,
+        tau_min=(base.tau_min[0],) * n,
+        vessels=(base.vessels[0],) * n,
+    )
+
+
+def test_on_a_large_star_the_capped_step_stays_bounded_where_mpcs_diverges():
+    """An 11-vessel star (hub degree 10): at 5 /s, dt (k5 d + k6 l) = 2.75 for the hub, so
+    mpc's estimator step at those gains has the hub's own weight at -1.75 and its estimate
+    swings ever wider; the capped step keeps every estimate a convex combination of the
+    values it combines, so it stays within [0, v0] on the way up from 0 (no rate limit
+    here, to see the step alone)."""
+    scenario = _star(11)
+    v0 = scenario.v0_schedule.values[0]
+    span = {}
+    for name, policy in (("mpc", MPCPolicy(scenario, k5=5.0, k6=5.0, **SHORT)),
+                         ("tuned", MPCTuned(scenario, speed_rate=np.inf, **SHORT))):  # fmt: skip
+        sim = FleetSim(scenario, num_fleets=1)
+        obs = sim.reset(seeds=[0])
+        low, high = 0.0, 0.0
+        for _ in range(100):
+            obs = sim.step(policy.act_batch(obs))
+            estimate = policy.diagnostics["speed_estimate"]
+            low, high = min(low, float(estimate.min())), max(high, float(estimate.max()))
+        span[name] = (low, high)
+    assert span["mpc"][1] > 2 * v0 or span["mpc"][0] < -v0, span
+    assert span["tuned"][0] >= 0.0 and span["tuned"][1] <= v0 * (1 + 1e-9), span
