@@ -8,7 +8,8 @@ in what they are told (``baselines.mpc_kernels`` holds the compiled parts):
                     centralized over the fleet; predicts with copies of the
                     simulator's fleets (true model, unmodeled dynamics, the
                     true disturbances of the coming steps, ideal links, true
-                    v0); minimizes the fleet's cost
+                    v0, taken up from 0 no faster than the fleet can follow:
+                    ``SPEED_RATE``); minimizes the fleet's cost
 ``mpc``             deployable (``baselines.POLICIES``): per vessel, from its
                     local observation only; predicts with the nominal model
                     plus a disturbance-observer estimate of the residual
@@ -47,6 +48,7 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
+import math
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
@@ -61,9 +63,20 @@ from cpf_env.evaluation.privileged import ideal_link_observations, true_dynamics
 from cpf_env.sim.fleet import FleetSim, observation_layout
 from cpf_env.sim.observation import LEADER, NU, SLOT_MSG, SLOT_WEIGHT, SLOTS, TAU, V0
 
-__all__ = ["MPCPolicy", "MPCPrivileged", "OraclePolicy", "RecedingHorizon", "RecedingHorizonGains"]
+__all__ = [
+    "SPEED_RATE",
+    "MPCPolicy",
+    "MPCPrivileged",
+    "OraclePolicy",
+    "RecedingHorizon",
+    "RecedingHorizonGains",
+]
 
 Array = NDArray[np.float64]
+
+#: The reference speed's rate limit of the oracle (and of ``mpc_tuned``'s estimate): a
+#: quarter of the nominal surge acceleration at the force limit (``RecedingHorizonGains``).
+SPEED_RATE = 0.25
 
 
 @dataclass(frozen=True)
@@ -87,6 +100,11 @@ class RecedingHorizonGains:
         observer_time: Time constant of ``mpc``'s residual-force observer (s).
         k5: ``mpc``'s speed-estimator gain on neighbours' estimates (1/s).
         k6: ``mpc``'s speed-estimator gain on the heard v0 (1/s).
+        speed_rate: How fast the reference speed may move, a fraction > 0 of the
+            nominal surge acceleration at the force limit, tau_max_u / (m - X_udot)
+            (``inf``: no limit): ``mpc``'s speed estimate moves at most that much
+            per second on each vessel; the oracle takes up v0 at that rate from 0,
+            with the fleet's smallest such acceleration (``mpc_kernels.ramped_speed``).
     """
 
     horizon: float = 2.0
@@ -102,10 +120,11 @@ class RecedingHorizonGains:
     observer_time: float = 0.2
     k5: float = 1.0
     k6: float = 1.0
+    speed_rate: float = math.inf
 
-    def vector(self) -> Array:
-        """The feedback's gains in kernel form (``mpc_kernels.GAINS_SIZE``,)."""
-        return np.array([*self.K1, *self.K2, self.k_sync, self.k_mu], dtype=np.float64)
+    def vector(self, ramp: float) -> Array:
+        """The feedback's gains in kernel form (``mpc_kernels.GAINS_SIZE``,), ``ramp`` in m/s^2."""
+        return np.array([*self.K1, *self.K2, self.k_sync, self.k_mu, ramp], dtype=np.float64)
 
 
 def _gains(options: dict[str, Any]) -> RecedingHorizonGains:
@@ -120,6 +139,11 @@ def _gains(options: dict[str, Any]) -> RecedingHorizonGains:
             "need horizon > 0, tail >= 0, knot >= 1 and samples >= 2 (warm start and bare "
             f"feedback), got {gains}."
         )
+    if not gains.speed_rate > 0:
+        raise ValueError(
+            "speed_rate must be > 0 (a fraction of the nominal surge acceleration at the "
+            f"force limit; inf for no limit), got {gains.speed_rate!r}."
+        )
     return gains
 
 
@@ -128,9 +152,12 @@ class RecedingHorizon(FleetPolicy):
 
     Args:
         env: Anything ``baselines.policy.resolve_scenario`` accepts.
-        **options: Fields of ``RecedingHorizonGains``.
+        **options: Fields of ``RecedingHorizonGains``; those not given take the member's
+            ``DEFAULTS``, then the dataclass's.
 
     Attributes:
+        speed_step: (n,) the most the reference speed moves in one control step (m/s),
+            ``speed_rate`` x dt x each vessel's nominal surge acceleration at its limit.
         last_costs: (R, samples) predicted costs of the candidates at the last
             revision, candidate 0 the warm start and 1 the bare feedback; R rows
             (fleets for the oracle, fleet x vessel for ``mpc``).
@@ -139,6 +166,8 @@ class RecedingHorizon(FleetPolicy):
 
     name: ClassVar[str]
     privileged: ClassVar[bool]
+    #: The member's own defaults of ``RecedingHorizonGains`` fields.
+    DEFAULTS: ClassVar[dict[str, Any]] = {}
     #: Plan dimensions per vessel: force offsets (3) and path-rate offset.
     DIMS = 4
     #: Share of a sampled path-rate offset drawn per vessel; the rest is common to the fleet.
@@ -146,7 +175,7 @@ class RecedingHorizon(FleetPolicy):
 
     def __init__(self, env: object, **options: Any) -> None:
         self.scenario = resolve_scenario(env)
-        self.gains = _gains(options)
+        self.gains = _gains({**self.DEFAULTS, **options})
         s = self.scenario
         self.n = s.n
         self.obs_dim = observation_layout(s).size
@@ -154,10 +183,12 @@ class RecedingHorizon(FleetPolicy):
         self.agents = [f"vessel_{i}" for i in range(s.n)]
         self.diagnostics: dict[str, Array] = {}
         self._constants = tuple(FleetSim(s).constants)
-        self._gain_vector = self.gains.vector()
+        _, tau_max = s.tau_limits
+        surge = tau_max[:, 0] / np.array([v.mass - v.X_udot for v in s.vessel_models])
+        self.speed_step: Array = self.gains.speed_rate * s.dt * surge
+        self._gain_vector = self.gains.vector(ramp=self.gains.speed_rate * float(surge.min()))
         self._knots = max(1, round(self.gains.horizon / (s.dt * self.gains.knot)))
         self._tail = round(self.gains.tail / (s.dt * self.gains.knot))
-        _, tau_max = s.tau_limits
         self._noise_scale = np.array([*(self.gains.force_noise * tau_max.max(axis=0)),
                                       self.gains.rate_noise])  # fmt: skip
         self._seed = 0
@@ -283,6 +314,7 @@ class OraclePolicy(_ReadsSimulator):
 
     name = "oracle"
     privileged = True
+    DEFAULTS: ClassVar[dict[str, Any]] = {"speed_rate": SPEED_RATE}
 
     def act_batch(self, obs: ArrayLike, fleets: ArrayLike | None = None) -> Array:
         """Actions (B, n, 4 + m) of the bound fleets; ``obs`` only fixes B (the truth is read).
@@ -383,7 +415,11 @@ class MPCPolicy(RecedingHorizon):
         message = obs[..., slots + SLOT_MSG]
         pull = (weight * (self._speed[..., None] - message)).sum(axis=-1)
         heard = obs[..., LEADER] * (self._speed - obs[..., V0])
-        self._speed = self._speed - dt * (g.k5 * pull + g.k6 * heard)
+        step = dt * (g.k5 * pull + g.k6 * heard)
+        # a convex combination of the old estimate, the messages and v0 on any graph: the
+        # old one's weight 1 - dt (k5 d_i + k6 l_i) is kept >= 0
+        step = step / np.maximum(dt * (g.k5 * weight.sum(axis=-1) + g.k6 * obs[..., LEADER]), 1.0)
+        self._speed = self._speed - np.clip(step, -self.speed_step, self.speed_step)
 
     def act_batch(self, obs: ArrayLike, fleets: ArrayLike | None = None) -> Array:
         """Actions (B, n, 4 + m) from local observations (B, n, obs_dim).

@@ -73,13 +73,36 @@ __all__ = [
     "observe_residual",
     "oracle_actions",
     "oracle_rows",
+    "ramped_speed",
     "tracking_feedback",
 ]
 
-#: Layout of the feedback gains: K1 (3, 1/s), K2 (3, 1/s), k_sync (1/s), k_mu (1/s).
-G_K1, G_K2, G_SYNC, G_MU, GAINS_SIZE = 0, 3, 6, 7, 8
+#: Layout of the feedback gains: K1 (3, 1/s), K2 (3, 1/s), k_sync (1/s), k_mu (1/s), and
+#: the oracle's reference-speed ramp (m/s^2; inf: v0 itself).
+G_K1, G_K2, G_SYNC, G_MU, G_RAMP, GAINS_SIZE = 0, 3, 6, 7, 8, 9
 #: Columns of a local rollout's start: x, y, psi, u, v, r, theta.
 LOCAL_STATE = 7
+
+
+@numba.njit(cache=True)
+def ramped_speed(c: KernelConstants, time: float, ramp: float) -> float:
+    """The reference speed (m/s) at ``time`` (s): v0's schedule followed from 0 at ``ramp``.
+
+    Starting from 0 at time 0, the speed moves toward each value of the
+    piecewise-constant schedule at ``ramp`` (m/s^2) at most; ``inf`` gives
+    ``leader_speed`` itself.
+    """
+    if ramp == math.inf:
+        return leader_speed(c, time)
+    speed, start = 0.0, 0.0
+    count = c.v0_times.shape[0]
+    for k in range(count):
+        end = time if k + 1 == count else min(time, max(c.v0_times[k + 1], 0.0))
+        reach = ramp * max(end - start, 0.0)
+        gap = c.v0_values[k] - speed
+        speed = c.v0_values[k] if abs(gap) <= reach else speed + math.copysign(reach, gap)
+        start = max(start, end)
+    return speed
 
 
 @numba.njit(cache=True)
@@ -157,14 +180,15 @@ def oracle_actions(
     """The oracle's command for fleet b at its current state into ``out`` (n, 4 + m).
 
     Told the truth: true state, true lumped force and mass matrix, true
-    synchronization errors, the true v0. ``offsets`` (n, 4) is the plan's
+    synchronization errors, the true v0 (taken up at ``gains[G_RAMP]``,
+    ``ramped_speed``). ``offsets`` (n, 4) is the plan's
     current knot; ``lumped`` (n, 3) and ``mass`` (n, 3, 3) are scratch.
     The message sent is v0 (no vessel needs it: the oracle is centralized).
     """
     fleet_lumped_uncertainty(a, c, b, lumped, mass)
     step = a.step[b]
     member = topology_index(c, step)
-    v0 = leader_speed(c, step * c.dt)
+    v0 = ramped_speed(c, step * c.dt, gains[G_RAMP])
     for i in range(a.eta.shape[1]):
         sync, degree = 0.0, 0.0
         for k in range(c.slots.shape[1]):

@@ -425,8 +425,10 @@ def step_fleets_parallel(arrays: tuple, constants: tuple, actions: np.ndarray) -
     refusal = _step_refusal(a, actions)
     if refusal != STEPPED:
         return refusal
-    for b in prange(a.eta.shape[0]):
-        step_fleet(a, c, actions, b)
+    for index in prange(a.eta.shape[0]):
+        # int64 as the serial loop's index: prange's is uint64, which would compile
+        # ``step_fleet`` a second time
+        step_fleet(a, c, actions, int(np.int64(index)))
     return _step_outcome(a)
 
 

@@ -2,13 +2,16 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
 import baselines
-from baselines.mpc import MPCPolicy, MPCPrivileged, OraclePolicy
+from baselines.mpc import SPEED_RATE, MPCPolicy, MPCPrivileged, OraclePolicy
 from cpf_commands.common.rollout import rollout
 from cpf_env import FleetSim, scenarios
+from cpf_env.sim.arrays import KernelConstants
 
 #: Small plans for short tests: one knot of 5 steps, no tail, 4 samples.
 SHORT = {"horizon": 0.25, "tail": 0.0, "knot": 5, "samples": 4}
@@ -143,3 +146,28 @@ def test_the_oracle_costs_least_over_the_whole_episode(scenario):
     costs = {name: float(m["cost"][0]) for name, m in zip(names, measured, strict=True)}
     others = {name: cost for name, cost in costs.items() if name != "oracle"}
     assert costs["oracle"] < min(others.values()), costs
+
+
+def test_the_oracles_reference_speed_follows_v0s_schedule_at_its_ramp():
+    """``ramped_speed``: from 0 at t = 0 toward each value of the schedule at the ramp (m/s^2);
+    ``inf`` is the schedule itself. bench_switching steps v0 0.1 -> 0.15 at 35 s, back at 78 s."""
+    from baselines.mpc_kernels import ramped_speed
+    from cpf_env.sim.kernels import leader_speed
+
+    scenario = scenarios.get("bench_switching")
+    c = KernelConstants(*FleetSim(scenario).constants)
+    ramp = 0.02
+    expected = {0.0: 0.0, 2.0: 0.04, 5.0: 0.1, 34.0: 0.1, 36.0: 0.12, 37.5: 0.15, 78.5: 0.14,
+                80.0: 0.11, 90.0: 0.1}  # fmt: skip
+    for time, speed in expected.items():
+        assert ramped_speed(c, time, ramp) == pytest.approx(speed, abs=1e-12), time
+        assert ramped_speed(c, time, math.inf) == leader_speed(c, time)
+
+
+def test_the_oracle_takes_up_v0_at_its_ramp_and_mpc_keeps_v0_at_once():
+    """Defaults: the oracle ramps (``SPEED_RATE``), mpc's estimate is not rate limited."""
+    assert baselines.make_policy("oracle", "bench_mild").gains.speed_rate == SPEED_RATE
+    assert baselines.make_policy("mpc", "bench_mild").gains.speed_rate == math.inf
+    assert np.all(baselines.make_policy("mpc", "bench_mild").speed_step == math.inf)
+    with pytest.raises(ValueError, match="speed_rate must be > 0"):
+        baselines.make_policy("oracle", "bench_mild", speed_rate=0.0)

@@ -85,24 +85,23 @@ def _star(n: int) -> scenarios.Scenario:
     )
 
 
-def test_on_a_large_star_the_capped_step_stays_bounded_where_mpcs_diverges():
-    """An 11-vessel star (hub degree 10): at 5 /s, dt (k5 d + k6 l) = 2.75 for the hub, so
-    mpc's estimator step at those gains has the hub's own weight at -1.75 and its estimate
-    swings ever wider; the capped step keeps every estimate a convex combination of the
-    values it combines, so it stays within [0, v0] on the way up from 0 (no rate limit
-    here, to see the step alone)."""
+def test_on_a_large_star_the_estimators_step_stays_bounded_at_the_fast_gains():
+    """An 11-vessel star (hub degree 10): at 5 /s, dt (k5 d + k6 l) = 2.75 for the hub, so an
+    uncapped step would give the hub's old estimate the weight -1.75 and swing ever wider
+    (removing the cap in ``MPCPolicy._update_knowledge`` fails this test); the capped step
+    keeps every estimate a convex combination of the values it combines, so it stays
+    within [0, v0] on the way up from 0 (no rate limit here, to see the step alone)."""
     scenario = _star(11)
     v0 = scenario.v0_schedule.values[0]
-    span = {}
-    for name, policy in (("mpc", MPCPolicy(scenario, k5=5.0, k6=5.0, **SHORT)),
-                         ("tuned", MPCTuned(scenario, speed_rate=np.inf, **SHORT))):  # fmt: skip
-        sim = FleetSim(scenario, num_fleets=1)
-        obs = sim.reset(seeds=[0])
-        low, high = 0.0, 0.0
-        for _ in range(100):
-            obs = sim.step(policy.act_batch(obs))
-            estimate = policy.diagnostics["speed_estimate"]
-            low, high = min(low, float(estimate.min())), max(high, float(estimate.max()))
-        span[name] = (low, high)
-    assert span["mpc"][1] > 2 * v0 or span["mpc"][0] < -v0, span
-    assert span["tuned"][0] >= 0.0 and span["tuned"][1] <= v0 * (1 + 1e-9), span
+    policy = MPCTuned(scenario, speed_rate=np.inf, **SHORT)
+    hub = scenario.n // 2
+    assert scenario.dt * (K5 * (scenario.n - 1) + K6) > 2.0  # an uncapped step diverges
+    sim = FleetSim(scenario, num_fleets=1)
+    obs = sim.reset(seeds=[0])
+    low, high = 0.0, 0.0
+    for _ in range(300):
+        obs = sim.step(policy.act_batch(obs))
+        estimate = policy.diagnostics["speed_estimate"]
+        low, high = min(low, float(estimate.min())), max(high, float(estimate.max()))
+    assert low >= 0.0 and high <= v0 * (1 + 1e-9), (low, high)
+    assert policy.diagnostics["speed_estimate"][0, hub] > 0.9 * v0  # and the hub got there
