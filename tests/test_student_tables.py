@@ -78,3 +78,25 @@ def test_guarded_verdicts_flag_a_physical_regression_and_read_the_deployable_tab
     lines = _tables()._guarded(folder, tuned, ["mpc_tuned"])
     assert "| bench_mild | mpc | mixed (worse: heading) (N 8) |" in lines
     assert "| bench_mild | mpc_tuned | loses (N 8) |" in lines
+
+
+def test_an_oracle_in_the_deployable_table_replaces_the_folders(tmp_path: Path) -> None:
+    import numpy as np
+
+    from cpf_commands.bench.episodes import METRICS
+    from cpf_commands.bench.report import CellResult
+
+    costs = {
+        "nn_dsc": [100.0, 110.0, 90.0, 100.0],
+        "mpc": [40.0, 44.0, 36.0, 40.0],
+        "oracle": [20.0, 22.0, 18.0, 20.0],
+        "r/agents/student_s0": [30.0, 33.0, 27.0, 30.0],
+    }
+    _bench(tmp_path / "bench_test", costs)
+    seeds = tuple(range(10000, 10006))  # a superset of the folder's seeds
+    metrics = {m: np.zeros(len(seeds)) for m in METRICS}
+    metrics["cost"] = np.array([40.0, 44.0, 36.0, 40.0, 1.0, 1.0])
+    newer = [CellResult("oracle", "bench_mild", seeds, False, metrics)]
+    lines = _tables()._table(tmp_path / "bench_test", newer)
+    assert lines[-1].endswith("IQM normalized score 1.167")  # (100 - 30) / (100 - 40)
+    assert "| 100.0 | 40.0 | 40.0 |" in lines[4]
