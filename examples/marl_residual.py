@@ -137,7 +137,7 @@ def main() -> None:
     actor = experiment.algorithm.get_policy_for_loss("vessel")
     with torch.no_grad():  # start from the base policy: zero mean residual
         last = [v for k, v in actor.state_dict(keep_vars=True).items() if "mlp.params" in k][-2:]
-        k = experiment.test_env.base_env.action_size
+        k = experiment.test_env.base_env.core.action_size
         last[0][:k].zero_()
         last[1][:k].zero_()
     started = time.perf_counter()

@@ -69,7 +69,7 @@ RECORD_FIELDS = {
 }
 TASK_FIELDS = {
     "scenario": "str",
-    "base": "str",
+    "base_policy": "str",
     "mode": "str",
     "scale": "float",
     "extras": "tuple[str, ...]",
@@ -124,7 +124,7 @@ def save_marl_policy(
         raise ValueError(f"the actor must use Tanh activations, got {model.activation_class}.")
     layers = _actor_layers(experiment, group)
     env = experiment.test_env.base_env
-    k = env.action_size
+    k = env.core.action_size
     weight, bias = layers[-1]
     if weight.shape[0] != 2 * k:
         raise ValueError(
@@ -193,7 +193,7 @@ def marl_config(record: Any, source: Path) -> tuple[TrainConfig, list[int], dict
         config = TrainConfig(
             algo="ppo",
             scenario=task["scenario"],
-            base=task["base"],
+            base=task["base_policy"],
             mode=task["mode"],
             scale=task["scale"],
             extras=tuple(task["extras"]),

@@ -76,6 +76,7 @@ def test_the_tasks_are_the_training_scenarios_each_with_a_config() -> None:
         assert isinstance(loaded, CpfTaskClass)
         assert loaded.config["scenario"] == task.name.lower()
         assert loaded.config["max_steps"] == 200
+        assert loaded.config["stagger"] is True
     assert (CONF / "config.yaml").is_file()
 
 
