@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import csv
 import doctest
 import importlib.util
 import json
@@ -191,14 +192,67 @@ def test_two_mappo_iterations_on_the_pettingzoo_route_with_distinct_worker_seeds
 def test_the_training_example_writes_a_curve_and_a_policy(tmp_path: Path) -> None:
     script = Path(__file__).resolve().parents[2] / "examples" / "marl_residual.py"
     out = tmp_path / "run"
-    command = [sys.executable, str(script), "--iterations", "1", "--out", str(out)]
+    command = [sys.executable, str(script), "--iterations", "1", "--out", str(out),
+               "--eval-fleets", "2", "--eval-steps", "20"]  # fmt: skip
     env = {**os.environ, "NUMBA_NUM_THREADS": "1"}
     result = subprocess.run(command, capture_output=True, text=True, env=env, cwd=tmp_path)
     assert result.returncode == 0, result.stderr[-2000:]
     assert "vessel-steps/s" in result.stdout
-    rows = (out / "curve.csv").read_text().splitlines()
-    assert len(rows) == 2 and rows[0].startswith("iteration,frames,vessel_steps")
+    with (out / "curve.csv").open() as text:
+        rows = list(csv.DictReader(text))
+    assert len(rows) == 1 and rows[0]["vessel_steps"] == str(64 * 100 * 5)
+    assert float(rows[0]["eval_return"]) < 0 and float(rows[0]["eval_return_sync"]) < 0
     run = json.loads((out / "run.json").read_text())
     assert run["vessel_steps"] == 64 * 100 * 5
+    assert run["stagger"] is True and run["evaluation"]["max_steps"] == 20
+    assert run["evaluation"]["at_start"] == run["evaluation"]["base"]  # the zeroed actor
+    assert json.loads((out / "config.json").read_text())["task"]["stagger"] is True
     policy = load_policy(out, scenario="bench_lossy_links")
     assert policy.name == "run"
+
+
+def constant_actor(value: float):  # type: ignore[no-untyped-def]
+    """A TorchRL policy writing the same residual for every vessel."""
+    from tensordict.nn import TensorDictModule
+
+    def act(observation: torch.Tensor) -> torch.Tensor:
+        return torch.full((*observation.shape[:-1], 3), value)
+
+    keys = {"in_keys": [("vessel", "observation")], "out_keys": [("vessel", "action")]}
+    return TensorDictModule(act, **keys)
+
+
+def test_the_fixed_seed_evaluation_is_the_base_at_zero_and_repeats_itself() -> None:
+    from agents.marl.fixed_seeds import EVALUATION_FIELDS, FixedSeedEvaluation
+    from cpf_env.scenarios.reward_weights import REWARD_TERMS
+
+    config = {**CpfTask.BENCH_LOSSY_LINKS.get_from_yaml().config, "normalization_steps": 20}
+    evaluation = FixedSeedEvaluation(config, fleets=3, seed=2, max_steps=40)
+    assert list(evaluation.base) == list(EVALUATION_FIELDS)
+    assert evaluation.evaluate(constant_actor(0.0)) == evaluation.base
+    assert evaluation.base["return_minus_base"] == 0.0
+    pushed = evaluation.evaluate(constant_actor(0.5))
+    assert pushed == evaluation.evaluate(constant_actor(0.5))
+    assert pushed["return_minus_base"] != 0.0 and pushed["late_reward_minus_base"] != 0.0
+    assert pushed["return_minus_base"] == pytest.approx(
+        pushed["return"] - evaluation.base["return"], abs=1e-9
+    )
+    terms = sum(pushed[f"return_{term}"] for term in REWARD_TERMS)
+    assert terms == pytest.approx(pushed["return"], rel=1e-12)
+    # the same seeds played by the env itself: the base's rewards, second half per vessel-step
+    env = evaluation.env
+    env.set_seed(2)
+    rewards = env.rollout(40, constant_actor(0.0))["next", "vessel", "reward"].double()
+    assert evaluation.base["late_reward"] == pytest.approx(float(rewards[:, 20:].mean()), rel=1e-5)
+    assert evaluation.base["return"] == pytest.approx(float(rewards.sum(1).mean()), rel=1e-5)
+
+
+def test_the_fixed_seed_evaluation_plays_the_scenarios_own_length_by_default() -> None:
+    from agents.marl.fixed_seeds import FixedSeedEvaluation
+    from cpf_env import scenarios
+
+    config = {**CpfTask.BENCH_MILD.get_from_yaml().config, "normalization_steps": 20}
+    evaluation = FixedSeedEvaluation(config, fleets=1)
+    assert evaluation.max_steps == scenarios.get("bench_mild").max_steps != config["max_steps"]
+    with pytest.raises(ValueError, match="evaluation"):
+        FixedSeedEvaluation(config, fleets=1, seed=10_000, max_steps=10)
