@@ -14,7 +14,11 @@ rate 3e-4, initial exploration std 0.37 (``log_std_init = -1``), and the
 actor's mean output zeroed at the start, so the first policy is the base
 policy itself (SB3's residual PPO zero-initializes its action layer too).
 64 fleets x 100 steps per batch (32,000 vessel-steps), 8 passes of
-minibatches of 1,600 fleet-steps.
+minibatches of 1,600 fleet-steps. With ``--encoder`` the actor reads the
+neighbour slots through the DeepSets encoder (``agents.marl.models``: slot MLP
+of width 32, mean over the linked slots, then 64 x 64; inputs normalized with
+statistics shared by the slots), so the saved policy runs on any degree; the
+critic stays the 64 x 64 MLP.
 
 Every ``--eval-every`` iterations the actor plays one episode on each of
 ``--eval-fleets`` fixed training seeds (0, 1, ...; unstaggered, deterministic
@@ -45,7 +49,9 @@ from typing import Any
 
 import torch
 
+from agents.agent_folder import PolicyNetwork
 from agents.marl.fixed_seeds import EVALUATION_FIELDS, FixedSeedEvaluation
+from agents.marl.models import NeighbourSetMlpConfig
 from agents.marl.policy_folder import save_marl_policy
 from agents.marl.tasks import CpfTask  # imports BenchMARL (with the TorchRL 0.14 alias)
 from benchmarl.experiment.callback import Callback  # isort: skip
@@ -143,6 +149,12 @@ def main() -> None:
     )
     parser.add_argument("--out", type=Path, required=True)
     parser.add_argument(
+        "--encoder",
+        action="store_true",
+        help="the actor reads the neighbour slots through the DeepSets encoder "
+        "(agents.marl.models; the task's shared_slot_statistics on)",
+    )
+    parser.add_argument(
         "--eval-every", type=int, default=2, help="evaluate on fixed seeds every N iterations"
     )
     parser.add_argument(
@@ -178,25 +190,34 @@ def main() -> None:
         setattr(config, key, value)
     algorithm = {"mappo": MappoConfig, "ippo": IppoConfig}[args.algorithm].get_from_yaml()
     algorithm.scale_mapping = "biased_softplus_0.37"
-    model = MlpConfig.get_from_yaml()
-    model.num_cells = [64, 64]
+    critic = MlpConfig.get_from_yaml()
+    critic.num_cells = [64, 64]
     task = CpfTask[args.task.upper()].get_from_yaml()
     task.config["stagger"] = args.stagger
+    model: MlpConfig | NeighbourSetMlpConfig = critic
+    if args.encoder:
+        task.config["shared_slot_statistics"] = True
+        model = NeighbourSetMlpConfig.for_task(task.config, num_cells=[64, 64])
     curve = Curve(n=5, evaluation=None, every=args.eval_every, iterations=args.iterations)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     experiment = Experiment(
         task=task,
         algorithm_config=algorithm,
         model_config=model,
-        critic_model_config=model,
+        critic_model_config=critic,
         seed=args.seed,
         config=config,
         callbacks=[curve],
     )
     curve.n = experiment.test_env.base_env.n
     actor = experiment.algorithm.get_policy_for_loss("vessel")
+    networks = [module for module in actor.modules() if isinstance(module, PolicyNetwork)]
     with torch.no_grad():  # start from the base policy: zero mean residual
-        last = [v for k, v in actor.state_dict(keep_vars=True).items() if "mlp.params" in k][-2:]
+        if networks:  # the encoder actor
+            last = [networks[0].output.weight, networks[0].output.bias]
+        else:
+            state = actor.state_dict(keep_vars=True)
+            last = [value for key, value in state.items() if "mlp.params" in key][-2:]
         k = experiment.test_env.base_env.core.action_size
         last[0][:k].zero_()
         last[1][:k].zero_()
@@ -222,6 +243,7 @@ def main() -> None:
         "settings": {k: v for k, v in settings.items() if k != "save_folder"},
         "scale_mapping": algorithm.scale_mapping,
         "num_cells": model.num_cells,
+        "encoder": args.encoder,
         "iterations": experiment.n_iters_performed,
         "vessel_steps": vessel_steps,
         "seconds": seconds,

@@ -93,6 +93,7 @@ class FixedSeedEvaluation:
             False,
             normalize=task.normalize if statistics is None else statistics,
             normalization_steps=task.normalization_steps,
+            shared_slot_statistics=task.shared_slot_statistics and statistics is None,
             state=False,
             **{**task.overrides, "max_steps": self.max_steps},
         )
