@@ -283,13 +283,7 @@ def read_marl_agent(
     manifest = read_manifest(folder / MANIFEST, MARL_FORMAT, MARL_FORMAT_VERSION)
     record = read_json(folder, CONFIG, manifest)
     config, sizes, overrides = marl_config(record, folder / CONFIG)
-    version = manifest["format_version"]
-    encoder = actor_from_record(record, version, config, folder / CONFIG)
-    if version == 2 and encoder is None:
-        raise AgentFolderError(
-            f"{folder / CONFIG}: format version 2 holds an encoder actor, but field 'actor' "
-            "gives none; the folder is damaged."
-        )
+    encoder = actor_from_record(record, manifest["format_version"], config, folder / CONFIG)
     statistics = read_json(folder, NORMALIZATION, manifest)
     normalization = None
     inputs = sizes[0] if encoder is None else config.learner_input_size()
