@@ -142,6 +142,9 @@ def main() -> None:
     parser.add_argument("--iterations", type=int, default=40)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument(
+        "--max-steps", type=int, default=None, help="training episode length (the task's: 200)"
+    )
+    parser.add_argument(
         "--stagger",
         action=argparse.BooleanOptionalAction,
         default=True,
@@ -194,6 +197,8 @@ def main() -> None:
     critic.num_cells = [64, 64]
     task = CpfTask[args.task.upper()].get_from_yaml()
     task.config["stagger"] = args.stagger
+    if args.max_steps is not None:
+        task.config["max_steps"] = args.max_steps
     model: MlpConfig | NeighbourSetMlpConfig = critic
     if args.encoder:
         task.config["shared_slot_statistics"] = True

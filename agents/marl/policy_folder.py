@@ -141,14 +141,13 @@ def save_marl_policy(
     record: dict[str, Any] = {"task": dict(experiment.task.config), "algorithm": algorithm}
     if networks:  # agents.marl.models.NeighbourSetMlp
         network = networks[0]
-        assert network.encoder is not None
-        tensors = dict(network.state_dict())
-        slots = network.encoder.slots_in(env.core.input_size)
-        record["actor"] = {"encoder": ENCODER, "history": 0, **encoder_layout(network.encoder)}
-        record["actor"]["slots"] = slots
-        first = network.encoder.features_dim
+        encoder = network.encoder
+        assert encoder is not None
+        record["actor"] = {"encoder": ENCODER, "history": 0, **encoder_layout(encoder)}
+        record["actor"]["slots"] = encoder.slots_in(env.core.input_size)
+        first = encoder.features_dim
         layers = [(layer.weight, layer.bias) for layer in [*network.hidden, network.output]]
-        tensors = {key: value for key, value in tensors.items() if key.startswith("encoder.")}
+        tensors = {f"encoder.{key}": value for key, value in encoder.state_dict().items()}
     else:
         if experiment.model_config.activation_class is not torch.nn.Tanh:
             raise ValueError(
