@@ -14,12 +14,27 @@ rate 3e-4, initial exploration std 0.37 (``log_std_init = -1``), and the
 actor's mean output zeroed at the start, so the first policy is the base
 policy itself (SB3's residual PPO zero-initializes its action layer too).
 64 fleets x 100 steps per batch (32,000 vessel-steps), 8 passes of
-minibatches of 1,600 fleet-steps.
+minibatches of 1,600 fleet-steps. With ``--encoder`` the actor reads the
+neighbour slots through the DeepSets encoder (``agents.marl.models``: slot MLP
+of width 32, mean over the linked slots, then 64 x 64; inputs normalized with
+statistics shared by the slots), so the saved policy runs on any degree; the
+critic stays the 64 x 64 MLP.
+
+Every ``--eval-every`` iterations the actor plays one episode on each of
+``--eval-fleets`` fixed training seeds (0, 1, ...; unstaggered, deterministic
+action, ``--eval-steps`` long: default the scenario's own length, as
+``cpf-bench`` plays it) against the base policy alone on the same seeds
+(``agents.marl.fixed_seeds.FixedSeedEvaluation``): the training returns mostly
+measure the episodes' random starts, these differences measure the actor.
 
 Writes into ``--out``: the policy folder's files, ``curve.csv`` (per
-iteration: frames, vessel-steps, seconds since start, collection and training
-seconds, mean reward per vessel-step, mean return of the episodes that ended)
-and ``run.json`` (settings, versions, totals, end-to-end vessel-steps/s).
+iteration: frames, vessel-steps, collection and training seconds, mean reward
+per vessel-step of the batch, mean return of the episodes that ended in it,
+seconds since start; on evaluated iterations the actor's return and
+second-half reward per vessel-step on the fixed seeds, each also minus the
+base's, and the return's part of each reward term) and ``run.json``
+(settings, versions, totals, end-to-end vessel-steps/s without the
+evaluations, the evaluation before training and the base's numbers).
 """
 
 from __future__ import annotations  # noqa: I001  (BenchMARL after agents.marl.tasks: the alias)
@@ -34,6 +49,9 @@ from typing import Any
 
 import torch
 
+from agents.agent_folder import PolicyNetwork
+from agents.marl.fixed_seeds import EVALUATION_FIELDS, FixedSeedEvaluation
+from agents.marl.models import NeighbourSetMlpConfig
 from agents.marl.policy_folder import save_marl_policy
 from agents.marl.tasks import CpfTask  # imports BenchMARL (with the TorchRL 0.14 alias)
 from benchmarl.experiment.callback import Callback  # isort: skip
@@ -41,14 +59,38 @@ from cpf_env.infra import atomic
 
 FLEETS = 64
 STEPS_PER_BATCH = 100
+#: The columns of ``curve.csv``; ``eval_*`` are empty on iterations not evaluated.
+COLUMNS = (
+    "iteration",
+    "frames",
+    "vessel_steps",
+    "collection_seconds",
+    "reward_per_vessel_step",
+    "episode_return",
+    "episodes_ended",
+    "training_seconds",
+    "evaluation_seconds",
+    "seconds",
+    *(f"eval_{name}" for name in EVALUATION_FIELDS),
+)
 
 
 class Curve(Callback):
-    """BenchMARL callback recording one row per iteration."""
+    """BenchMARL callback recording one row per iteration, the fixed-seed evaluation every few.
 
-    def __init__(self, n: int) -> None:
+    Args:
+        n: Vessels per fleet.
+        evaluation: The fixed-seed evaluation, or None.
+        every: Evaluate after iterations ``every``, ``2 every``, ... and the last.
+        iterations: The number of iterations of the run.
+    """
+
+    def __init__(
+        self, n: int, evaluation: FixedSeedEvaluation | None, every: int, iterations: int
+    ) -> None:
         super().__init__()
         self.n, self.rows, self.start = n, [], time.perf_counter()
+        self.evaluation, self.every, self.iterations = evaluation, every, iterations
         self.frames = 0
         self._collected = self.start
         self._last = self.start
@@ -77,11 +119,19 @@ class Curve(Callback):
         )
 
     def on_train_end(self, training_td: Any, group: str) -> None:
-        """Training time of the iteration, and the wall clock."""
+        """Training time of the iteration, the evaluation if due, and the wall clock."""
         now = time.perf_counter()
-        self.rows[-1]["training_seconds"] = now - self._collected
-        self.rows[-1]["seconds"] = now - self.start
-        self._last = now
+        row = self.rows[-1]
+        row["training_seconds"] = now - self._collected
+        iteration = row["iteration"]
+        due = iteration % self.every == 0 or iteration == self.iterations
+        if self.evaluation is not None and due:
+            assert self.experiment is not None
+            scores = self.evaluation.evaluate(self.experiment.policy)
+            row.update({f"eval_{name}": value for name, value in scores.items()})
+        self._last = time.perf_counter()
+        row["evaluation_seconds"] = self._last - now
+        row["seconds"] = self._last - self.start
 
 
 def main() -> None:
@@ -91,7 +141,31 @@ def main() -> None:
     parser.add_argument("--task", default="bench_lossy_links")
     parser.add_argument("--iterations", type=int, default=40)
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument(
+        "--max-steps", type=int, default=None, help="training episode length (the task's: 200)"
+    )
+    parser.add_argument(
+        "--stagger",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="spread the fleets' episode ends (the task's default; off: all end together)",
+    )
     parser.add_argument("--out", type=Path, required=True)
+    parser.add_argument(
+        "--encoder",
+        action="store_true",
+        help="the actor reads the neighbour slots through the DeepSets encoder "
+        "(agents.marl.models; the task's shared_slot_statistics on)",
+    )
+    parser.add_argument(
+        "--eval-every", type=int, default=2, help="evaluate on fixed seeds every N iterations"
+    )
+    parser.add_argument(
+        "--eval-fleets", type=int, default=32, help="fixed training seeds (0 ..), 0: none"
+    )
+    parser.add_argument(
+        "--eval-steps", type=int, default=None, help="evaluation episode length (scenario's)"
+    )
     args = parser.parse_args()
     torch.set_num_threads(1)
 
@@ -119,32 +193,54 @@ def main() -> None:
         setattr(config, key, value)
     algorithm = {"mappo": MappoConfig, "ippo": IppoConfig}[args.algorithm].get_from_yaml()
     algorithm.scale_mapping = "biased_softplus_0.37"
-    model = MlpConfig.get_from_yaml()
-    model.num_cells = [64, 64]
+    critic = MlpConfig.get_from_yaml()
+    critic.num_cells = [64, 64]
     task = CpfTask[args.task.upper()].get_from_yaml()
-    curve = Curve(n=5)
+    task.config["stagger"] = args.stagger
+    if args.max_steps is not None:
+        task.config["max_steps"] = args.max_steps
+    model: MlpConfig | NeighbourSetMlpConfig = critic
+    if args.encoder:
+        task.config["shared_slot_statistics"] = True
+        model = NeighbourSetMlpConfig.for_task(task.config, num_cells=[64, 64])
+    curve = Curve(n=5, evaluation=None, every=args.eval_every, iterations=args.iterations)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     experiment = Experiment(
         task=task,
         algorithm_config=algorithm,
         model_config=model,
-        critic_model_config=model,
+        critic_model_config=critic,
         seed=args.seed,
         config=config,
         callbacks=[curve],
     )
     curve.n = experiment.test_env.base_env.n
     actor = experiment.algorithm.get_policy_for_loss("vessel")
+    networks = [module for module in actor.modules() if isinstance(module, PolicyNetwork)]
     with torch.no_grad():  # start from the base policy: zero mean residual
-        last = [v for k, v in actor.state_dict(keep_vars=True).items() if "mlp.params" in k][-2:]
-        k = experiment.test_env.base_env.action_size
+        if networks:  # the encoder actor
+            last = [networks[0].output.weight, networks[0].output.bias]
+        else:
+            state = actor.state_dict(keep_vars=True)
+            last = [value for key, value in state.items() if "mlp.params" in key][-2:]
+        k = experiment.test_env.base_env.core.action_size
         last[0][:k].zero_()
         last[1][:k].zero_()
+    at_start = base = None
+    if args.eval_fleets:
+        curve.evaluation = FixedSeedEvaluation(
+            task.config,
+            args.eval_fleets,
+            statistics=experiment.test_env.base_env.input_statistics,
+            max_steps=args.eval_steps,
+        )
+        base, at_start = curve.evaluation.base, curve.evaluation.evaluate(experiment.policy)
     started = time.perf_counter()
     experiment.run()
     seconds = time.perf_counter() - started
     save_marl_policy(experiment, args.out, args.algorithm)
     vessel_steps = experiment.total_frames * curve.n
+    evaluation_seconds = sum(r["evaluation_seconds"] for r in curve.rows)
     run = {
         "algorithm": args.algorithm,
         "task": args.task,
@@ -152,12 +248,22 @@ def main() -> None:
         "settings": {k: v for k, v in settings.items() if k != "save_folder"},
         "scale_mapping": algorithm.scale_mapping,
         "num_cells": model.num_cells,
+        "encoder": args.encoder,
         "iterations": experiment.n_iters_performed,
         "vessel_steps": vessel_steps,
         "seconds": seconds,
-        "vessel_steps_per_second": vessel_steps / seconds,
+        "vessel_steps_per_second": vessel_steps / (seconds - evaluation_seconds),
         "collection_seconds": sum(r["collection_seconds"] for r in curve.rows),
-        "training_seconds": sum(r.get("training_seconds", 0.0) for r in curve.rows),
+        "training_seconds": sum(r["training_seconds"] for r in curve.rows),
+        "evaluation_seconds": evaluation_seconds,
+        "evaluation": {
+            "seeds": list(range(args.eval_fleets)),
+            "every": args.eval_every,
+            "max_steps": None if curve.evaluation is None else curve.evaluation.max_steps,
+            "base": base,
+            "at_start": at_start,
+        },
+        "stagger": bool(task.config["stagger"]),
         "versions": {
             "torch": torch.__version__,
             "torchrl": __import__("torchrl").__version__,
@@ -165,7 +271,7 @@ def main() -> None:
         },
     }
     text = io.StringIO()
-    writer = csv.DictWriter(text, fieldnames=list(curve.rows[0]) + ["training_seconds", "seconds"])
+    writer = csv.DictWriter(text, fieldnames=COLUMNS)
     writer.writeheader()
     writer.writerows(curve.rows)
     atomic.write_text(args.out / "curve.csv", text.getvalue())

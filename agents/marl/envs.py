@@ -17,10 +17,12 @@ from typing import Any
 
 from agents.resolve import resolve_base_policy
 from cpf_env.envs.core import DEFAULT_INFO_LEVEL
+from cpf_env.envs.input_statistics import InputStatistics, estimate_input_statistics
 from cpf_env.envs.policy import FleetPolicy
 from cpf_env.envs.residual import ResidualConfig
 from cpf_env.envs.torchrl_env import TorchRLFleetEnv
 from cpf_env.scenarios import Scenario, make_scenario
+from cpf_env.sim.fleet import observation_layout
 
 __all__ = ["make_env"]
 
@@ -33,6 +35,7 @@ def make_env(
     stagger: bool = True,
     info_level: str = DEFAULT_INFO_LEVEL,
     policy_options: dict[str, Any] | None = None,
+    shared_slot_statistics: bool = False,
     **options: Any,
 ) -> TorchRLFleetEnv:
     """A residual ``TorchRLFleetEnv`` over a base policy given by name (``FleetVecEnv``'s).
@@ -47,22 +50,41 @@ def make_env(
         stagger: Spread the horizons over the fleets (``EpisodeCore``).
         info_level: ``"none"`` (default), ``"minimal"`` or ``"full"``.
         policy_options: Options (gains) of a base policy given by name.
+        shared_slot_statistics: With ``normalize=True``, scale every neighbour slot
+            with the slots' pooled statistics and leave the links' weights a_ij raw
+            (``agents.slot_statistics.shared_slot_statistics``, ``raw_weights=True``):
+            the inputs a ``NeighbourSetEncoder`` reads (``agents.marl.models``).
         **options: ``TorchRLFleetEnv``'s own (``device``, ``seed``, ``normalize``,
             ``normalization_steps``, ``state``) and ``Scenario`` field overrides.
 
     Raises:
-        ValueError: An unknown base policy name (or any error of ``TorchRLFleetEnv``).
+        ValueError: An unknown base policy name, ``shared_slot_statistics`` without
+            ``normalize=True`` (or any error of ``TorchRLFleetEnv``).
     """
     env_options = {"device", "seed", "normalize", "normalization_steps", "state"}
     own = {key: value for key, value in options.items() if key in env_options}
     overrides = {key: value for key, value in options.items() if key not in env_options}
     resolved = make_scenario(scenario, **overrides)
-    return TorchRLFleetEnv(
-        resolved,
-        num_fleets,
-        resolve_base_policy(base_policy, resolved, policy_options),
-        ResidualConfig() if residual is None else residual,
-        stagger,
-        info_level,
-        **own,
+    base = resolve_base_policy(base_policy, resolved, policy_options)
+    residual = ResidualConfig() if residual is None else residual
+    if shared_slot_statistics:
+        if own.get("normalize") is not True:
+            raise ValueError("shared_slot_statistics=True pools the statistics of normalize=True.")
+        own["normalize"] = _shared_slot_statistics(
+            resolved, base, residual, own.get("normalization_steps", 200)
+        )
+    return TorchRLFleetEnv(resolved, num_fleets, base, residual, stagger, info_level, **own)
+
+
+def _shared_slot_statistics(
+    scenario: Scenario, base: FleetPolicy | None, residual: ResidualConfig, steps: int
+) -> InputStatistics:
+    """The env's input statistics (as ``normalize=True`` estimates them), slots pooled."""
+    from agents.slot_statistics import shared_slot_statistics
+
+    estimated = estimate_input_statistics(scenario, base, residual, steps=steps)
+    layout = residual.learner_layout(observation_layout(scenario))
+    mean, var = shared_slot_statistics(
+        estimated.mean, estimated.var, layout.n_slots, layout.slot_size, raw_weights=True
     )
+    return InputStatistics(mean, var, estimated.epsilon, estimated.clip)

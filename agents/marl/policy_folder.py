@@ -2,18 +2,25 @@
 
 ``save_marl_policy(experiment, folder)`` writes, for the shared actor of
 BenchMARL's PPO family (MAPPO, IPPO: ``share_policy_params=True``, an MLP over
-each vessel's local input):
+each vessel's local input, or ``agents.marl.models.NeighbourSetMlp``: the
+neighbour encoder, then an MLP):
 
 - ``policy.safetensors``: the actor MLP as ``agents.agent_folder.PolicyNetwork``
   tensors (``hidden.<i>.weight`` (out, in), ``hidden.<i>.bias``, ``output.weight``,
   ``output.bias``), float32. The output layer keeps only the rows of the
   Gaussian's location: the deterministic action BenchMARL evaluates with is
-  ``tanh(loc)`` on [-1, 1] (its ``TanhNormal``), so the scale rows are dropped;
+  ``tanh(loc)`` on [-1, 1] (its ``TanhNormal``), so the scale rows are dropped.
+  With the encoder, also its tensors (``encoder.phi.*``, ``encoder.empty_weight``,
+  ``encoder.tolerance``: ``agents.agent_folder``'s names);
 - ``normalization.json``: the env's frozen ``InputStatistics``, or ``null``;
 - ``config.json``: the task config (``CpfTaskConfig``), the algorithm, the layer
-  sizes and activation, and the run's record (seed, frames, iterations);
-- ``manifest.json``: format ``cpf-marl-agent``, and the SHA-256 and size of each
-  file (the manifest of ``agents.agent_folder``, with its own format name).
+  sizes and activation, and the run's record (seed, frames, iterations); with
+  the encoder, the field ``actor`` of ``agents.agent_folder``'s version 2
+  (``encoder``, ``history``, ``pooling``, ``hidden``, ``slot_size``, ``slots``,
+  ``tail``);
+- ``manifest.json``: format ``cpf-marl-agent``, version 1 (an MLP) or 2 (with
+  the encoder), and the SHA-256 and size of each file (the manifest of
+  ``agents.agent_folder``, with its own format name).
 
 ``read_marl_agent`` reads it back (every hash checked, every field typed
 strictly, the weights' shapes, dtype and values checked before any network is
@@ -22,8 +29,10 @@ allocated: ``agents.agent_folder``'s discipline; no pickle anywhere) as a
 ``cpf-bench --policies FOLDER`` and ``cpf-run --policy FOLDER``) dispatches
 here on the format name and runs it as an ``agents.TrainedPolicy``: the named
 base policy underneath, the same residual composition and statistics, local
-observations only. Nothing here imports BenchMARL: a saved folder loads with
-the ``rl`` extra.
+observations only. An encoder actor runs on any number of neighbour slots
+(its statistics shared by the slots, ``agents.encoder.statistics_for_slots``),
+so on scenarios of a higher degree than its task's. Nothing here imports
+BenchMARL: a saved folder loads with the ``rl`` extra.
 """
 
 from __future__ import annotations
@@ -39,13 +48,16 @@ from agents.agent_folder import (
     NORMALIZATION,
     WEIGHTS,
     PolicyNetwork,
+    actor_from_record,
     agent_files,
+    encoder_layout,
     network_from_layers,
     normalization_from_json,
     read_json,
     read_weights,
     write_with_manifest,
 )
+from agents.encoder import empty_weight_after, statistics_for_slots
 from agents.folder_files import AgentFolderError, check_fields, field, read_manifest
 from agents.train_config import TrainConfig
 from cpf_env.envs.input_statistics import InputStatistics
@@ -55,7 +67,10 @@ from cpf_env.scenarios import make_scenario
 __all__ = ["MARL_FORMAT", "marl_config", "marl_overrides", "read_marl_agent", "save_marl_policy"]
 
 MARL_FORMAT = "cpf-marl-agent"
-MARL_FORMAT_VERSION = 1
+#: The format's versions, all read: 1, an MLP actor; 2, the neighbour encoder and an MLP.
+MARL_FORMAT_VERSION = (1, 2)
+#: ``config.json``'s ``actor.encoder`` of an encoder actor (``TrainConfig.encoder``).
+ENCODER = "deepsets"
 #: BenchMARL algorithms whose actor this format holds (a Gaussian over [-1, 1], tanh-squashed).
 ALGORITHMS = ("mappo", "ippo")
 #: The actor's hidden activation and output transform (``PolicyNetwork``'s arguments).
@@ -69,7 +84,7 @@ RECORD_FIELDS = {
 }
 TASK_FIELDS = {
     "scenario": "str",
-    "base": "str",
+    "base_policy": "str",
     "mode": "str",
     "scale": "float",
     "extras": "tuple[str, ...]",
@@ -119,42 +134,54 @@ def save_marl_policy(
     """
     if algorithm not in ALGORITHMS:
         raise ValueError(f"algorithm must be one of {ALGORITHMS}, got {algorithm!r}.")
-    model = experiment.model_config
-    if model.activation_class is not torch.nn.Tanh:
-        raise ValueError(f"the actor must use Tanh activations, got {model.activation_class}.")
-    layers = _actor_layers(experiment, group)
     env = experiment.test_env.base_env
-    k = env.action_size
+    k = env.core.action_size
+    actor = experiment.algorithm.get_policy_for_loss(group)
+    networks = [module for module in actor.modules() if isinstance(module, PolicyNetwork)]
+    record: dict[str, Any] = {"task": dict(experiment.task.config), "algorithm": algorithm}
+    if networks:  # agents.marl.models.NeighbourSetMlp
+        network = networks[0]
+        encoder = network.encoder
+        assert encoder is not None
+        record["actor"] = {"encoder": ENCODER, "history": 0, **encoder_layout(encoder)}
+        record["actor"]["slots"] = encoder.slots_in(env.core.input_size)
+        first = encoder.features_dim
+        layers = [(layer.weight, layer.bias) for layer in [*network.hidden, network.output]]
+        tensors = {f"encoder.{key}": value for key, value in encoder.state_dict().items()}
+    else:
+        if experiment.model_config.activation_class is not torch.nn.Tanh:
+            raise ValueError(
+                "the actor must use Tanh activations, got "
+                f"{experiment.model_config.activation_class}."
+            )
+        layers = _actor_layers(experiment, group)
+        first, tensors = int(layers[0][0].shape[1]), {}
     weight, bias = layers[-1]
     if weight.shape[0] != 2 * k:
         raise ValueError(
             f"the actor's last layer has {weight.shape[0]} outputs, not 2 k = {2 * k}."
         )
-    tensors = {}
     for i, (w, b) in enumerate(layers[:-1]):
         tensors[f"hidden.{i}.weight"], tensors[f"hidden.{i}.bias"] = w, b
     tensors["output.weight"], tensors["output.bias"] = weight[:k], bias[:k]
     tensors = {
         name: value.detach().to(torch.float32).contiguous() for name, value in tensors.items()
     }
-    sizes = [int(layers[0][0].shape[1]), *(int(w.shape[0]) for w, _ in layers[:-1]), k]
-    record = {
-        "task": dict(experiment.task.config),
-        "algorithm": algorithm,
-        "sizes": sizes,
-        "activation": "tanh",
-        "output": "tanh",
-        "seed": int(experiment.seed),
-        "frames": int(experiment.total_frames),
-        "iterations": int(experiment.n_iters_performed),
-    }
+    record["sizes"] = [first, *(int(w.shape[0]) for w, _ in layers[:-1]), k]
+    record.update(
+        activation="tanh",
+        output="tanh",
+        seed=int(experiment.seed),
+        frames=int(experiment.total_frames),
+        iterations=int(experiment.n_iters_performed),
+    )
     target = Path(folder)
     with atomic.staged_folder(target) as staging:
         write_with_manifest(
             staging,
             agent_files(tensors, env.input_statistics, record),
             MARL_FORMAT,
-            MARL_FORMAT_VERSION,
+            2 if networks else 1,
         )
     return target
 
@@ -189,16 +216,24 @@ def marl_config(record: Any, source: Path) -> tuple[TrainConfig, list[int], dict
             f"each >= 1, got {sizes}."
         )
     task = record["task"]
+    shared = task.get("shared_slot_statistics", False)  # absent before the encoder actor
+    if not isinstance(shared, bool):
+        raise AgentFolderError(
+            f"{source}: field 'task.shared_slot_statistics' must be true or false, got "
+            f"{type(shared).__name__}."
+        )
     try:
         config = TrainConfig(
             algo="ppo",
             scenario=task["scenario"],
-            base=task["base"],
+            base=task["base_policy"],
             mode=task["mode"],
             scale=task["scale"],
             extras=tuple(task["extras"]),
             normalize_observations=task["normalize"],
+            shared_slot_statistics=shared,
             net_arch=tuple(sizes[1:-1]),
+            encoder=ENCODER if "actor" in record else None,
         )
     except ValueError as error:
         raise AgentFolderError(f"{source}: field 'task' is not a valid task: {error}") from None
@@ -245,15 +280,45 @@ def read_marl_agent(
         AgentFolderError: A missing, unreadable, altered or inconsistent file (named).
     """
     manifest = read_manifest(folder / MANIFEST, MARL_FORMAT, MARL_FORMAT_VERSION)
-    config, sizes, overrides = marl_config(read_json(folder, CONFIG, manifest), folder / CONFIG)
+    record = read_json(folder, CONFIG, manifest)
+    config, sizes, overrides = marl_config(record, folder / CONFIG)
+    encoder = actor_from_record(record, manifest["format_version"], config, folder / CONFIG)
     statistics = read_json(folder, NORMALIZATION, manifest)
     normalization = None
+    inputs = sizes[0] if encoder is None else config.learner_input_size()
     if statistics is not None:
-        normalization = normalization_from_json(statistics, folder / NORMALIZATION, sizes[0])
+        normalization = normalization_from_json(statistics, folder / NORMALIZATION, inputs)
     if (normalization is not None) != config.normalize_observations:
         raise AgentFolderError(
             f"{folder / NORMALIZATION} {'holds' if normalization else 'lacks'} statistics but "
             f"config.json says task.normalize={config.normalize_observations}."
         )
-    network = network_from_layers(read_weights(folder, manifest), sizes, ACTOR, folder / WEIGHTS)
+    network = network_from_layers(
+        read_weights(folder, manifest), sizes, ACTOR, folder / WEIGHTS, encoder
+    )
+    if encoder is not None:
+        _check_empty_weight(network, normalization, encoder, folder / NORMALIZATION)
     return config, network, normalization, overrides
+
+
+def _check_empty_weight(
+    network: PolicyNetwork,
+    normalization: InputStatistics | None,
+    encoder: dict[str, Any],
+    source: Path,
+) -> None:
+    """Refuse slot statistics that differ between slots, or an empty weight they do not give."""
+    empty = 0.0
+    if normalization is not None:
+        try:
+            statistics_for_slots(normalization, encoder["slots"], encoder["slot_size"], 1)
+            empty = empty_weight_after(normalization, encoder["slots"], encoder["slot_size"])
+        except ValueError as error:
+            raise AgentFolderError(f"{source}: {error}") from None
+    assert network.encoder is not None
+    held = float(network.encoder.empty_weight)
+    if held != float(torch.tensor(empty, dtype=torch.float32)):
+        raise AgentFolderError(
+            f"{source}: an empty slot's a_ij becomes {empty} after these statistics, but the "
+            f"encoder in {WEIGHTS} masks slots at {held}; the files come from different runs."
+        )

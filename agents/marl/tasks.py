@@ -74,6 +74,9 @@ class CpfTaskConfig:
         extras: Local extras of the learner's input (``EXTRAS``).
         normalize: Scale inputs with statistics of the base policy alone.
         normalization_steps: Control periods those statistics pool.
+        shared_slot_statistics: One set of statistics for every neighbour slot, the
+            links' weights left raw (``agents.marl.envs.make_env``): the inputs of the
+            neighbour-encoder actor (``agents.marl.models``).
         state: Give centralized critics the global state.
         stagger: Spread the fleets' horizons (``EpisodeCore``; on, as on every
             batched route; one fleet per worker on the PettingZoo route has nothing
@@ -89,6 +92,7 @@ class CpfTaskConfig:
     extras: list[str] = dataclasses.field(default_factory=list)
     normalize: bool = True
     normalization_steps: int = 200
+    shared_slot_statistics: bool = False
     state: bool = True
     stagger: bool = True
     overrides: dict[str, Any] = dataclasses.field(default_factory=dict)
@@ -154,6 +158,7 @@ class CpfTaskClass(TaskClass):
                 device=device,
                 normalize=config.normalize,
                 normalization_steps=config.normalization_steps,
+                shared_slot_statistics=config.shared_slot_statistics,
                 state=config.state,
                 max_steps=config.max_steps,
                 **config.overrides,

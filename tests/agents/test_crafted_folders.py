@@ -22,6 +22,7 @@ from pathlib import Path
 from types import FrameType
 from typing import Any
 
+import numpy as np
 import pytest
 import torch
 from conftest import ROOT
@@ -35,6 +36,7 @@ from cpf_commands.run.cli import run_main
 
 AGENT = ROOT / "results/residual_rl/agents/residual_ppo_bench_lossy_links_5m_s0"
 MARL = ROOT / "results/marl/agents/mappo_bench_lossy_links_s0"
+MARL_ENCODER = ROOT / "results/marl/agents/mappo_encoder_bench_lossy_links_s0"
 #: Seconds a load may take before the guard calls it a hang.
 DEADLINE = 20.0
 #: Memory a load may add to the process (bytes) before allocations fail.
@@ -255,6 +257,47 @@ def test_marl_statistics_of_the_wrong_length_are_refused_at_load(tmp_path: Path)
 
     _edit_json(folder, "normalization.json", shorten)
     _refused(folder, "normalization.json", "24 inputs")
+
+
+def test_a_marl_encoder_folder_runs_on_more_slots_than_trained() -> None:
+    from cpf_env import scenarios
+    from cpf_env.sim.fleet import FleetSim
+
+    policy = load_policy(MARL_ENCODER, scenario="bench_switching")  # K = 4; trained on 2
+    sim = FleetSim(scenarios.get("bench_switching"), num_fleets=2)
+    policy.reset()
+    actions = policy.act_batch(sim.reset(seeds=[0, 1]))
+    assert actions.shape[:2] == (2, 5) and np.isfinite(actions).all()
+    assert load_policy(MARL_ENCODER).scenario.name == "bench_lossy_links"
+
+
+@pytest.mark.parametrize(
+    ("edit", "name", "pattern"),
+    [
+        (lambda record: record.pop("actor"), "config.json", "lacks the field 'actor'"),
+        (_set("actor.slots", 3), "config.json", "'actor.slots'"),
+        (_set("task.shared_slot_statistics", "true"), "config.json",
+         "'task.shared_slot_statistics'"),
+        (_set("task.shared_slot_statistics", False), "config.json", "shared_slot_statistics"),
+        (_set("format_version", 1), "manifest.json", "version 1"),
+    ],
+)  # fmt: skip
+def test_a_marl_encoder_folder_that_contradicts_itself_is_refused(
+    tmp_path: Path, edit: Callable[[Any], None], name: str, pattern: str
+) -> None:
+    folder = _copy(MARL_ENCODER, tmp_path)
+    _edit_json(folder, name, edit)
+    _refused(folder, pattern)
+
+
+def test_a_marl_encoder_whose_slot_statistics_differ_is_refused(tmp_path: Path) -> None:
+    folder = _copy(MARL_ENCODER, tmp_path)
+
+    def unpool(data: dict[str, Any]) -> None:
+        data["mean"][18 + 4 + 1] += 0.5  # slot 1's theta difference, not slot 0's
+
+    _edit_json(folder, "normalization.json", unpool)
+    _refused(folder, "normalization.json", "differ between slots")
 
 
 # ---- types, finiteness and dtypes: nothing loaded silently -------------------------------------

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import csv
 import doctest
 import importlib.util
 import json
@@ -76,6 +77,7 @@ def test_the_tasks_are_the_training_scenarios_each_with_a_config() -> None:
         assert isinstance(loaded, CpfTaskClass)
         assert loaded.config["scenario"] == task.name.lower()
         assert loaded.config["max_steps"] == 200
+        assert loaded.config["stagger"] is True
     assert (CONF / "config.yaml").is_file()
 
 
@@ -187,17 +189,135 @@ def test_two_mappo_iterations_on_the_pettingzoo_route_with_distinct_worker_seeds
     assert experiment.total_frames == 400
 
 
-def test_the_training_example_writes_a_curve_and_a_policy(tmp_path: Path) -> None:
+@pytest.mark.parametrize("actor", [[], ["--encoder"]], ids=["mlp", "encoder"])
+def test_the_training_example_writes_a_curve_and_a_policy(tmp_path: Path, actor: list[str]) -> None:
     script = Path(__file__).resolve().parents[2] / "examples" / "marl_residual.py"
     out = tmp_path / "run"
-    command = [sys.executable, str(script), "--iterations", "1", "--out", str(out)]
+    command = [sys.executable, str(script), "--iterations", "1", "--out", str(out),
+               "--eval-fleets", "2", "--eval-steps", "20", *actor]  # fmt: skip
     env = {**os.environ, "NUMBA_NUM_THREADS": "1"}
     result = subprocess.run(command, capture_output=True, text=True, env=env, cwd=tmp_path)
     assert result.returncode == 0, result.stderr[-2000:]
     assert "vessel-steps/s" in result.stdout
-    rows = (out / "curve.csv").read_text().splitlines()
-    assert len(rows) == 2 and rows[0].startswith("iteration,frames,vessel_steps")
+    with (out / "curve.csv").open() as text:
+        rows = list(csv.DictReader(text))
+    assert len(rows) == 1 and rows[0]["vessel_steps"] == str(64 * 100 * 5)
+    assert float(rows[0]["eval_return"]) < 0 and float(rows[0]["eval_return_sync"]) < 0
     run = json.loads((out / "run.json").read_text())
     assert run["vessel_steps"] == 64 * 100 * 5
+    assert run["stagger"] is True and run["evaluation"]["max_steps"] == 20
+    assert run["evaluation"]["at_start"] == run["evaluation"]["base"]  # the zeroed actor
+    record = json.loads((out / "config.json").read_text())
+    assert record["task"]["stagger"] is True
+    assert record["task"]["shared_slot_statistics"] is bool(actor) and ("actor" in record) is bool(
+        actor
+    )
     policy = load_policy(out, scenario="bench_lossy_links")
     assert policy.name == "run"
+
+
+def constant_actor(value: float):  # type: ignore[no-untyped-def]
+    """A TorchRL policy writing the same residual for every vessel."""
+    from tensordict.nn import TensorDictModule
+
+    def act(observation: torch.Tensor) -> torch.Tensor:
+        return torch.full((*observation.shape[:-1], 3), value)
+
+    keys = {"in_keys": [("vessel", "observation")], "out_keys": [("vessel", "action")]}
+    return TensorDictModule(act, **keys)
+
+
+def test_the_fixed_seed_evaluation_is_the_base_at_zero_and_repeats_itself() -> None:
+    from agents.marl.fixed_seeds import EVALUATION_FIELDS, FixedSeedEvaluation
+    from cpf_env.scenarios.reward_weights import REWARD_TERMS
+
+    config = {**CpfTask.BENCH_LOSSY_LINKS.get_from_yaml().config, "normalization_steps": 20}
+    evaluation = FixedSeedEvaluation(config, fleets=3, seed=2, max_steps=40)
+    assert list(evaluation.base) == list(EVALUATION_FIELDS)
+    assert evaluation.evaluate(constant_actor(0.0)) == evaluation.base
+    assert evaluation.base["return_minus_base"] == 0.0
+    pushed = evaluation.evaluate(constant_actor(0.5))
+    assert pushed == evaluation.evaluate(constant_actor(0.5))
+    assert pushed["return_minus_base"] != 0.0 and pushed["late_reward_minus_base"] != 0.0
+    assert pushed["return_minus_base"] == pytest.approx(
+        pushed["return"] - evaluation.base["return"], abs=1e-9
+    )
+    terms = sum(pushed[f"return_{term}"] for term in REWARD_TERMS)
+    assert terms == pytest.approx(pushed["return"], rel=1e-12)
+    # the same seeds played by the env itself: the base's rewards, second half per vessel-step
+    env = evaluation.env
+    env.set_seed(2)
+    rewards = env.rollout(40, constant_actor(0.0))["next", "vessel", "reward"].double()
+    assert evaluation.base["late_reward"] == pytest.approx(float(rewards[:, 20:].mean()), rel=1e-5)
+    assert evaluation.base["return"] == pytest.approx(float(rewards.sum(1).mean()), rel=1e-5)
+
+
+def test_the_fixed_seed_evaluation_plays_the_scenarios_own_length_by_default() -> None:
+    from agents.marl.fixed_seeds import FixedSeedEvaluation
+    from cpf_env import scenarios
+
+    config = {**CpfTask.BENCH_MILD.get_from_yaml().config, "normalization_steps": 20}
+    evaluation = FixedSeedEvaluation(config, fleets=1)
+    assert evaluation.max_steps == scenarios.get("bench_mild").max_steps != config["max_steps"]
+    with pytest.raises(ValueError, match="evaluation"):
+        FixedSeedEvaluation(config, fleets=1, seed=10_000, max_steps=10)
+
+
+def test_a_neighbour_encoder_actor_trains_saves_and_runs_on_a_higher_degree(
+    tmp_path: Path,
+) -> None:
+    from benchmarl.algorithms import MappoConfig
+    from benchmarl.experiment import Experiment, ExperimentConfig
+    from benchmarl.models import MlpConfig
+
+    from agents.marl.models import NeighbourSetMlp, NeighbourSetMlpConfig
+    from cpf_env import scenarios
+    from cpf_env.sim.fleet import FleetSim, observation_layout
+
+    torch.set_num_threads(1)
+    config = ExperimentConfig.get_from_yaml()
+    for key, value in SMALL.items():
+        setattr(config, key, value)
+    config.save_folder = str(tmp_path)
+    task = CpfTask.BENCH_LOSSY_LINKS.get_from_yaml()
+    task.config.update(normalization_steps=20, shared_slot_statistics=True)
+    model = NeighbourSetMlpConfig.for_task(task.config, num_cells=[16], hidden=8)
+    assert (model.slot_size, model.tail) == (4, 0)
+    critic = MlpConfig.get_from_yaml()
+    critic.num_cells = [16]
+    experiment = Experiment(task=task, algorithm_config=MappoConfig.get_from_yaml(),
+                            model_config=model, critic_model_config=critic, seed=0,
+                            config=config)  # fmt: skip
+    actor = experiment.algorithm.get_policy_for_loss("vessel")
+    assert any(isinstance(module, NeighbourSetMlp) for module in actor.modules())
+    statistics = experiment.test_env.base_env.input_statistics
+    slots = statistics.mean[18:26].reshape(2, 4)
+    assert np.array_equal(slots[0], slots[1]) and slots[0, 0] == 0.0  # pooled, a_ij raw
+    experiment.run()
+    assert experiment.n_iters_performed == 2
+    folder = policy_folder.save_marl_policy(experiment, tmp_path / "agent", "mappo")
+    manifest = json.loads((folder / "manifest.json").read_text())
+    record = json.loads((folder / "config.json").read_text())
+    assert manifest["format_version"] == 2 and record["sizes"] == [18 + 8 + 1, 16, 3]
+    assert record["actor"] == {"encoder": "deepsets", "history": 0, "pooling": "mean",
+                               "hidden": 8, "slot_size": 4, "slots": 2, "tail": 0}  # fmt: skip
+    # the saved actor acts as BenchMARL's deterministic policy on the training task
+    policy = load_policy(folder, scenario="bench_lossy_links")
+    env = experiment.test_env
+    td = env.reset()
+    with torch.no_grad(), set_exploration_type(ExplorationType.DETERMINISTIC):
+        expected = experiment.policy(td.clone())["vessel", "action"].numpy()
+    policy.reset()
+    policy.act_batch(env.base_env.sim.arrays.obs.copy())
+    controller = policy._controller
+    assert controller is not None
+    residual = policy.diagnostics["residual"] / (0.2 * controller._tau_scale)
+    np.testing.assert_allclose(residual, expected, atol=2e-6)
+    # and runs on a star of degree 4 (trained on 2 slots): one episode start of cpf-run's
+    assert observation_layout(scenarios.get("bench_switching")).n_slots == 4
+    star = load_policy(folder, scenario="bench_switching")
+    sim = FleetSim(scenarios.get("bench_switching"), num_fleets=2)
+    observation = sim.reset(seeds=[0, 1])
+    star.reset()
+    actions = star.act_batch(observation)
+    assert actions.shape[:2] == (2, 5) and np.isfinite(actions).all()
