@@ -130,20 +130,22 @@ def test_the_timing_example_reports_solve_times_and_real_time_factors():
 @pytest.mark.slow
 @pytest.mark.parametrize("scenario", scenarios.suite.list_suite())
 def test_the_oracle_costs_least_over_the_whole_episode(scenario):
-    """The bound is below every analytic policy, deployable or privileged, on every suite
-    scenario (one seed, whole episode; measured margins 9-29 % below the next, mpc).
+    """The bound's mean cost over three seeds is below every other analytic policy's,
+    deployable or privileged (the one-piece ablations of ``baselines.mpc_told`` and
+    ``mpc_tuned`` included), on every suite scenario, whole episode.
 
-    Not the one-piece ablations of ``baselines.mpc_told``: on seed 10000 of
-    ``bench_heterogeneous`` ``mpc_told_v0`` costs 69.41 against the oracle's 69.59, within
-    the resolution of the oracle's sampled plan (over 20 seeds 64.02 against 62.71;
-    docs/benchmark.md, "What a local controller can reach")."""
+    A mean, as the headroom table's (J_oracle against J_best): on a single seed the
+    oracle's 12 sampled plans for the whole fleet do not resolve differences of a few
+    tenths of a percent, e.g. on seed 10000 ``mpc_tuned`` costs 60.20 against the oracle's
+    60.38 on ``bench_mild`` and 69.16 against 69.31 on ``bench_heterogeneous`` (over the
+    20 ``test`` seeds 62.57 against 61.09 and 63.65 against 62.70; docs/benchmark.md)."""
     from cpf_commands.common.rollout import rollout_group
 
     task = scenarios.get(scenario)
-    told = {"mpc_told_dynamics", "mpc_told_links", "mpc_told_v0"}
-    names = [*baselines.POLICIES, *(name for name in baselines.PRIVILEGED if name not in told)]
-    measured = rollout_group([baselines.make_policy(n, task) for n in names], task, [10000])
-    costs = {name: float(m["cost"][0]) for name, m in zip(names, measured, strict=True)}
+    names = [*baselines.POLICIES, *baselines.PRIVILEGED]
+    seeds = [10000, 10001, 10002]
+    measured = rollout_group([baselines.make_policy(n, task) for n in names], task, seeds)
+    costs = {name: float(m["cost"].mean()) for name, m in zip(names, measured, strict=True)}
     others = {name: cost for name, cost in costs.items() if name != "oracle"}
     assert costs["oracle"] < min(others.values()), costs
 
