@@ -102,6 +102,7 @@ __all__ = [
     "actor_tensors",
     "agent_files",
     "build_actor",
+    "check_empty_weight",
     "check_mlp_input",
     "encoder_layout",
     "network_from_layers",
@@ -661,7 +662,7 @@ def read_agent(folder: Path) -> tuple[dict[str, Any], PolicyNetwork, Normalizati
             f"config.json says normalize_observations={config.normalize_observations}."
         )
     if encoder is not None:
-        _check_empty_weight(network, normalization, encoder, folder / NORMALIZATION)
+        check_empty_weight(network, normalization, encoder, folder / NORMALIZATION)
     return record, network, normalization
 
 
@@ -688,7 +689,7 @@ def check_mlp_input(
         )
 
 
-def _check_empty_weight(
+def check_empty_weight(
     network: PolicyNetwork,
     normalization: Normalization | None,
     encoder: dict[str, Any],

@@ -50,6 +50,7 @@ from agents.agent_folder import (
     PolicyNetwork,
     actor_from_record,
     agent_files,
+    check_empty_weight,
     encoder_layout,
     network_from_layers,
     normalization_from_json,
@@ -57,7 +58,6 @@ from agents.agent_folder import (
     read_weights,
     write_with_manifest,
 )
-from agents.encoder import empty_weight_after, statistics_for_slots
 from agents.folder_files import AgentFolderError, check_fields, field, read_manifest
 from agents.train_config import TrainConfig
 from cpf_env.envs.input_statistics import InputStatistics
@@ -297,28 +297,5 @@ def read_marl_agent(
         read_weights(folder, manifest), sizes, ACTOR, folder / WEIGHTS, encoder
     )
     if encoder is not None:
-        _check_empty_weight(network, normalization, encoder, folder / NORMALIZATION)
+        check_empty_weight(network, normalization, encoder, folder / NORMALIZATION)
     return config, network, normalization, overrides
-
-
-def _check_empty_weight(
-    network: PolicyNetwork,
-    normalization: InputStatistics | None,
-    encoder: dict[str, Any],
-    source: Path,
-) -> None:
-    """Refuse slot statistics that differ between slots, or an empty weight they do not give."""
-    empty = 0.0
-    if normalization is not None:
-        try:
-            statistics_for_slots(normalization, encoder["slots"], encoder["slot_size"], 1)
-            empty = empty_weight_after(normalization, encoder["slots"], encoder["slot_size"])
-        except ValueError as error:
-            raise AgentFolderError(f"{source}: {error}") from None
-    assert network.encoder is not None
-    held = float(network.encoder.empty_weight)
-    if held != float(torch.tensor(empty, dtype=torch.float32)):
-        raise AgentFolderError(
-            f"{source}: an empty slot's a_ij becomes {empty} after these statistics, but the "
-            f"encoder in {WEIGHTS} masks slots at {held}; the files come from different runs."
-        )
