@@ -3,7 +3,8 @@
 ``make_env`` builds a run's ``FleetVecEnv`` (or ``MixtureVecEnv``),
 ``build_model`` its untrained PPO or SAC model with the residual-learning
 defaults (``agents.training`` lists them) and, with ``encoder="deepsets"``,
-the ``DeepSetsExtractor`` in front of the actor, ``planned_timesteps`` the
+the ``DeepSetsExtractor`` in front of the actor and, with
+``asymmetric_critic``, the ``AsymmetricActorCriticPolicy``; ``planned_timesteps`` the
 budget SB3 really trains. ``agents.training.train`` and ``agents.run_folder`` use
 them; reading an agent folder needs none of this (no SB3 import).
 """
@@ -17,7 +18,11 @@ import gymnasium as gym
 import torch
 from stable_baselines3 import PPO, SAC
 from stable_baselines3.common.base_class import BaseAlgorithm
-from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
+from stable_baselines3.common.policies import ActorCriticPolicy
+from stable_baselines3.common.torch_layers import (
+    BaseFeaturesExtractor,
+    MlpExtractor,
+)
 from stable_baselines3.common.vec_env import VecEnv
 
 from agents.agent_folder import ENCODER_HIDDEN, ENCODER_POOLING
@@ -26,9 +31,19 @@ from agents.encoder import NeighbourSetEncoder
 from agents.mixture_env import MixtureVecEnv
 from agents.train_config import TrainConfig
 from agents.vec_env import FleetVecEnv
-from cpf_env.sim.observation import SLOTS
+from cpf_env.evaluation.privileged import UNOBSERVED_SIZE
+from cpf_env.sim.observation import SLOTS, observation_box
 
-__all__ = ["ALGORITHMS", "DeepSetsExtractor", "build_model", "make_env", "planned_timesteps"]
+__all__ = [
+    "ALGORITHMS",
+    "AsymmetricActorCriticPolicy",
+    "DeepSetsExtractor",
+    "LocalInputs",
+    "build_model",
+    "hidden_columns",
+    "make_env",
+    "planned_timesteps",
+]
 
 #: SB3 algorithms by name.
 ALGORITHMS: dict[str, type[BaseAlgorithm]] = {"ppo": PPO, "sac": SAC}
@@ -68,6 +83,91 @@ class DeepSetsExtractor(BaseFeaturesExtractor):
         return self.encoder(observations)
 
 
+class LocalInputs(BaseFeaturesExtractor):
+    """The actor's features: its input without the critic's unobserved state, through ``inner``.
+
+    The run's input is ``[local input, unobserved state (UNOBSERVED_SIZE), history]``
+    (``FleetVecEnv(critic_state=True)``, then ``HistoryVecEnv``); the actor reads
+    ``[local input, history]``, which is what an agent folder's actor is given.
+
+    Args:
+        observation_space: The run's whole input space.
+        hidden_start: Where the unobserved state starts (the local input's length).
+        inner: The features extractor over the actor's input (a ``FlattenExtractor``
+            or a ``DeepSetsExtractor``).
+    """
+
+    def __init__(
+        self, observation_space: gym.spaces.Box, hidden_start: int, inner: BaseFeaturesExtractor
+    ) -> None:
+        super().__init__(observation_space, inner.features_dim)
+        self.inner, self.hidden_start = inner, hidden_start
+
+    @property
+    def encoder(self) -> NeighbourSetEncoder | None:
+        """The inner extractor's neighbour encoder, if it has one (what a folder keeps)."""
+        encoder = getattr(self.inner, "encoder", None)
+        return encoder if isinstance(encoder, NeighbourSetEncoder) else None
+
+    def forward(self, observations: torch.Tensor) -> torch.Tensor:
+        """Features of the actor's columns of ``observations`` (B, whole input)."""
+        stop = self.hidden_start + UNOBSERVED_SIZE
+        local = torch.cat([observations[:, : self.hidden_start], observations[:, stop:]], dim=1)
+        return cast(torch.Tensor, self.inner(local))
+
+
+class AsymmetricActorCriticPolicy(ActorCriticPolicy):
+    """SB3's actor-critic with a critic that also reads what no vessel observes.
+
+    The input holds the unobserved state (``cpf_env.evaluation.privileged.
+    unobserved_state``) at ``hidden_start``; the critic's extractor reads the
+    whole input, the actor's (``LocalInputs``) the rest, and each has its own
+    MLP from its own feature width (``share_features_extractor`` is always
+    False). Everything else is SB3's ``ActorCriticPolicy``: the actor's modules
+    (``pi_features_extractor``, ``mlp_extractor.policy_net``, ``action_net``) are
+    where ``agents.agent_folder.sb3_actor_layers`` reads them, so the agent
+    folder holds an ordinary local actor.
+
+    Args:
+        hidden_start: Where the unobserved state starts in the input.
+        *args, **kwargs: ``ActorCriticPolicy``'s.
+    """
+
+    def __init__(self, *args: Any, hidden_start: int, **kwargs: Any) -> None:
+        self.hidden_start = hidden_start
+        super().__init__(*args, **{**kwargs, "share_features_extractor": False})
+
+    def _build(self, lr_schedule: Any) -> None:
+        """Give the actor its ``LocalInputs`` extractor, then build as SB3 does."""
+        kwargs = dict(self.features_extractor_kwargs)
+        if "tail" in kwargs:  # a DeepSetsExtractor: the actor's tail lacks the hidden state
+            kwargs["tail"] -= UNOBSERVED_SIZE
+        size = int(self.observation_space.shape[0]) - UNOBSERVED_SIZE  # type: ignore[index]
+        inner = self.features_extractor_class(observation_box(size), **kwargs)
+        actor = LocalInputs(cast(gym.spaces.Box, self.observation_space), self.hidden_start, inner)
+        self.features_extractor = self.pi_features_extractor = actor
+        self.features_dim = actor.features_dim
+        super()._build(lr_schedule)
+
+    def _build_mlp_extractor(self) -> None:
+        """An actor MLP on the actor's features and a critic MLP on the critic's."""
+        extractor, critic = (
+            MlpExtractor(width, self.net_arch, self.activation_fn, self.device)
+            for width in (self.features_dim, self.vf_features_extractor.features_dim)
+        )
+        extractor.value_net = critic.value_net
+        self.mlp_extractor = extractor
+
+
+def hidden_columns(model: BaseAlgorithm) -> range:
+    """The input columns only the critic reads (empty unless the run has an asymmetric critic).
+
+    An agent folder's observation statistics leave them out, as its actor does.
+    """
+    start = getattr(model.policy, "hidden_start", None)
+    return range(0) if start is None else range(start, start + UNOBSERVED_SIZE)
+
+
 def make_env(config: TrainConfig, num_fleets: int | None = None) -> FleetVecEnv | MixtureVecEnv:
     """The vector env of a run (``num_fleets`` overrides ``config.fleets``).
 
@@ -83,12 +183,14 @@ def make_env(config: TrainConfig, num_fleets: int | None = None) -> FleetVecEnv 
             base_policy=base,
             residual=residual,
             scenario_overrides=[config.scenario_overrides(name) for name in config.scenarios],
+            critic_state=config.asymmetric_critic,
         )
     return FleetVecEnv(
         config.home_scenario,
         num_fleets=fleets,
         base_policy=base,
         residual=residual,
+        critic_state=config.asymmetric_critic,
         **config.scenario_overrides(),
     )
 
@@ -117,7 +219,7 @@ def build_model(config: TrainConfig, env: VecEnv, device: str = "cpu") -> BaseAl
                 stacklevel=2,
             )
         model: BaseAlgorithm = PPO(
-            "MlpPolicy",
+            AsymmetricActorCriticPolicy if config.asymmetric_critic else "MlpPolicy",
             env,
             learning_rate=config.learning_rate,
             n_steps=config.n_steps,
@@ -130,6 +232,7 @@ def build_model(config: TrainConfig, env: VecEnv, device: str = "cpu") -> BaseAl
                 "net_arch": arch,
                 "log_std_init": config.log_std_init,
                 **_encoder_kwargs(config, env),
+                **_critic_kwargs(config, env),
             },
         )
         layer = cast(torch.nn.Linear, model.policy.action_net)
@@ -180,6 +283,18 @@ def _encoder_kwargs(config: TrainConfig, env: VecEnv) -> dict[str, Any]:
         },
         "share_features_extractor": False,
     }
+
+
+def _critic_kwargs(config: TrainConfig, env: VecEnv) -> dict[str, Any]:
+    """``AsymmetricActorCriticPolicy``'s ``hidden_start`` (none for a symmetric critic).
+
+    The fleets' env (under the wrappers) ends with the unobserved state, so it
+    starts ``UNOBSERVED_SIZE`` before the end of that env's input.
+    """
+    if not config.asymmetric_critic:
+        return {}
+    size = int(env.unwrapped.observation_space.shape[0])  # type: ignore[index]
+    return {"hidden_start": size - UNOBSERVED_SIZE}
 
 
 def planned_timesteps(config: TrainConfig, num_envs: int) -> int:

@@ -564,7 +564,8 @@ def distill(
     action_size = groups[0].env.controller.action_size
     network = student_actor(config, size, action_size).to(where)
     stats: InputStatistics | None = None
-    data: list[tuple[NDArray[np.float32], NDArray[np.float64]]] = []
+    data: list[NDArray[np.float32]] = []  # each round's normalized student inputs
+    labelled: list[NDArray[np.float64]] = []  # each round's labels, unclipped
     rounds: list[dict[str, float]] = []
     draws: list[list[int]] = []
     evaluations = None if evaluate is None else EvaluationLog(evaluate, best=None)
@@ -591,12 +592,13 @@ def distill(
             groups = _redraw(groups, config, settings, round_)
         draws.append(draw_seeds(settings, round_))
         student = None if round_ == 0 else network
-        data.append(_rollout(groups, student, stats, settings.steps))
+        inputs, new_labels = _rollout(groups, student, stats, settings.steps)
         if stats is None:
-            stats = input_statistics(config, data[0][0])
-        inputs = np.concatenate([d[0] for d in data])
-        labels = np.concatenate([d[1] for d in data])
-        rows = torch.from_numpy(stats.apply(inputs)).to(where)
+            stats = input_statistics(config, inputs)
+        data.append(stats.apply(inputs))  # normalized once: the statistics stay round 0's
+        labelled.append(new_labels)
+        labels = np.concatenate(labelled)
+        rows = torch.from_numpy(np.concatenate(data)).to(where)
         targets = torch.from_numpy(np.clip(labels, -1.0, 1.0).astype(np.float32)).to(where)
         loss = _fit(network, rows, targets, settings, generator)
         rounds.append(

@@ -2,8 +2,8 @@
 
 The vector envs (``agents.vec_env.FleetVecEnv``, ``agents.mixture_env``) restart
 single fleets and then ask the base to act for them alone
-(``act_batch(obs, fleets)``); ``mpc`` acts for every row it is given and
-refuses a subset. ``make_core`` (``agents.resolve``), through which
+(``act_batch(obs, fleets)``); ``mpc`` (and ``mpc_tuned``) acts for every
+row it is given and refuses a subset. ``make_core`` (``agents.resolve``), through which
 ``cpf-train`` and ``cpf-distill`` build their envs, runs the names of
 ``WHOLE_BATCH_BASES`` as a ``FleetwiseBase``: one instance per fleet.
 Evaluation (``agents.load_policy``, ``cpf-bench``) acts for all fleets at once
@@ -17,14 +17,15 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from baselines import make_policy
+from baselines import POLICIES, MPCPolicy, make_policy
 from cpf_env.envs.policy import FleetPolicy
 from cpf_env.scenarios import Scenario
 
 __all__ = ["WHOLE_BATCH_BASES", "FleetwiseBase"]
 
-#: Bases that act for every row they are given (no ``act_batch(obs, fleets)``).
-WHOLE_BATCH_BASES = ("mpc",)
+#: Bases that act for every row they are given (no ``act_batch(obs, fleets)``): ``mpc`` and
+#: every deployable design built on it (``mpc_tuned``).
+WHOLE_BATCH_BASES = tuple(name for name, cls in POLICIES.items() if issubclass(cls, MPCPolicy))
 
 
 class FleetwiseBase(FleetPolicy):

@@ -10,7 +10,9 @@ statistics, so the run's deterministic policy before any update is the
 folder's (``tests/agents/test_init_from.py``). What is not the folder's:
 
 - the critic (and, with an encoder, the critic's own encoder) is freshly
-  initialised, as in any run: an agent folder holds no value function. Its
+  initialised, as in any run: an agent folder holds no value function. With
+  ``asymmetric_critic`` its unobserved-state inputs keep mean 0 and variance 1
+  (they are of order one: ``cpf_env.evaluation.privileged.unobserved_state``). Its
   first estimates are poor, so the first updates' advantages are noisy; the
   small exploration noise below and PPO's clipped steps are what limits how
   far the actor moves from the student meanwhile;
@@ -52,6 +54,7 @@ from agents.agent_folder import (
     sb3_actor_layers,
     training_config,
 )
+from agents.algorithms import hidden_columns
 from agents.train_config import TrainConfig
 
 __all__ = ["RECIPE", "InitSource", "read_init_source"]
@@ -114,8 +117,11 @@ class InitSource:
         if self.normalization is not None:
             assert isinstance(env, VecNormalize)  # normalize_observations is in RECIPE
             rms = cast(RunningMeanStd, env.obs_rms)
-            rms.mean = np.array(self.normalization.mean, dtype=np.float64)
-            rms.var = np.array(self.normalization.var, dtype=np.float64)
+            mean = np.array(self.normalization.mean, dtype=np.float64)
+            var = np.array(self.normalization.var, dtype=np.float64)
+            columns = hidden_columns(model)  # an asymmetric critic's own inputs: left unscaled
+            rms.mean = np.insert(mean, columns.start, np.zeros(len(columns)))
+            rms.var = np.insert(var, columns.start, np.ones(len(columns)))
             env.epsilon, env.clip_obs = self.normalization.epsilon, self.normalization.clip
 
 

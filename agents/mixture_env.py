@@ -80,6 +80,7 @@ class MixtureVecEnv(VecEnv):
         info_level: ``"none"`` (default), ``"minimal"`` or ``"full"`` (``FleetVecEnv``).
         policy_options: Options (gains) for a base policy given by name.
         scenario_overrides: Per-scenario ``Scenario`` overrides (same order), or None.
+        critic_state: Append the unobserved state to each input (``FleetVecEnv``).
 
     Attributes:
         groups: The ``FleetVecEnv`` of each scenario, in order.
@@ -99,6 +100,7 @@ class MixtureVecEnv(VecEnv):
         info_level: str = DEFAULT_INFO_LEVEL,
         policy_options: dict[str, Any] | None = None,
         scenario_overrides: Sequence[dict[str, Any]] | None = None,
+        critic_state: bool = False,
     ) -> None:
         overrides = list(scenario_overrides or [{}] * len(scenarios))
         if len(overrides) != len(scenarios):
@@ -134,6 +136,7 @@ class MixtureVecEnv(VecEnv):
                 stagger=stagger,
                 info_level=info_level,
                 policy_options=policy_options,
+                critic_state=critic_state,
             )
             for scenario, fleets, base in zip(
                 resolved, split_fleets(int(num_fleets), len(resolved)), bases, strict=True

@@ -57,7 +57,13 @@ from agents.agent_folder import (
     read_agent,
     write_agent,
 )
-from agents.algorithms import DeepSetsExtractor, build_model, make_env, planned_timesteps
+from agents.algorithms import (
+    DeepSetsExtractor,
+    build_model,
+    hidden_columns,
+    make_env,
+    planned_timesteps,
+)
 from agents.checkpoint import checkpoint_timesteps, load_checkpoint
 from agents.folder_files import AgentFolderError
 from agents.history_env import HistoryVecEnv
@@ -418,9 +424,11 @@ class TrainingRun:
         normalization = None
         if isinstance(self.env, VecNormalize):
             rms = cast(RunningMeanStd, self.env.obs_rms)
+            hidden = list(hidden_columns(self.model))  # the actor's inputs only
             normalization = Normalization(
-                rms.mean.copy(), rms.var.copy(), self.env.epsilon, self.env.clip_obs
-            )
+                np.delete(rms.mean, hidden), np.delete(rms.var, hidden), self.env.epsilon,
+                self.env.clip_obs,
+            )  # fmt: skip
         seconds = self.schedule.seconds()
         training = seconds - self.schedule.evaluations.seconds
         steps = int(self.model.num_timesteps)

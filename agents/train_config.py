@@ -35,8 +35,9 @@ __all__ = [
 ALGORITHM_NAMES = ("ppo", "sac")
 #: Neighbour encoders of the actor (``agents.encoder``); None: an MLP over the flat input.
 ENCODERS = ("deepsets",)
-#: Fields added with agent-folder format version 2, and the defaults ``to_json`` leaves out.
-SINCE_FORMAT_2: dict[str, Any] = {"encoder": None, "history": 0}
+#: Fields added since agent-folder format version 1, and the defaults ``to_json`` leaves out
+#: (a record at these defaults reads in versions before them).
+SINCE_FORMAT_2: dict[str, Any] = {"encoder": None, "history": 0, "asymmetric_critic": False}
 #: Largest training seed: numpy's legacy seeding, which SB3 calls, takes 32 bits.
 MAX_SEED = 2**32 - 1
 #: Accepted initial log standard deviations: exp(-20) is no noise, exp(5) = 148 already
@@ -104,6 +105,11 @@ class TrainConfig:
         history: Own-history entries appended to the learner's input
             (``agents.history_env.HistoryVecEnv`` in training, kept by the loaded policy
             in evaluation); 0: none.
+        asymmetric_critic: PPO's critic also reads what no vessel observes
+            (``cpf_env.evaluation.privileged.unobserved_state``: the true lumped force,
+            v0, the vessel's offset from the fleet's mean path variable), the actor
+            only the local input (``agents.algorithms.AsymmetricActorCriticPolicy``);
+            the agent folder holds the actor, as for any run (PPO only).
     """
 
     algo: str = "ppo"
@@ -134,6 +140,7 @@ class TrainConfig:
     shared_slot_statistics: bool = False
     encoder: str | None = None
     history: int = 0
+    asymmetric_critic: bool = False
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "extras", tuple(self.extras))
@@ -196,6 +203,7 @@ class TrainConfig:
             "normalize_observations",
             "balance_rewards",
             "shared_slot_statistics",
+            "asymmetric_critic",
         )
         for name in flags:
             if not isinstance(getattr(self, name), bool):
@@ -216,6 +224,11 @@ class TrainConfig:
             raise ValueError(
                 f"history must be an integer >= 0 (own-history entries; 0: none), got "
                 f"{self.history!r}."
+            )
+        if self.asymmetric_critic and self.algo != "ppo":
+            raise ValueError(
+                "asymmetric_critic is implemented for PPO (an actor-critic with separate "
+                f"inputs); use algo='ppo' or asymmetric_critic=false, got algo={self.algo!r}."
             )
         if self.encoder is None:
             return

@@ -29,6 +29,14 @@ takes effect at the next ``reset()`` (every vessel of a fleet shares the
 fleet's episode, so the seed is per fleet, not per slot), and an ending fleet
 is reset in the same step, its last observation in ``terminal_observation``.
 
+``critic_state=True`` appends ``UNOBSERVED_SIZE`` = 5 floats to every slot's
+input, after the local input: what the vessel cannot observe
+(``cpf_env.evaluation.privileged.unobserved_state``: the true lumped force
+over the force scale, v0, theta_i minus the fleet's mean). They are for an
+asymmetric critic (``TrainConfig.asymmetric_critic``); the actor drops them
+(``agents.algorithms.AsymmetricActorCriticPolicy``). A terminal observation
+carries the state the fleet ended in.
+
 Infos follow ``info_level`` (``"none"``, the default of every route: an empty
 dict per slot, the hot path at thousands of slots; ``"minimal"``/``"full"``:
 each slot's ``EpisodeCore.vessel_infos``), plus SB3's entries of ending
@@ -59,6 +67,7 @@ from agents.resolve import make_core
 from cpf_env.envs.core import DEFAULT_INFO_LEVEL, check_info_level, checked_actions
 from cpf_env.envs.policy import FleetPolicy
 from cpf_env.envs.residual import ResidualConfig
+from cpf_env.evaluation.privileged import UNOBSERVED_SIZE, unobserved_state
 from cpf_env.scenarios import Scenario
 from cpf_env.sim.fleet import check_seed
 from cpf_env.sim.observation import observation_box
@@ -82,6 +91,7 @@ class FleetVecEnv(VecEnv):
         stagger: Spread the horizons over the fleets at each reset of all fleets.
         info_level: ``"none"`` (default), ``"minimal"`` or ``"full"``.
         policy_options: Options (gains) for a base policy given by name.
+        critic_state: Append the unobserved state to each input (module docstring).
         **overrides: ``Scenario`` field overrides, as in ``cpf_env.parallel_env``.
 
     Attributes:
@@ -102,9 +112,11 @@ class FleetVecEnv(VecEnv):
         stagger: bool = True,
         info_level: str = DEFAULT_INFO_LEVEL,
         policy_options: dict[str, Any] | None = None,
+        critic_state: bool = False,
         **overrides: Any,
     ) -> None:
         self.info_level = check_info_level(info_level)
+        self.critic_state = critic_state
         core = make_core(
             scenario, num_fleets, base_policy, residual, stagger, policy_options, **overrides
         )
@@ -112,7 +124,9 @@ class FleetVecEnv(VecEnv):
         assert core.controller is not None  # make_core: always the residual form
         self.controller = core.controller
         self.num_fleets, self.n, self.stagger = core.num_fleets, core.n, core.stagger
-        observation_space = observation_box(core.input_size)
+        observation_space = observation_box(
+            core.input_size + (UNOBSERVED_SIZE if critic_state else 0)
+        )
         action_space = spaces.Box(-1.0, 1.0, (core.action_size,), dtype=np.float32)
         super().__init__(core.num_fleets * core.n, observation_space, action_space)
         self._fleet_seeds: list[int | None] = []
@@ -144,9 +158,9 @@ class FleetVecEnv(VecEnv):
         """
         seeds = self._fleet_seeds or None
         self._fleet_seeds = []
-        inputs = self.core.reset(seeds=seeds)
+        self.core.reset(seeds=seeds)
         self.reset_infos = [{} for _ in range(self.num_envs)]
-        return self._flat(inputs).copy()
+        return self._observations()
 
     def step_async(self, actions: NDArray[np.floating]) -> None:
         """Store the actions (num_envs, k) for ``step_wait``.
@@ -172,9 +186,11 @@ class FleetVecEnv(VecEnv):
         terminated, ended = self.core.terminated, self.core.ended
         infos = self.core.vessel_infos(self.info_level)
         if not ended.any():  # the hot path
-            obs = self._flat(self.core.inputs).copy()
-            return obs, rewards, np.zeros(self.num_envs, dtype=bool), infos
+            return self._observations(), rewards, np.zeros(self.num_envs, dtype=bool), infos
+        hidden = unobserved_state(self.sim, np.flatnonzero(ended)) if self.critic_state else None
         fleets, terminal = self.core.reset_ended()
+        if hidden is not None:
+            terminal = np.concatenate([terminal, hidden], axis=-1)
         for row, b in enumerate(fleets):
             truncated = not terminated[b]
             for i in range(self.n):
@@ -183,7 +199,7 @@ class FleetVecEnv(VecEnv):
                 slot["TimeLimit.truncated"] = truncated
         dones = np.zeros(self.num_fleets, dtype=bool)
         dones[fleets] = True
-        return self._flat(self.core.inputs).copy(), rewards, np.repeat(dones, self.n), infos
+        return self._observations(), rewards, np.repeat(dones, self.n), infos
 
     def close(self) -> None:
         """Nothing to release (the simulator holds only arrays)."""
@@ -216,9 +232,12 @@ class FleetVecEnv(VecEnv):
 
     # --- helpers --------------------------------------------------------------------------
 
-    def _flat(self, array: NDArray[np.float32]) -> NDArray[np.float32]:
-        """(B, n, d) -> (B * n, d), slot k * n + i = vessel i of fleet k."""
-        return array.reshape(self.num_envs, -1)
+    def _observations(self) -> NDArray[np.float32]:
+        """(B * n, d) inputs, slot k * n + i = vessel i of fleet k; a copy (module docstring)."""
+        inputs = self.core.inputs
+        if self.critic_state:
+            inputs = np.concatenate([inputs, unobserved_state(self.sim)], axis=-1)
+        return inputs.reshape(self.num_envs, -1).copy()
 
     def _slots(self, indices: VecEnvIndices) -> Sequence[int]:
         """Slot indices from SB3's ``indices`` argument (None, an int or an iterable)."""

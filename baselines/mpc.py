@@ -428,7 +428,9 @@ class MPCPolicy(RecedingHorizon):
             ValueError: ``fleets`` given (this policy acts for every row it is given).
         """
         if fleets is not None:
-            raise ValueError("policy 'mpc' acts for all rows of obs; pass them without fleets.")
+            raise ValueError(
+                f"policy {self.name!r} acts for all rows of obs; pass them without fleets."
+            )
         given = np.asarray(obs, dtype=np.float64)
         if given.ndim != 3 or given.shape[1:] != (self.n, self.obs_dim):
             raise ValueError(

@@ -156,6 +156,14 @@ def _parser() -> argparse.ArgumentParser:
         "input, kept by the loaded policy in evaluation; 0: none",
     )
     parser.add_argument(
+        "--asymmetric-critic",
+        action=argparse.BooleanOptionalAction,
+        default=defaults.asymmetric_critic,
+        help="PPO's critic also reads what no vessel observes (the true lumped force, v0, the "
+        "vessel's offset from the fleet's mean path variable); the actor, and the agent "
+        "folder, stay local",
+    )
+    parser.add_argument(
         "--reward-weight",
         nargs="+",
         default=[],

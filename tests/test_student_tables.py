@@ -30,13 +30,17 @@ def _bench(folder: Path, costs: dict[str, list[float]]) -> None:
     )
 
 
+#: Four episodes of bench_mild per policy: the student between mpc and the oracle.
+COSTS = {
+    "nn_dsc": (100.0, 110.0, 90.0, 100.0),
+    "mpc": (40.0, 44.0, 36.0, 40.0),
+    "oracle": (20.0, 22.0, 18.0, 20.0),
+    "r/agents/student_s0": (30.0, 33.0, 27.0, 30.0),
+}
+
+
 def test_tables_count_wins_over_mpc_and_the_score(tmp_path: Path) -> None:
-    costs = {
-        "nn_dsc": [100.0, 110.0, 90.0, 100.0],
-        "mpc": [40.0, 44.0, 36.0, 40.0],
-        "oracle": [20.0, 22.0, 18.0, 20.0],
-        "r/agents/student_s0": [30.0, 33.0, 27.0, 30.0],
-    }
+    costs = {name: list(values) for name, values in COSTS.items()}
     _bench(tmp_path / "bench_test", costs)
     lines = _tables()._table(tmp_path / "bench_test")
     summary = "beats mpc on 1/1 (bench_mild); loses or is mixed against nn_dsc on none; not run"
@@ -86,12 +90,7 @@ def test_an_oracle_in_the_deployable_table_replaces_the_folders(tmp_path: Path) 
     from cpf_commands.bench.episodes import METRICS
     from cpf_commands.bench.report import CellResult
 
-    costs = {
-        "nn_dsc": [100.0, 110.0, 90.0, 100.0],
-        "mpc": [40.0, 44.0, 36.0, 40.0],
-        "oracle": [20.0, 22.0, 18.0, 20.0],
-        "r/agents/student_s0": [30.0, 33.0, 27.0, 30.0],
-    }
+    costs = {name: list(values) for name, values in COSTS.items()}
     _bench(tmp_path / "bench_test", costs)
     seeds = tuple(range(10000, 10006))  # a superset of the folder's seeds
     metrics = {m: np.zeros(len(seeds)) for m in METRICS}

@@ -16,8 +16,12 @@ Nothing here writes to the simulator.
   links would have delivered them: each occupied neighbour slot holds
   theta_j - theta_i now, age 0 and the message j sent at the last step. On
   links without loss and delay these are the observations, bit for bit.
+* ``unobserved_state``: a short summary of what the vessel cannot see, as
+  dimensionless-ish features for a learner's critic (``UNOBSERVED_SIZE`` = 5
+  per vessel): the lumped f over the vessel's force scale, v0 now (m/s) and
+  theta_i minus the fleet's mean path variable.
 
-Both are computed per fleet by compiled functions (``fleet_lumped_uncertainty``,
+The first two are computed per fleet by compiled functions (``fleet_lumped_uncertainty``,
 ``fleet_ideal_observations``), which the compiled closed loop of
 ``baselines.closed_loop`` calls too, so there is one implementation.
 """
@@ -39,12 +43,17 @@ if TYPE_CHECKING:  # a kernel module imports only kernel sources at run time (ke
     from cpf_env.sim.fleet import FleetSim
 
 __all__ = [
+    "UNOBSERVED_SIZE",
     "fleet_ideal_observations",
     "fleet_lumped_uncertainty",
     "ideal_link_observations",
     "lumped_uncertainty",
     "true_dynamics",
+    "unobserved_state",
 ]
+
+#: Features per vessel of ``unobserved_state``.
+UNOBSERVED_SIZE = 5
 
 
 @numba.njit(cache=True)
@@ -145,3 +154,24 @@ def ideal_link_observations(sim: FleetSim, fleets: ArrayLike | None = None) -> N
     obs = np.empty((rows.shape[0], *sim.arrays.obs.shape[1:]), dtype=np.float32)
     _ideal_rows(sim.arrays, sim.constants, rows, obs)
     return obs
+
+
+def unobserved_state(sim: FleetSim, fleets: ArrayLike | None = None) -> NDArray[np.float32]:
+    """What no vessel observes, (R, n, ``UNOBSERVED_SIZE``) float32, of ``fleets`` (default all).
+
+    Per vessel: the lumped f (``lumped_uncertainty``) over the vessel's force
+    scale ``max(|tau_min|, |tau_max|)`` (3, dimensionless), the leader speed v0
+    at the fleet's time (m/s; most vessels only estimate it), and theta_i minus
+    the mean path variable of the fleet (how far the vessel is from the
+    fleet's synchronization, which its delayed, lossy links show only in
+    part). Each is of order one on the suite, so a learner may use them unscaled.
+    """
+    rows = _rows(sim, fleets, "state")
+    lumped = true_dynamics(sim, rows)[0] / sim.constants.tau_scale
+    v0 = np.array([sim.v0_at(float(t)) for t in sim.time[rows]])
+    theta = sim.arrays.theta[rows]
+    out = np.empty((rows.shape[0], sim.n, UNOBSERVED_SIZE), dtype=np.float32)
+    out[..., :3] = lumped
+    out[..., 3] = v0[:, None]
+    out[..., 4] = theta - theta.mean(axis=1, keepdims=True)
+    return out

@@ -349,7 +349,7 @@ def test_a_version_2_mlp_with_history_round_trips(tmp_path: Path) -> None:
 
 
 def test_a_fresh_mlp_folder_holds_only_the_fields_of_format_1(tmp_path: Path) -> None:
-    """No 'encoder', 'history' nor 'actor': cpf_env versions before format 2 read config.json."""
+    """No 'encoder', 'history', 'asymmetric_critic' nor 'actor': older versions read it."""
     config = dataclasses.replace(HISTORY_CONFIG, history=0)
     folder = tmp_path / "mlp"
     folder.mkdir()
@@ -360,7 +360,7 @@ def test_a_fresh_mlp_folder_holds_only_the_fields_of_format_1(tmp_path: Path) ->
     record = json.loads((folder / "config.json").read_text())
     assert set(record) == {"config"}
     fields = {f.name for f in dataclasses.fields(TrainConfig)}
-    assert set(record["config"]) == fields - {"encoder", "history"}
+    assert set(record["config"]) == fields - {"encoder", "history", "asymmetric_critic"}
     assert TrainConfig.from_json(record["config"]) == config
     assert json.loads((folder / "manifest.json").read_text())["format_version"] == 1
     assert read_agent(folder)[1].input_size == 26

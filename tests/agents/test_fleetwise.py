@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from agents.fleetwise import FleetwiseBase
+from agents.fleetwise import WHOLE_BATCH_BASES, FleetwiseBase
 from agents.vec_env import FleetVecEnv
 from baselines import make_policy
 from cpf_env import scenarios
@@ -49,3 +49,12 @@ def test_an_env_with_base_mpc_restarts_single_fleets() -> None:
         _, _, done, _ = env.step(np.zeros((env.num_envs, 3), dtype=np.float32))
         dones |= done
     assert dones.all()
+
+
+def test_every_mpc_design_is_run_fleet_by_fleet() -> None:
+    assert set(WHOLE_BATCH_BASES) == {"mpc", "mpc_tuned"}
+    env = FleetVecEnv(
+        "bench_current_waves", num_fleets=2, base_policy="mpc_tuned", residual=ResidualConfig()
+    )
+    assert isinstance(env.controller.base, FleetwiseBase)
+    assert env.controller.base.name == "mpc_tuned"
