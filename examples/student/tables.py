@@ -5,7 +5,9 @@ r"""Print results/student/README.md's tables from the committed benchmark episod
 
 For each of ``bench_test``, ``bench_shift`` and ``bench_procedural``, and
 their ``_k6`` (6-slot students) and ``_deepsets`` (encoder and history
-students) versions (those that exist), one row per scenario: the mean episode cost of ``nn_dsc``,
+students) versions, and ``bench_test_tuned`` and ``bench_shift_tuned``
+(students on ``mpc_tuned``, which there takes ``mpc``'s place below) (those
+that exist), one row per scenario: the mean episode cost of ``nn_dsc``,
 ``mpc`` and ``oracle`` (where it ran) and of each student (one per training
 seed), each student's paired cost difference to ``mpc`` (mean over seeds
 with its 95 % bootstrap interval, ``cpf_commands.bench.stats``) and its
@@ -48,17 +50,17 @@ from cpf_commands.bench.report import CellResult, read_episodes_csv
 from cpf_commands.bench.stats import iqm, paired_difference
 from cpf_commands.bench.verdict import verdicts
 
-BENCHES = (
-    "bench_test",
-    "bench_shift",
-    "bench_procedural",
-    "bench_test_k6",
-    "bench_shift_k6",
-    "bench_procedural_k6",
-    "bench_test_deepsets",
-    "bench_shift_deepsets",
-    "bench_procedural_deepsets",
-)
+#: The bench folders, each with the deployable policy its students are a residual on (the
+#: reference of its cost table).
+BENCHES = {
+    **{
+        f"bench_{split}{variant}": "mpc"
+        for variant in ("", "_k6", "_deepsets")
+        for split in ("test", "shift", "procedural")
+    },
+    "bench_test_tuned": "mpc_tuned",
+    "bench_shift_tuned": "mpc_tuned",
+}
 STUDENT = "agents/student"
 
 
@@ -87,8 +89,12 @@ def _against(costs: dict[int, float], reference: dict[int, float]) -> tuple[floa
     return paired_difference([costs[s] for s in seeds], [reference[s] for s in seeds])
 
 
-def _table(folder: Path, deployable: Sequence[CellResult] = ()) -> list[str]:
+def _table(
+    folder: Path, deployable: Sequence[CellResult] = (), reference: str = "mpc"
+) -> list[str]:
     """The folder's cost table, with the verdicts and scores (module docstring).
+
+    ``reference`` is the deployable policy each student's cost is paired with.
 
     An ``oracle`` cell of ``deployable`` on the same scenario replaces the folder's
     (on the seeds the folder's ``nn_dsc`` ran).
@@ -105,22 +111,22 @@ def _table(folder: Path, deployable: Sequence[CellResult] = ()) -> list[str]:
     has_oracle = all(("oracle", s) in costs for s in scenarios)
     mean = {key: float(np.mean(list(values.values()))) for key, values in costs.items()}
     lines = [
-        f"{folder.name}: mean cost per scenario; each student's cost difference to mpc "
-        "[95 %] and verdicts (vs mpc; vs nn_dsc)",
+        f"{folder.name}: mean cost per scenario; each student's cost difference to {reference} "
+        f"[95 %] and verdicts (vs {reference}; vs nn_dsc)",
         "",
-        "| scenario | nn_dsc | mpc | "
+        f"| scenario | nn_dsc | {reference} | "
         + ("oracle | " if has_oracle else "")
         + " | ".join(Path(s).name for s in students)
         + " |",
         "|---|---|---|" + ("---|" if has_oracle else "") + "---|" * len(students),
     ]
-    beats_mpc: dict[str, list[str]] = defaultdict(list)
+    beats_reference: dict[str, list[str]] = defaultdict(list)
     loses_nn_dsc: dict[str, list[str]] = defaultdict(list)
     scores: dict[str, list[float]] = defaultdict(list)
     ran: dict[str, int] = defaultdict(int)
     missing: dict[str, list[str]] = defaultdict(list)
     for scenario in scenarios:
-        cells = [f"{mean[('nn_dsc', scenario)]:.1f}", f"{mean[('mpc', scenario)]:.1f}"]
+        cells = [f"{mean[('nn_dsc', scenario)]:.1f}", f"{mean[(reference, scenario)]:.1f}"]
         if has_oracle:
             cells.append(f"{mean[('oracle', scenario)]:.1f}")
         for student in students:
@@ -129,11 +135,11 @@ def _table(folder: Path, deployable: Sequence[CellResult] = ()) -> list[str]:
                 missing[student].append(scenario)
                 continue
             ran[student] += 1
-            delta, low, high = _against(costs[(student, scenario)], costs[("mpc", scenario)])
+            delta, low, high = _against(costs[(student, scenario)], costs[(reference, scenario)])
             versus_mpc = "beats" if high < 0 else "loses" if low > 0 else "no difference"
             versus_nn_dsc = verdicts.get((student, scenario), "-")
             if versus_mpc == "beats":
-                beats_mpc[student].append(scenario)
+                beats_reference[student].append(scenario)
             if versus_nn_dsc.startswith(("loses", "mixed")):
                 loses_nn_dsc[student].append(scenario)
             if has_oracle:
@@ -150,8 +156,10 @@ def _table(folder: Path, deployable: Sequence[CellResult] = ()) -> list[str]:
     for student in students:
         score = f", IQM normalized score {float(iqm(scores[student])):.3f}" if has_oracle else ""
         lines.append(
-            f"- {Path(student).name}: beats mpc on {len(beats_mpc[student])}/{ran[student]} "
-            f"({', '.join(beats_mpc[student]) or 'none'}); loses or is mixed against nn_dsc on "
+            f"- {Path(student).name}: beats {reference} on "
+            f"{len(beats_reference[student])}/{ran[student]} "
+            f"({', '.join(beats_reference[student]) or 'none'}); loses or is mixed against "
+            f"nn_dsc on "
             f"{', '.join(loses_nn_dsc[student]) or 'none'}; not run on "
             f"{', '.join(missing[student]) or 'none'}{score}"
         )
@@ -213,10 +221,10 @@ def main() -> None:
     args = parser.parse_args()
     deployable = [cell for path in args.deployable
                   for cell in read_episodes_csv(Path(path).read_text())]  # fmt: skip
-    for name in BENCHES:
+    for name, reference in BENCHES.items():
         folder = Path(args.root) / name
         if (folder / "episodes.csv").is_file():
-            print("\n".join(_table(folder, deployable)), end="\n\n")
+            print("\n".join(_table(folder, deployable, reference)), end="\n\n")
             print("\n".join(_guarded(folder, deployable, args.against)), end="\n\n")
 
 
