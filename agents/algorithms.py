@@ -40,9 +40,9 @@ __all__ = [
     "DeepSetsExtractor",
     "LocalInputs",
     "build_model",
-    "hidden_columns",
     "make_env",
     "planned_timesteps",
+    "unobserved_columns",
 ]
 
 #: SB3 algorithms by name.
@@ -92,16 +92,16 @@ class LocalInputs(BaseFeaturesExtractor):
 
     Args:
         observation_space: The run's whole input space.
-        hidden_start: Where the unobserved state starts (the local input's length).
+        unobserved_start: Where the unobserved state starts (the local input's length).
         inner: The features extractor over the actor's input (a ``FlattenExtractor``
             or a ``DeepSetsExtractor``).
     """
 
     def __init__(
-        self, observation_space: gym.spaces.Box, hidden_start: int, inner: BaseFeaturesExtractor
+        self, observation_space: gym.spaces.Box, unobserved_start: int, inner: BaseFeaturesExtractor
     ) -> None:
         super().__init__(observation_space, inner.features_dim)
-        self.inner, self.hidden_start = inner, hidden_start
+        self.inner, self.unobserved_start = inner, unobserved_start
 
     @property
     def encoder(self) -> NeighbourSetEncoder | None:
@@ -111,8 +111,8 @@ class LocalInputs(BaseFeaturesExtractor):
 
     def forward(self, observations: torch.Tensor) -> torch.Tensor:
         """Features of the actor's columns of ``observations`` (B, whole input)."""
-        stop = self.hidden_start + UNOBSERVED_SIZE
-        local = torch.cat([observations[:, : self.hidden_start], observations[:, stop:]], dim=1)
+        stop = self.unobserved_start + UNOBSERVED_SIZE
+        local = torch.cat([observations[:, : self.unobserved_start], observations[:, stop:]], dim=1)
         return cast(torch.Tensor, self.inner(local))
 
 
@@ -120,7 +120,7 @@ class AsymmetricActorCriticPolicy(ActorCriticPolicy):
     """SB3's actor-critic with a critic that also reads what no vessel observes.
 
     The input holds the unobserved state (``cpf_env.evaluation.privileged.
-    unobserved_state``) at ``hidden_start``; the critic's extractor reads the
+    unobserved_state``) at ``unobserved_start``; the critic's extractor reads the
     whole input, the actor's (``LocalInputs``) the rest, and each has its own
     MLP from its own feature width (``share_features_extractor`` is always
     False). Everything else is SB3's ``ActorCriticPolicy``: the actor's modules
@@ -129,25 +129,31 @@ class AsymmetricActorCriticPolicy(ActorCriticPolicy):
     folder holds an ordinary local actor.
 
     Args:
-        hidden_start: Where the unobserved state starts in the input.
+        unobserved_start: Where the unobserved state starts in the input.
         *args, **kwargs: ``ActorCriticPolicy``'s.
     """
 
-    def __init__(self, *args: Any, hidden_start: int, **kwargs: Any) -> None:
-        self.hidden_start = hidden_start
+    def __init__(self, *args: Any, unobserved_start: int, **kwargs: Any) -> None:
+        self.unobserved_start = unobserved_start
         super().__init__(*args, **{**kwargs, "share_features_extractor": False})
 
     def _build(self, lr_schedule: Any) -> None:
         """Give the actor its ``LocalInputs`` extractor, then build as SB3 does."""
         kwargs = dict(self.features_extractor_kwargs)
-        if "tail" in kwargs:  # a DeepSetsExtractor: the actor's tail lacks the hidden state
-            kwargs["tail"] -= UNOBSERVED_SIZE
+        if issubclass(self.features_extractor_class, DeepSetsExtractor):
+            kwargs["tail"] -= UNOBSERVED_SIZE  # the actor's tail lacks the unobserved state
         size = int(self.observation_space.shape[0]) - UNOBSERVED_SIZE  # type: ignore[index]
         inner = self.features_extractor_class(observation_box(size), **kwargs)
-        actor = LocalInputs(cast(gym.spaces.Box, self.observation_space), self.hidden_start, inner)
+        actor = LocalInputs(
+            cast(gym.spaces.Box, self.observation_space), self.unobserved_start, inner
+        )
         self.features_extractor = self.pi_features_extractor = actor
         self.features_dim = actor.features_dim
         super()._build(lr_schedule)
+
+    def _get_constructor_parameters(self) -> dict[str, Any]:
+        """SB3's, and ``unobserved_start`` (so ``policy.save`` / ``load`` rebuild it)."""
+        return {**super()._get_constructor_parameters(), "unobserved_start": self.unobserved_start}
 
     def _build_mlp_extractor(self) -> None:
         """An actor MLP on the actor's features and a critic MLP on the critic's."""
@@ -159,12 +165,12 @@ class AsymmetricActorCriticPolicy(ActorCriticPolicy):
         self.mlp_extractor = extractor
 
 
-def hidden_columns(model: BaseAlgorithm) -> range:
+def unobserved_columns(model: BaseAlgorithm) -> range:
     """The input columns only the critic reads (empty unless the run has an asymmetric critic).
 
     An agent folder's observation statistics leave them out, as its actor does.
     """
-    start = getattr(model.policy, "hidden_start", None)
+    start = getattr(model.policy, "unobserved_start", None)
     return range(0) if start is None else range(start, start + UNOBSERVED_SIZE)
 
 
@@ -286,7 +292,7 @@ def _encoder_kwargs(config: TrainConfig, env: VecEnv) -> dict[str, Any]:
 
 
 def _critic_kwargs(config: TrainConfig, env: VecEnv) -> dict[str, Any]:
-    """``AsymmetricActorCriticPolicy``'s ``hidden_start`` (none for a symmetric critic).
+    """``AsymmetricActorCriticPolicy``'s ``unobserved_start`` (none for a symmetric critic).
 
     The fleets' env (under the wrappers) ends with the unobserved state, so it
     starts ``UNOBSERVED_SIZE`` before the end of that env's input.
@@ -294,7 +300,7 @@ def _critic_kwargs(config: TrainConfig, env: VecEnv) -> dict[str, Any]:
     if not config.asymmetric_critic:
         return {}
     size = int(env.unwrapped.observation_space.shape[0])  # type: ignore[index]
-    return {"hidden_start": size - UNOBSERVED_SIZE}
+    return {"unobserved_start": size - UNOBSERVED_SIZE}
 
 
 def planned_timesteps(config: TrainConfig, num_envs: int) -> int:

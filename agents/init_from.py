@@ -54,7 +54,7 @@ from agents.agent_folder import (
     sb3_actor_layers,
     training_config,
 )
-from agents.algorithms import hidden_columns
+from agents.algorithms import unobserved_columns
 from agents.train_config import TrainConfig
 
 __all__ = ["RECIPE", "InitSource", "read_init_source"]
@@ -119,7 +119,7 @@ class InitSource:
             rms = cast(RunningMeanStd, env.obs_rms)
             mean = np.array(self.normalization.mean, dtype=np.float64)
             var = np.array(self.normalization.var, dtype=np.float64)
-            columns = hidden_columns(model)  # an asymmetric critic's own inputs: left unscaled
+            columns = unobserved_columns(model)  # an asymmetric critic's own inputs: left unscaled
             rms.mean = np.insert(mean, columns.start, np.zeros(len(columns)))
             rms.var = np.insert(var, columns.start, np.ones(len(columns)))
             env.epsilon, env.clip_obs = self.normalization.epsilon, self.normalization.clip

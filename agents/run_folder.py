@@ -59,10 +59,11 @@ from agents.agent_folder import (
 )
 from agents.algorithms import (
     DeepSetsExtractor,
+    LocalInputs,
     build_model,
-    hidden_columns,
     make_env,
     planned_timesteps,
+    unobserved_columns,
 )
 from agents.checkpoint import checkpoint_timesteps, load_checkpoint
 from agents.folder_files import AgentFolderError
@@ -412,7 +413,10 @@ class TrainingRun:
         """Write the current agent (actor, frozen normalization, record) into ``folder``."""
         encoder = None
         if self.config.encoder is not None:
-            extractor = cast(DeepSetsExtractor, self.model.policy.pi_features_extractor)
+            extractor = cast(
+                "DeepSetsExtractor | LocalInputs", self.model.policy.pi_features_extractor
+            )
+            assert extractor.encoder is not None  # the run's encoder
             encoder = encoder_layout(extractor.encoder)
         network = network_from_tensors(
             actor_tensors(self.model, self.config.algo),
@@ -424,9 +428,9 @@ class TrainingRun:
         normalization = None
         if isinstance(self.env, VecNormalize):
             rms = cast(RunningMeanStd, self.env.obs_rms)
-            hidden = list(hidden_columns(self.model))  # the actor's inputs only
+            unobserved = list(unobserved_columns(self.model))  # the actor's inputs only
             normalization = Normalization(
-                np.delete(rms.mean, hidden), np.delete(rms.var, hidden), self.env.epsilon,
+                np.delete(rms.mean, unobserved), np.delete(rms.var, unobserved), self.env.epsilon,
                 self.env.clip_obs,
             )  # fmt: skip
         seconds = self.schedule.seconds()

@@ -35,8 +35,9 @@ __all__ = [
 ALGORITHM_NAMES = ("ppo", "sac")
 #: Neighbour encoders of the actor (``agents.encoder``); None: an MLP over the flat input.
 ENCODERS = ("deepsets",)
-#: Fields added since agent-folder format version 1, and the defaults ``to_json`` leaves out
-#: (a record at these defaults reads in versions before them).
+#: Fields added since agent-folder format version 1, and the defaults ``to_json`` leaves out,
+#: so a record at these defaults reads in the versions before them (``encoder`` and
+#: ``history`` came with format version 2; ``asymmetric_critic`` shapes only training).
 SINCE_FORMAT_2: dict[str, Any] = {"encoder": None, "history": 0, "asymmetric_critic": False}
 #: Largest training seed: numpy's legacy seeding, which SB3 calls, takes 32 bits.
 MAX_SEED = 2**32 - 1

@@ -8,7 +8,8 @@ batched, with no Python loop over fleets.
 
 ================  ==============================================================
 Observation       ``Box(obs_dim + extras)`` float32, finite bounds (raw units;
-                  ``cpf-train`` normalizes with SB3's ``VecNormalize``)
+                  ``cpf-train`` normalizes with SB3's ``VecNormalize``); with
+                  ``critic_state`` ``+ UNOBSERVED_SIZE``
 Action            ``Box(-1, 1, (k,))`` float32: the residual (k = 3 forces by
                   default), or with ``base_policy=None`` the whole command:
                   forces and theta_dot as fractions of their limits (k = 4)
@@ -187,10 +188,12 @@ class FleetVecEnv(VecEnv):
         infos = self.core.vessel_infos(self.info_level)
         if not ended.any():  # the hot path
             return self._observations(), rewards, np.zeros(self.num_envs, dtype=bool), infos
-        hidden = unobserved_state(self.sim, np.flatnonzero(ended)) if self.critic_state else None
+        unobserved = (
+            unobserved_state(self.sim, np.flatnonzero(ended)) if self.critic_state else None
+        )
         fleets, terminal = self.core.reset_ended()
-        if hidden is not None:
-            terminal = np.concatenate([terminal, hidden], axis=-1)
+        if unobserved is not None:
+            terminal = np.concatenate([terminal, unobserved], axis=-1)
         for row, b in enumerate(fleets):
             truncated = not terminated[b]
             for i in range(self.n):
@@ -234,10 +237,10 @@ class FleetVecEnv(VecEnv):
 
     def _observations(self) -> NDArray[np.float32]:
         """(B * n, d) inputs, slot k * n + i = vessel i of fleet k; a copy (module docstring)."""
-        inputs = self.core.inputs
-        if self.critic_state:
-            inputs = np.concatenate([inputs, unobserved_state(self.sim)], axis=-1)
-        return inputs.reshape(self.num_envs, -1).copy()
+        if self.critic_state:  # a new array already
+            inputs = np.concatenate([self.core.inputs, unobserved_state(self.sim)], axis=-1)
+            return inputs.reshape(self.num_envs, -1)
+        return self.core.inputs.reshape(self.num_envs, -1).copy()
 
     def _slots(self, indices: VecEnvIndices) -> Sequence[int]:
         """Slot indices from SB3's ``indices`` argument (None, an int or an iterable)."""

@@ -136,9 +136,9 @@ def _table(
                 continue
             ran[student] += 1
             delta, low, high = _against(costs[(student, scenario)], costs[(reference, scenario)])
-            versus_mpc = "beats" if high < 0 else "loses" if low > 0 else "no difference"
+            versus_reference = "beats" if high < 0 else "loses" if low > 0 else "no difference"
             versus_nn_dsc = verdicts.get((student, scenario), "-")
-            if versus_mpc == "beats":
+            if versus_reference == "beats":
                 beats_reference[student].append(scenario)
             if versus_nn_dsc.startswith(("loses", "mixed")):
                 loses_nn_dsc[student].append(scenario)
@@ -149,7 +149,7 @@ def _table(
                 )
             cells.append(
                 f"{mean[(student, scenario)]:.1f} ({delta:+.2f} [{low:+.2f}, {high:+.2f}]; "
-                f"{versus_mpc}; {versus_nn_dsc})"
+                f"{versus_reference}; {versus_nn_dsc})"
             )
         lines.append(f"| {scenario} | " + " | ".join(cells) + " |")
     lines.append("")

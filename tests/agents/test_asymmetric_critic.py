@@ -12,7 +12,7 @@ from stable_baselines3 import PPO
 from stable_baselines3.common.vec_env import VecNormalize
 
 from agents import TrainConfig, load_policy, train
-from agents.algorithms import AsymmetricActorCriticPolicy, LocalInputs, hidden_columns, make_env
+from agents.algorithms import AsymmetricActorCriticPolicy, LocalInputs, make_env, unobserved_columns
 from agents.init_from import read_init_source
 from agents.run_folder import TrainingRun
 from agents.schedule import RunSchedule
@@ -95,7 +95,7 @@ def _predict(model: PPO, inputs: np.ndarray) -> np.ndarray:
     return np.asarray(action)
 
 
-def _asymmetric(config: TrainConfig, tmp_path: Path) -> TrainingRun:
+def _run(config: TrainConfig, tmp_path: Path) -> TrainingRun:
     return TrainingRun(config, tmp_path, RunSchedule(), None, None, None)
 
 
@@ -108,11 +108,11 @@ def test_the_actor_ignores_the_unobserved_state_and_the_critic_reads_it(
     tmp_path: Path, actor: dict[str, object]
 ) -> None:
     config = TrainConfig(scenario="bench_mild", asymmetric_critic=True, **TINY, **actor)  # type: ignore[arg-type]
-    run = _asymmetric(config, tmp_path)
+    run = _run(config, tmp_path)
     policy = run.model.policy
     assert isinstance(policy, AsymmetricActorCriticPolicy)
     assert isinstance(policy.pi_features_extractor, LocalInputs)
-    columns = hidden_columns(run.model)
+    columns = unobserved_columns(run.model)
     local_size = FleetVecEnv("bench_mild", num_fleets=1).observation_space.shape[0]
     assert columns == range(local_size, local_size + UNOBSERVED_SIZE)
     with torch.no_grad():  # a critic that reads the hidden columns, an actor that does not
@@ -181,7 +181,7 @@ def test_fine_tuning_a_student_with_an_asymmetric_critic_starts_from_the_student
     assert isinstance(run.env, VecNormalize)
     normalized = run.env.reset()  # statistics frozen: the folder's, the hidden columns unscaled
     raw = run.env.get_original_obs().astype(np.float32)
-    columns = hidden_columns(run.model)
+    columns = unobserved_columns(run.model)
     np.testing.assert_array_equal(
         normalized[:, columns.start : columns.stop], raw[:, columns.start : columns.stop]
     )
@@ -204,3 +204,29 @@ def test_cpf_train_takes_the_asymmetric_critic_and_refuses_it_for_sac(
         train_main(argv)
     assert "asymmetric_critic is implemented for PPO" in capsys.readouterr().err
     assert not (tmp_path / "x").exists()
+
+
+def test_an_asymmetric_encoder_and_history_run_writes_a_folder_of_the_actors_inputs(
+    tmp_path: Path,
+) -> None:
+    actor = {"encoder": "deepsets", "shared_slot_statistics": True, "history": 2}
+    config = TrainConfig(
+        scenario="bench_mild",
+        timesteps=320,
+        seed=3,
+        asymmetric_critic=True,
+        **TINY,
+        **actor,  # type: ignore[arg-type]
+    )
+    folder = train(config, tmp_path / "run", progress=False)
+    plain = TrainConfig(scenario="bench_mild", timesteps=320, seed=3, **TINY, **actor)  # type: ignore[arg-type]
+    (tmp_path / "plain").mkdir()
+    run = _run(plain, tmp_path / "plain")  # the same actor without the critic's columns
+    statistics = json.loads((folder / "normalization.json").read_text())
+    assert len(statistics["mean"]) == run.env.observation_space.shape[0]
+    policy = load_policy(folder, scenario="bench_switching")  # another degree: the encoder
+    sim = FleetSim(policy.scenario, num_fleets=2)
+    obs = sim.reset(seeds=[1, 2])
+    for _ in range(5):
+        obs = sim.step(policy.act_batch(obs))
+    assert np.all(np.isfinite(obs))
