@@ -55,11 +55,10 @@ from agents.agent_folder import (
     encoder_layout,
     network_from_tensors,
     read_agent,
+    sb3_actor_layers,
     write_agent,
 )
 from agents.algorithms import (
-    DeepSetsExtractor,
-    LocalInputs,
     build_model,
     make_env,
     planned_timesteps,
@@ -411,13 +410,8 @@ class TrainingRun:
 
     def write_agent(self, folder: Path, interrupted: bool = False) -> None:
         """Write the current agent (actor, frozen normalization, record) into ``folder``."""
-        encoder = None
-        if self.config.encoder is not None:
-            extractor = cast(
-                "DeepSetsExtractor | LocalInputs", self.model.policy.pi_features_extractor
-            )
-            assert extractor.encoder is not None  # the run's encoder
-            encoder = encoder_layout(extractor.encoder)
+        module = sb3_actor_layers(self.model, self.config.algo)[0]  # the actor's encoder, if any
+        encoder = None if module is None else encoder_layout(module)
         network = network_from_tensors(
             actor_tensors(self.model, self.config.algo),
             self.config.algo,
