@@ -11,12 +11,13 @@ file keyed by a SHA-256 digest of:
 * the policy's name (built with its default gains: ``cpf-bench`` passes none);
 * the scenario, every field (``repr`` of the frozen dataclass);
 * the horizon in steps;
-* the sources the numbers come from: the simulator's kernel sources
-  (``cpf_env.infra.kernel_cache.kernel_sources_digest``), the two modules of
-  the receding-horizon policies (``baselines.mpc``, ``baselines.mpc_kernels``),
-  the metrics (``cpf_env.evaluation.fleet_metrics``) and the modules that
-  define the policy beyond those (``CACHED_POLICIES``: ``baselines.mpc_tuned``
-  for ``mpc_tuned``).
+* the code the numbers come from (``cpf_commands.bench.sources.code_digest``):
+  the module that defines the policy and the episode runner
+  (``cpf_commands.bench.episodes``), with every module of the repository
+  they import, transitively: the simulator, its kernels, the scenarios, the
+  planners and the metrics. Docstrings and comments are left out, so an
+  edit to prose keeps the keys; an edit to code re-keys the cells of every
+  policy that imports it.
 
 A cell whose seeds the matching file all holds is read instead of run; any
 other is run and, when it ran whole episodes, its seeds merged into the file
@@ -29,48 +30,41 @@ data (JSON numbers), never code.
 
 from __future__ import annotations
 
+import functools
 import hashlib
-import inspect
 import json
 from collections.abc import Sequence
 from pathlib import Path
-from types import ModuleType
 
 import numpy as np
 from numpy.typing import NDArray
 
-from baselines import mpc, mpc_kernels, mpc_tuned
-from cpf_env.evaluation import fleet_metrics
+from baselines import ALL_POLICIES
+from cpf_commands.bench.sources import code_digest
 from cpf_env.infra import atomic
-from cpf_env.infra.kernel_cache import kernel_sources_digest
 from cpf_env.scenarios import Scenario
 
 __all__ = ["CACHED_POLICIES", "CACHE_DIRECTORY", "cell_key", "load_cell", "store_cell"]
 
-#: Policy names whose cells are cached (given by name, i.e. with default gains), each with
-#: the modules that define it beyond ``baselines.mpc`` and ``baselines.mpc_kernels``.
-CACHED_POLICIES: dict[str, tuple[ModuleType, ...]] = {
-    "oracle": (),
-    "mpc": (),
-    "mpc_tuned": (mpc_tuned,),
-}
+#: Policy names whose cells are cached (given by name, i.e. with their default gains).
+CACHED_POLICIES = ("oracle", "mpc", "mpc_tuned")
+#: The module that runs a cell's episodes and measures them.
+RUNNER = "cpf_commands.bench.episodes"
 #: Where the cells live: results/bench_cache of the source checkout.
 CACHE_DIRECTORY = Path(__file__).resolve().parents[2] / "results" / "bench_cache"
 
 
-def _sources_digest(policy: str) -> str:
-    """SHA-256 of the kernel sources and of the policy's and the metrics' modules."""
-    digest = hashlib.sha256(kernel_sources_digest().encode())
-    for module in (mpc, mpc_kernels, fleet_metrics, *CACHED_POLICIES.get(policy, ())):
-        digest.update(Path(inspect.getfile(module)).read_bytes())
-    return digest.hexdigest()
+@functools.cache
+def _code_digest(policy: str) -> str:
+    """``code_digest`` of the policy's module and the runner (read once per process)."""
+    return code_digest((ALL_POLICIES[policy].__module__, RUNNER))
 
 
 def cell_key(policy: str, task: Scenario, steps: int | None) -> str:
     """The content key (SHA-256, hex) of a policy's episodes on a scenario (module docstring)."""
     horizon = task.max_steps if steps is None else int(steps)
     digest = hashlib.sha256()
-    for part in (policy, repr(task), str(horizon), _sources_digest(policy)):
+    for part in (policy, repr(task), str(horizon), _code_digest(policy)):
         digest.update(part.encode() + b"\0")
     return digest.hexdigest()
 
