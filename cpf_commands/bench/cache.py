@@ -1,6 +1,6 @@
-"""Content-keyed cache of the bench's slow cells: the receding-horizon ``oracle`` and ``mpc``.
+"""Content-keyed cache of the bench's slow cells: the receding-horizon planners.
 
-The headroom bound (``oracle``) and ``mpc`` plan by rolling candidate plans
+The headroom bound (``oracle``), ``mpc`` and ``mpc_tuned`` plan by rolling candidate plans
 out over their horizon at every revision, about a hundred times the work of
 the other analytic policies. Their episodes are a pure function of what
 they are run on (and each episode of its seed alone: the policies seed
@@ -12,18 +12,19 @@ file keyed by a SHA-256 digest of:
 * the scenario, every field (``repr`` of the frozen dataclass);
 * the horizon in steps;
 * the code the numbers come from (``cpf_commands.bench.sources.code_digest``):
-  the module that defines the policy and the episode runner
-  (``cpf_commands.bench.episodes``), with every module of the repository
-  they import, transitively: the simulator, its kernels, the scenarios, the
-  planners and the metrics. Docstrings and comments are left out, so an
-  edit to prose keeps the keys; an edit to code re-keys the cells of every
-  policy that imports it.
+  the module that defines the policy and ``RUNNERS`` (the resolver that
+  builds it by name, the rollout and the episode runner), with every module
+  of the repository they import, transitively: the simulator, its kernels,
+  the scenarios, the planners and the metrics. Docstrings and comments are
+  left out, so an edit to prose keeps the keys; an edit to code re-keys the
+  cells of every policy that imports it.
 
 A cell whose seeds the matching file all holds is read instead of run; any
 other is run and, when it ran whole episodes, its seeds merged into the file
 (written atomically).
 ``CACHE_DIRECTORY`` is ``results/bench_cache`` of a source checkout, where
-the files for the test split of the suite (20 seeds) are committed;
+the files for the suite's test (20 seeds) and shift (10 seeds) splits are
+committed;
 outside a checkout (an installed package) nothing is cached. The files are
 data (JSON numbers), never code.
 """
@@ -44,24 +45,34 @@ from cpf_commands.bench.sources import code_digest
 from cpf_env.infra import atomic
 from cpf_env.scenarios import Scenario
 
-__all__ = ["CACHED_POLICIES", "CACHE_DIRECTORY", "cell_key", "load_cell", "store_cell"]
+__all__ = ["CACHED_POLICIES", "CACHE_DIRECTORY", "RUNNERS", "cell_key", "load_cell", "store_cell"]
 
 #: Policy names whose cells are cached (given by name, i.e. with their default gains).
 CACHED_POLICIES = ("oracle", "mpc", "mpc_tuned")
-#: The module that runs a cell's episodes and measures them.
-RUNNER = "cpf_commands.bench.episodes"
+#: The modules that build a policy by name, run its episodes and measure them.
+RUNNERS = (
+    "cpf_commands.common.policies",
+    "cpf_commands.common.rollout",
+    "cpf_commands.bench.episodes",
+)
 #: Where the cells live: results/bench_cache of the source checkout.
 CACHE_DIRECTORY = Path(__file__).resolve().parents[2] / "results" / "bench_cache"
 
 
 @functools.cache
 def _code_digest(policy: str) -> str:
-    """``code_digest`` of the policy's module and the runner (read once per process)."""
-    return code_digest((ALL_POLICIES[policy].__module__, RUNNER))
+    """``code_digest`` of the policy's module and ``RUNNERS`` (read once per process)."""
+    return code_digest((ALL_POLICIES[policy].__module__, *RUNNERS))
 
 
 def cell_key(policy: str, task: Scenario, steps: int | None) -> str:
-    """The content key (SHA-256, hex) of a policy's episodes on a scenario (module docstring)."""
+    """The content key (SHA-256, hex) of a policy's episodes on a scenario (module docstring).
+
+    Raises:
+        ValueError: ``policy`` is not one of ``CACHED_POLICIES``.
+    """
+    if policy not in CACHED_POLICIES:
+        raise ValueError(f"only {', '.join(CACHED_POLICIES)} are cached, not {policy!r}.")
     horizon = task.max_steps if steps is None else int(steps)
     digest = hashlib.sha256()
     for part in (policy, repr(task), str(horizon), _code_digest(policy)):

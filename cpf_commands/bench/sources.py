@@ -2,17 +2,21 @@
 
 ``cpf_commands.bench.cache`` keys a receding-horizon policy's cells on the
 code that computes them. That code is found statically: the modules named
-(the policy's own and the episode runner's), then every module of this
-repository's packages (``PACKAGES``) that they import, transitively,
-including imports inside functions. A package's ``__init__`` counts only
-where a statement imports from the package itself.
+(the policy's own, the resolver that builds it and the rollout that runs
+it), then every module of this repository's packages (``PACKAGES``) that
+they import, transitively, including imports inside functions. A
+package's ``__init__`` counts where a statement imports from the package
+itself.
 
-The digest reads each module's code without its docstrings and comments
-(``code_text``), so an edit to prose leaves every key as it was, while an
-edit to any statement, constant or signature re-keys the cells that import
-it. The text is cut from the source at the positions ``ast`` and
-``tokenize`` report, not rebuilt from a syntax tree, so the digest does
-not change with the Python version.
+The digest reads each module's code without its docstrings, comments,
+trailing blanks and blank lines (``code_text``; text inside other string
+literals is kept as it is), so an edit to prose leaves every key as it
+was, while an edit to any statement, constant or signature re-keys the
+cells that import it. The text is cut from the source at the positions
+``ast`` and ``tokenize`` report, and every cut is checked against what it
+removes, so the digest does not depend on how a Python version builds its
+syntax tree. It covers this repository's code only: numpy's, numba's and
+Python's versions are not part of it.
 """
 
 from __future__ import annotations
@@ -35,11 +39,14 @@ _Span = tuple[tuple[int, int], tuple[int, int]]  # (line, column) start and end;
 
 
 def _module_file(name: str, root: Path) -> Path | None:
-    """The file of a dotted module name of ``PACKAGES``, None for any other or a missing one."""
+    """The file of a dotted module name of ``PACKAGES``, None for any other or a missing one.
+
+    A package comes before a module of the same name, as Python's import system has it.
+    """
     if name.split(".")[0] not in PACKAGES:
         return None
     base = root.joinpath(*name.split("."))
-    for path in (base.with_suffix(".py"), base / "__init__.py"):
+    for path in (base / "__init__.py", base.with_suffix(".py")):
         if path.is_file():
             return path
     return None
@@ -87,19 +94,25 @@ def module_closure(modules: Iterable[str], root: Path = ROOT) -> dict[str, Path]
             continue
         found[name] = path
         package = name if path.name == "__init__.py" else name.rpartition(".")[0]
-        tree = ast.parse(path.read_text(), filename=str(path))
+        tree = ast.parse(_read(path), filename=str(path))
         pending.extend(_imported(tree, package, root) - found.keys())
     return dict(sorted(found.items()))
 
 
-def _docstring_spans(tree: ast.Module) -> list[ast.Expr]:
+def _read(path: Path) -> str:
+    """A module's text as Python decodes it (its encoding line or UTF-8, a BOM dropped)."""
+    with tokenize.open(path) as file:
+        return file.read()
+
+
+def _docstrings(tree: ast.Module) -> list[ast.Expr]:
     """The docstring statements of the module, its classes and its functions."""
     owners = [tree] + [
         node
         for node in ast.walk(tree)
         if isinstance(node, ast.ClassDef | ast.FunctionDef | ast.AsyncFunctionDef)
     ]
-    spans = []
+    found = []
     for owner in owners:
         first = owner.body[0] if owner.body else None
         if (
@@ -107,8 +120,15 @@ def _docstring_spans(tree: ast.Module) -> list[ast.Expr]:
             and isinstance(first.value, ast.Constant)
             and isinstance(first.value.value, str)
         ):
-            spans.append(first)
-    return spans
+            found.append(first)
+    return found
+
+
+def _span(node: ast.expr | ast.stmt) -> tuple[int, int, int, int]:
+    """A node's first and last line and its byte columns there (``ast`` sets all four)."""
+    if node.end_lineno is None or node.end_col_offset is None:
+        raise ValueError(f"ast gave no end position for line {node.lineno}.")
+    return node.lineno, node.col_offset, node.end_lineno, node.end_col_offset
 
 
 def _column(line: str, byte_offset: int) -> int:
@@ -116,34 +136,61 @@ def _column(line: str, byte_offset: int) -> int:
     return len(line.encode()[:byte_offset].decode())
 
 
+def _cut_text(lines: list[str], span: _Span) -> str:
+    """The text a cut over ``span`` removes."""
+    (first, start), (last, end) = span
+    if first == last:
+        return lines[first - 1][start:end]
+    middle = lines[first : last - 1]
+    return "\n".join([lines[first - 1][start:], *middle, lines[last - 1][:end]])
+
+
 def code_text(source: str) -> str:
-    """``source`` without docstrings, comments, trailing blanks and empty lines.
+    """``source`` without docstrings, comments, trailing blanks and blank lines.
+
+    Lines inside a multi-line string literal that is not a docstring are
+    kept exactly, blanks included.
 
     Args:
         source: The text of a Python module.
+
+    Raises:
+        ValueError: A cut would not remove exactly a comment or a docstring (a
+            position ``ast`` or ``tokenize`` reported does not match the text).
     """
-    lines = source.splitlines()
-    spans: list[_Span] = []
-    for node in _docstring_spans(ast.parse(source)):
-        end_line = node.end_lineno if node.end_lineno is not None else node.lineno
-        end_offset = node.end_col_offset if node.end_col_offset is not None else 0
-        spans.append(
-            (
-                (node.lineno, _column(lines[node.lineno - 1], node.col_offset)),
-                (end_line, _column(lines[end_line - 1], end_offset)),
-            )
-        )
+    lines = source.replace("\r\n", "\n").replace("\r", "\n").split("\n")
+    tree = ast.parse(source)
+    docstrings = _docstrings(tree)
+    cuts: list[_Span] = []
+    for node in docstrings:
+        first, start, last, end = _span(node)
+        span = ((first, _column(lines[first - 1], start)), (last, _column(lines[last - 1], end)))
+        cuts.append(span)
+        if ast.literal_eval(_cut_text(lines, span)) != ast.literal_eval(node.value):
+            raise ValueError(f"the docstring at line {first} is not where ast puts it.")
     for token in tokenize.generate_tokens(io.StringIO(source).readline):
         if token.type == tokenize.COMMENT:
-            spans.append((token.start, token.end))
-    for (first, start), (last, end) in sorted(spans, reverse=True):
+            cuts.append((token.start, token.end))
+            if _cut_text(lines, (token.start, token.end)) != token.string:
+                raise ValueError(f"the comment at line {token.start[0]} is not where it reads.")
+    kept: set[int] = set()  # lines a multi-line string (not a docstring) runs over, but its last
+    skipped = {id(docstring.value) for docstring in docstrings}
+    for literal in ast.walk(tree):
+        if isinstance(literal, ast.Constant | ast.JoinedStr) and id(literal) not in skipped:
+            first, _, last, _ = _span(literal)
+            kept.update(range(first, last))
+    for (first, start), (last, end) in sorted(cuts, reverse=True):
         if first == last:
             lines[first - 1] = lines[first - 1][:start] + lines[first - 1][end:]
         else:
             lines[first - 1] = lines[first - 1][:start]
             lines[last - 1] = lines[last - 1][end:]
             lines[first : last - 1] = [""] * (last - 1 - first)
-    return "\n".join(line.rstrip() for line in lines if line.strip())
+    return "\n".join(
+        line if number in kept else line.rstrip()
+        for number, line in enumerate(lines, start=1)
+        if number in kept or line.strip()
+    )
 
 
 def code_digest(modules: Iterable[str], root: Path = ROOT) -> str:
@@ -155,5 +202,5 @@ def code_digest(modules: Iterable[str], root: Path = ROOT) -> str:
     """
     digest = hashlib.sha256()
     for name, path in module_closure(modules, root).items():
-        digest.update(name.encode() + b"\0" + code_text(path.read_text()).encode() + b"\0")
+        digest.update(name.encode() + b"\0" + code_text(_read(path)).encode() + b"\0")
     return digest.hexdigest()

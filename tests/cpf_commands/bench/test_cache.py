@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from cpf_commands.bench import cache
 from cpf_commands.bench.headroom import headroom_rows, headroom_table, oracle_not_lowest
@@ -18,6 +19,8 @@ def test_keys_change_with_the_scenario_the_horizon_and_the_policy():
     assert key != cache.cell_key("oracle", mild, 21)
     assert key != cache.cell_key("mpc", mild, 20)
     assert key != cache.cell_key("oracle", mild.replace(max_path_error=9.0), 20)
+    with pytest.raises(ValueError, match="only oracle, mpc, mpc_tuned are cached, not 'nn_dsc'"):
+        cache.cell_key("nn_dsc", mild, 20)
 
 
 def test_cells_round_trip_per_seed_and_partial_hits_miss(tmp_path):

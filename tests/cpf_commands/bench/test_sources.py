@@ -52,6 +52,31 @@ def test_a_code_edit_changes_the_code_text(edit):
     assert sources.code_text(MODULE.replace(*edit)) != sources.code_text(MODULE)
 
 
+def test_strings_line_breaks_and_page_breaks_keep_their_code():
+    """Whitespace inside a string is code; a form feed or CRLF does not shift the cuts."""
+    text = 'T = """a\n\n   \nb   \n"""  # c\n'
+    assert sources.code_text(text) == 'T = """a\n\n   \nb   \n"""'
+    assert sources.code_text(text) != sources.code_text('T = """a\nb\n"""\n')
+    paged = 'RATE = 0.5\n\x0c\ndef f(a=1):\n    """Doc \u2028 é."""\n    return a * RATE  # é\n'
+    assert sources.code_text(paged) == "RATE = 0.5\ndef f(a=1):\n    return a * RATE"
+    assert sources.code_text(paged.replace("\n", "\r\n")) == sources.code_text(paged)
+    assert sources.code_text(paged.replace("a=1", "a=2")) != sources.code_text(paged)
+
+
+def test_modules_are_read_as_python_decodes_them(tmp_path):
+    """A BOM or an encoding line changes neither the code read nor the digest."""
+    texts = {
+        "bom": "\ufeffX = 'é'\n".encode(),
+        "latin": "# -*- coding: latin-1 -*-\nX = 'é'\n".encode("latin-1"),
+        "plain": "X = 'é'\n".encode(),
+    }
+    for name, data in texts.items():
+        (tmp_path / name / "baselines").mkdir(parents=True)
+        (tmp_path / name / "baselines" / "a.py").write_bytes(data)
+    digests = {sources.code_digest(["baselines.a"], tmp_path / name) for name in texts}
+    assert len(digests) == 1
+
+
 def test_the_closure_follows_imports_into_functions_and_relative_ones(tmp_path):
     package = tmp_path / "baselines"
     package.mkdir()
@@ -68,19 +93,19 @@ def test_the_closure_follows_imports_into_functions_and_relative_ones(tmp_path):
 
 
 def test_a_policys_cells_depend_on_the_simulator_kernels_and_metrics():
-    closure = sources.module_closure(["baselines.mpc", cache.RUNNER])
+    closure = sources.module_closure(["baselines.mpc", *cache.RUNNERS])
     needed = {f"cpf_env.{name}" for name in KERNEL_SOURCES}
     needed |= {"baselines.mpc_kernels", "cpf_env.sim.fleet", "cpf_env.evaluation.fleet_metrics"}
+    needed |= {"baselines", "cpf_commands.common.policies"}  # the name -> policy resolution
     assert needed <= closure.keys()
-    assert "baselines.mpc_tuned" not in closure
 
 
-def test_edits_rekey_exactly_the_policies_whose_code_they_touch(tmp_path):
+def test_code_edits_rekey_the_policies_that_import_them_and_prose_edits_do_not(tmp_path):
     for package in sources.PACKAGES:
         shutil.copytree(
             sources.ROOT / package, tmp_path / package, ignore=shutil.ignore_patterns("__pycache__")
         )
-    starts = {name: (f"baselines.{name}", cache.RUNNER) for name in ("mpc", "mpc_tuned")}
+    starts = {name: (f"baselines.{name}", *cache.RUNNERS) for name in ("mpc", "mpc_tuned")}
 
     def digests():
         return {name: sources.code_digest(start, tmp_path) for name, start in starts.items()}
@@ -90,9 +115,8 @@ def test_edits_rekey_exactly_the_policies_whose_code_they_touch(tmp_path):
     fleet = tmp_path / "cpf_env" / "sim" / "fleet.py"
     fleet.write_text(fleet.read_text().replace('"""', '"""Reworded. ', 1))
     assert digests() == before  # prose only
-    tuned = tmp_path / "baselines" / "mpc_tuned.py"
-    tuned.write_text(tuned.read_text() + "\nEXTRA = 1\n")
-    after = digests()
-    assert after["mpc"] == before["mpc"] and after["mpc_tuned"] != before["mpc_tuned"]
     fleet.write_text(fleet.read_text() + "\nEXTRA = 1\n")
-    assert all(value != after[name] for name, value in digests().items())
+    after = digests()
+    assert all(value != before[name] for name, value in after.items())
+    (tmp_path / "baselines" / "unused.py").write_text("EXTRA = 2\n")  # imported by neither
+    assert digests() == after
