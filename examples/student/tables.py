@@ -4,10 +4,10 @@ r"""Print results/student/README.md's tables from the committed benchmark episod
     python examples/student/tables.py --root results/student
 
 For each of ``bench_test``, ``bench_shift`` and ``bench_procedural``, and
-their ``_k6`` (6-slot students) and ``_deepsets`` (encoder and history
-students) versions, and ``bench_test_tuned`` and ``bench_shift_tuned``
-(students on ``mpc_tuned``, which there takes ``mpc``'s place below) (those
-that exist), one row per scenario: the mean episode cost of ``nn_dsc``,
+their ``_k6`` (6-slot students), ``_deepsets`` (encoder and history
+students), ``_tuned`` and ``_tuned_deepsets`` versions (students on
+``mpc_tuned``, which there takes ``mpc``'s place below) (those that exist),
+one row per scenario: the mean episode cost of ``nn_dsc``,
 ``mpc`` and ``oracle`` (where it ran) and of each student (one per training
 seed), each student's paired cost difference to ``mpc`` (mean over seeds
 with its 95 % bootstrap interval, ``cpf_commands.bench.stats``) and its
@@ -58,8 +58,11 @@ BENCHES = {
         for variant in ("", "_k6", "_deepsets")
         for split in ("test", "shift", "procedural")
     },
-    "bench_test_tuned": "mpc_tuned",
-    "bench_shift_tuned": "mpc_tuned",
+    **{
+        f"bench_{split}{variant}": "mpc_tuned"
+        for variant in ("_tuned", "_tuned_deepsets")
+        for split in ("test", "shift", "procedural")
+    },
 }
 STUDENT = "agents/student"
 
