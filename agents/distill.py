@@ -22,7 +22,25 @@ The teacher's command is turned into the residual that would reproduce it,
 and clipped to [-1, 1]: the student learns what the teacher would add to the
 base it runs on; where the teacher's correction is beyond the residual's
 reach the label is clipped (``DistillReport.clipped`` says how often; raise
-``TrainConfig.scale`` if it is large). In ``force`` mode the path-variable
+``TrainConfig.scale`` if it is large).
+
+The loss. By default it is the mean squared error between the student's
+pre-clip output u and the clipped label. With ``DistillConfig.fit_applied``
+it is taken on the force the vessel receives. The plant saturates the
+command per axis, so a residual acts only within the bounds
+
+    lo = (tau_min - tau_base) / (scale * tau_limit),
+    hi = (tau_max - tau_base) / (scale * tau_limit)       (each clipped to [-1, 1]),
+
+and the label becomes t = clip(a*, lo, hi). Where t = hi (the teacher at the
+upper limit, or at the residual's reach) every u >= hi applies the same force,
+so the loss there is one-sided, (min(u, hi) - t)^2; likewise (max(u, lo) - t)^2
+where t = lo; elsewhere it is (u - t)^2. A student fitted with the plain loss
+scatters around a label at the limit, and the plant cuts off only the half of
+that scatter that points past the limit: the other half is lost force. The
+one-sided loss lets it aim past the limit instead. The path-variable rate's
+bounds are the output's [-1, 1]. ``DistillReport.at_limit`` is the share of
+force labels at a bound either way. In ``force`` mode the path-variable
 rate stays the base's, so a teacher that plans its own rate (``mpc``,
 ``oracle``) is imitated in force only; ``force_and_rate`` imitates both.
 
@@ -143,6 +161,9 @@ class DistillConfig:
             takes draws r x procedural .. (r + 1) x procedural - 1, all below
             ``splits.EVALUATION_SEED``); their episodes start at the round's start.
             False: the same draws throughout, their episodes continuing.
+        fit_applied: Fit the force the plant applies (one-sided where the label sits
+            at an actuator limit; see the module's docstring). False: the squared
+            error on the clipped residual everywhere.
     """
 
     teacher: str = "nn_dsc_privileged"
@@ -153,6 +174,7 @@ class DistillConfig:
     learning_rate: float = 1e-3
     procedural: int = 0
     redraw: bool = False
+    fit_applied: bool = False
 
     def __post_init__(self) -> None:
         if self.teacher not in TEACHERS:
@@ -173,8 +195,11 @@ class DistillConfig:
                 f"DistillConfig.procedural must be an integer >= 0 (procedural training fleets), "
                 f"got {self.procedural!r}."
             )
-        if not isinstance(self.redraw, bool):
-            raise ValueError(f"DistillConfig.redraw must be true or false, got {self.redraw!r}.")
+        for name in ("redraw", "fit_applied"):
+            if not isinstance(getattr(self, name), bool):
+                raise ValueError(
+                    f"DistillConfig.{name} must be true or false, got {getattr(self, name)!r}."
+                )
         if self.redraw and self.procedural == 0:
             raise ValueError(
                 "DistillConfig.redraw draws fresh procedural fleets each round; set "
@@ -198,10 +223,12 @@ class DistillReport:
         losses: Mean squared error of the student on all data after each round.
         zero_loss: The same error of the base alone (a = 0) on the final data.
         clipped: Fraction of the labels' components clipped to [-1, 1].
+        at_limit: Fraction of the force labels' components at a bound of the applied
+            residual (an actuator limit or the residual's reach), on the final data.
         seconds: Wall time (s).
         rounds: Per round: ``round``, ``samples`` (data so far), ``loss``,
-            ``zero_loss`` and ``clipped`` (on the data so far), ``seconds`` (since start,
-            evaluations included).
+            ``zero_loss``, ``clipped`` and ``at_limit`` (on the data so far), ``seconds``
+            (since start, evaluations included).
         draws: Per round, the procedural draw seeds its rollouts ran (``draw_seeds``).
         device: The torch device the student was fitted on.
         evaluations: The rows of ``evaluations.csv`` (``agents.schedule.EvaluationLog``):
@@ -214,6 +241,7 @@ class DistillReport:
     losses: tuple[float, ...]
     zero_loss: float
     clipped: float
+    at_limit: float
     seconds: float
     rounds: tuple[dict[str, float], ...]
     draws: tuple[tuple[int, ...], ...]
@@ -266,14 +294,34 @@ def _labels(env: FleetVecEnv, teacher: FleetPolicy) -> NDArray[np.float64]:
     """
     command = np.asarray(teacher.act_batch(env.sim.arrays.obs), dtype=np.float64)
     controller = env.controller
-    tau_min, tau_max = env.scenario.tau_limits
-    reach = controller.config.scale * np.maximum(np.abs(tau_min), np.abs(tau_max))
-    force = (command[..., :3] - controller.base_actions[..., :3]) / reach
+    force = (command[..., :3] - controller.base_actions[..., :3]) / _force_reach(env)
     if controller.config.mode == "force":
         return force
     rate_reach = controller.config.scale * float(env.scenario.theta_dot_max)
     rate = (command[..., 3] - controller.base_actions[..., 3]) / rate_reach
     return np.concatenate([force, rate[..., None]], axis=-1)
+
+
+def _force_reach(env: FleetVecEnv) -> NDArray[np.float64]:
+    """The force one unit of residual adds, scale x tau_limit, (n, 3) in N, N, N m."""
+    tau_min, tau_max = env.scenario.tau_limits
+    return env.controller.config.scale * np.maximum(np.abs(tau_min), np.abs(tau_max))
+
+
+def _applied_bounds(env: FleetVecEnv) -> NDArray[np.float64]:
+    """The residual's bounds of effect on the env's present base, (2, B, n, k): lo, hi.
+
+    Force axes: the residuals whose command reaches the actuator limits,
+    (tau_min - tau_base) / reach and (tau_max - tau_base) / reach, clipped to
+    [-1, 1]; the rate (``force_and_rate``): [-1, 1].
+    """
+    tau_min, tau_max = env.scenario.tau_limits
+    base, reach = env.controller.base_actions[..., :3], _force_reach(env)
+    bounds = np.full((2, *base.shape[:-1], env.controller.action_size), 1.0)
+    bounds[0] = -1.0
+    bounds[0, ..., :3] = np.clip((np.asarray(tau_min) - base) / reach, -1.0, 1.0)
+    bounds[1, ..., :3] = np.clip((np.asarray(tau_max) - base) / reach, -1.0, 1.0)
+    return bounds
 
 
 def student_actions(
@@ -296,25 +344,28 @@ def _rollout(
     student: PolicyNetwork | None,
     stats: InputStatistics | None,
     steps: int,
-) -> tuple[NDArray[np.float32], NDArray[np.float64]]:
+) -> tuple[NDArray[np.float32], NDArray[np.float64], NDArray[np.float64]]:
     """Run ``steps`` env steps of every group, continuing the episodes under way.
 
     Each group's ``obs`` is updated in place.
 
     Returns:
-        The inputs (S, d) the student read and the raw labels (S, k) of the teacher.
+        The inputs (S, d) the student read, the raw labels (S, k) of the teacher
+        and the applied residual's bounds (2, S, k) (``_applied_bounds``).
     """
-    inputs, labels = [], []
+    inputs, labels, bounds = [], [], []
     for _ in range(steps):
+        size = groups[0].env.controller.action_size
         label = np.concatenate(
-            [
-                _labels(group.env, group.teacher).reshape(-1, group.env.controller.action_size)
-                for group in groups
-            ]
+            [_labels(group.env, group.teacher).reshape(-1, size) for group in groups]
+        )
+        bound = np.concatenate(
+            [_applied_bounds(group.env).reshape(2, -1, size) for group in groups], axis=1
         )
         obs = np.concatenate([group.obs for group in groups])
         inputs.append(obs)
         labels.append(label)
+        bounds.append(bound)
         if student is None:
             action = np.clip(label, -1.0, 1.0).astype(np.float32)
         else:
@@ -330,29 +381,48 @@ def _rollout(
             if ended.any():
                 group.teacher.reset_fleets(ended)
             start = stop
-    return np.concatenate(inputs), np.concatenate(labels)
+    return np.concatenate(inputs), np.concatenate(labels), np.concatenate(bounds, axis=1)
+
+
+def _loss(output: torch.Tensor, targets: torch.Tensor, bounds: torch.Tensor | None) -> torch.Tensor:
+    """The mean squared error of ``output`` (R, k) on ``targets`` (R, k).
+
+    With ``bounds`` (2, R, k) (lo, hi; the targets lie within them) it is
+    one-sided where a target sits at a bound: an output past the bound counts
+    as the bound (``DistillConfig.fit_applied``).
+    """
+    if bounds is not None:
+        low, high = bounds
+        output = torch.where(targets >= high, torch.minimum(output, high), output)
+        output = torch.where(targets <= low, torch.maximum(output, low), output)
+    return torch.mean((output - targets) ** 2)
 
 
 def _fit(
     network: PolicyNetwork,
     rows: torch.Tensor,
     targets: torch.Tensor,
+    bounds: torch.Tensor | None,
     config: DistillConfig,
     generator: torch.Generator,
 ) -> float:
-    """Fit the actor's pre-clip output to ``targets`` (in [-1, 1]); return the final MSE."""
+    """Fit the actor's pre-clip output to ``targets`` (in [-1, 1]); return the final loss.
+
+    ``bounds``: (2, R, k) for the applied-force loss (``_loss``), or None.
+    """
     optimizer = torch.optim.Adam(network.parameters(), lr=config.learning_rate)
 
     for _ in range(config.epochs):
         order = torch.randperm(rows.shape[0], generator=generator).to(rows.device)
         for start in range(0, rows.shape[0], config.batch_size):
             index = order[start : start + config.batch_size]
-            loss = torch.mean((network.unbounded(rows[index]) - targets[index]) ** 2)
+            batch = None if bounds is None else bounds[:, index]
+            loss = _loss(network.unbounded(rows[index]), targets[index], batch)
             optimizer.zero_grad()
             loss.backward()
             optimizer.step()
     with torch.no_grad():
-        return float(torch.mean((network(rows) - targets) ** 2))
+        return float(_loss(network(rows), targets, bounds))
 
 
 def check_distillation(config: TrainConfig, settings: DistillConfig) -> None:
@@ -497,7 +567,9 @@ def _agent_record(
     seconds: float,
 ) -> dict[str, Any]:
     """The ``config.json`` record of the student after ``rounds`` (none yet: the base)."""
-    final = rounds[-1] if rounds else {"samples": 0, "zero_loss": 0.0, "clipped": 0.0}
+    final = (
+        rounds[-1] if rounds else {"samples": 0, "zero_loss": 0.0, "clipped": 0.0, "at_limit": 0.0}
+    )
     return {
         "config": config.to_json(),
         "distillation": {
@@ -507,6 +579,7 @@ def _agent_record(
             "losses": [r["loss"] for r in rounds],
             "zero_loss": final["zero_loss"],
             "clipped": final["clipped"],
+            "at_limit": final["at_limit"],
             "seconds": seconds,
         },
         "timesteps_done": int(final["samples"]),
@@ -566,6 +639,7 @@ def distill(
     stats: InputStatistics | None = None
     data: list[NDArray[np.float32]] = []  # each round's normalized student inputs
     labelled: list[NDArray[np.float64]] = []  # each round's labels, unclipped
+    bounded: list[NDArray[np.float64]] = []  # each round's applied bounds (2, S, k)
     rounds: list[dict[str, float]] = []
     draws: list[list[int]] = []
     evaluations = None if evaluate is None else EvaluationLog(evaluate, best=None)
@@ -592,22 +666,34 @@ def distill(
             groups = _redraw(groups, config, settings, round_)
         draws.append(draw_seeds(settings, round_))
         student = None if round_ == 0 else network
-        inputs, new_labels = _rollout(groups, student, stats, settings.steps)
+        inputs, new_labels, new_bounds = _rollout(groups, student, stats, settings.steps)
         if stats is None:
             stats = input_statistics(config, inputs)
         data.append(stats.apply(inputs))  # normalized once: the statistics stay round 0's
         labelled.append(new_labels)
-        labels = np.concatenate(labelled)
+        bounded.append(new_bounds)
+        labels, bounds = np.concatenate(labelled), np.concatenate(bounded, axis=1)
         rows = torch.from_numpy(np.concatenate(data)).to(where)
-        targets = torch.from_numpy(np.clip(labels, -1.0, 1.0).astype(np.float32)).to(where)
-        loss = _fit(network, rows, targets, settings, generator)
+        clipped = np.clip(labels, -1.0, 1.0)
+        applied = np.clip(labels, bounds[0], bounds[1])
+        at_limit = (applied <= bounds[0]) | (applied >= bounds[1])
+        if settings.fit_applied:
+            targets = torch.from_numpy(applied.astype(np.float32)).to(where)
+            limits = torch.from_numpy(bounds.astype(np.float32)).to(where)
+            loss = _fit(network, rows, targets, limits, settings, generator)
+            zero_loss = float(_loss(torch.zeros_like(targets), targets, limits))
+        else:
+            targets = torch.from_numpy(clipped.astype(np.float32)).to(where)
+            loss = _fit(network, rows, targets, None, settings, generator)
+            zero_loss = float(np.mean(clipped**2))
         rounds.append(
             {
                 "round": round_,
                 "samples": int(labels.shape[0]),
                 "loss": loss,
-                "zero_loss": float(np.mean(np.clip(labels, -1.0, 1.0) ** 2)),
+                "zero_loss": zero_loss,
                 "clipped": float(np.mean(np.abs(labels) > 1.0)),
+                "at_limit": float(np.mean(at_limit[:, :3])),
                 "seconds": clock(),
             }
         )
@@ -625,6 +711,7 @@ def distill(
         tuple(r["loss"] for r in rounds),
         final["zero_loss"],
         final["clipped"],
+        final["at_limit"],
         seconds,
         tuple(rounds),
         tuple(tuple(d) for d in draws),

@@ -5,7 +5,7 @@ The run is one TOML file: its top-level keys are ``agents.TrainConfig`` fields
 ``mode``, ``scale``, ``fleets``, ``net_arch``, ...) and its ``[distill]`` table
 holds ``agents.distill.DistillConfig`` fields (``teacher``, ``rounds``,
 ``steps``, ``epochs``, ``batch_size``, ``learning_rate``, ``procedural``,
-``redraw``). The student may be an MLP over K neighbour slots or, with
+``redraw``, ``fit_applied``). The student may be an MLP over K neighbour slots or, with
 ``encoder = "deepsets"`` (and ``shared_slot_statistics = true``), a
 permutation-invariant encoder that runs on any degree; ``history = H`` gives
 it its own last H inputs and actions (``agents.history``).
@@ -19,7 +19,8 @@ seeds and the data order). ``--out`` receives an ordinary agent folder
 - ``rounds.csv``: per DAgger round, ``round``, ``samples`` (labelled
   vessel-steps so far), ``loss`` (the student's mean squared error on them),
   ``zero_loss`` (the base's, a = 0), ``clipped`` (share of label components
-  beyond the residual's reach) and ``seconds`` (since the start);
+  beyond the residual's reach), ``at_limit`` (share of force label components
+  at an actuator limit or the residual's reach) and ``seconds`` (since the start);
 - with ``--eval-seeds N`` (N > 0; default 0, none), ``evaluations.csv`` in
   ``cpf-train``'s columns (``agents.schedule.EvaluationLog``, the evaluator
   ``cpf_commands.train_eval.TestSplitEvaluator`` on the training scenarios'
@@ -67,7 +68,7 @@ __all__ = ["distill_main", "read_distill_config"]
 #: The run record and the per-round curve ``--out`` (or ``--log``) receives.
 RUN_RECORD, ROUNDS = "run.json", "rounds.csv"
 #: Columns of ``rounds.csv``.
-ROUND_COLUMNS = ("round", "samples", "loss", "zero_loss", "clipped", "seconds")
+ROUND_COLUMNS = ("round", "samples", "loss", "zero_loss", "clipped", "at_limit", "seconds")
 
 
 def read_distill_config(path: str | Path, seed: int) -> tuple[TrainConfig, DistillConfig]:
@@ -236,6 +237,7 @@ def distill_main(argv: Sequence[str] | None = None) -> int:
         "wall_clock_seconds": round(time.perf_counter() - started, 1),
         "samples": report.samples,
         "clipped": report.clipped,
+        "at_limit": report.at_limit,
         "rounds": list(report.rounds),
         "draws": [list(seeds) for seeds in report.draws],
     }
@@ -255,7 +257,8 @@ def distill_main(argv: Sequence[str] | None = None) -> int:
         f"{f' + {settings.procedural} procedural fleets' if settings.procedural else ''}"
         f"{' (redrawn every round)' if settings.redraw else ''}: "
         f"{report.samples:,} samples, loss {report.losses[-1]:.4g} (base {report.zero_loss:.4g}), "
-        f"{report.clipped:.1%} of label components clipped, {record['wall_clock_seconds']} s; "
+        f"{report.clipped:.1%} of label components clipped, {report.at_limit:.1%} of force "
+        f"labels at a limit, {record['wall_clock_seconds']} s; "
         f"saved to {out}/\n"
         f"{_evaluated(report.evaluations, log)}"
         f"evaluate: cpf-bench --policies {config.base} {settings.teacher} {out} --split test"

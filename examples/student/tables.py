@@ -5,7 +5,7 @@ r"""Print results/student/README.md's tables from the committed benchmark episod
 
 For each of ``bench_test``, ``bench_shift`` and ``bench_procedural``, and
 their ``_k6`` (6-slot students), ``_deepsets`` (encoder and history
-students), ``_tuned`` and ``_tuned_deepsets`` versions (students on
+students), ``_tuned``, ``_tuned_deepsets`` and ``_tuned_applied`` versions (students on
 ``mpc_tuned``, which there takes ``mpc``'s place below) (those that exist),
 one row per scenario: the mean episode cost of ``nn_dsc``,
 ``mpc`` and ``oracle`` (where it ran) and of each student (one per training
@@ -60,7 +60,7 @@ BENCHES = {
     },
     **{
         f"bench_{split}{variant}": "mpc_tuned"
-        for variant in ("_tuned", "_tuned_deepsets")
+        for variant in ("_tuned", "_tuned_deepsets", "_tuned_applied")
         for split in ("test", "shift", "procedural")
     },
 }

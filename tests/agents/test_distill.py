@@ -17,8 +17,10 @@ from agents import load_policy
 from agents.agent_folder import build_actor, read_agent
 from agents.distill import (
     DistillConfig,
+    _applied_bounds,
     _group,
     _labels,
+    _loss,
     distill,
     draw_seeds,
     student_actions,
@@ -65,6 +67,8 @@ def test_teacher_names_are_checked() -> None:
         DistillConfig(redraw=True)
     with pytest.raises(ValueError, match="redraw must be true or false"):
         DistillConfig(procedural=1, redraw=1)  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match="fit_applied must be true or false"):
+        DistillConfig(fit_applied="yes")  # type: ignore[arg-type]
 
 
 @pytest.mark.parametrize("teacher", ["nn_dsc_privileged", "mpc", "oracle"])
@@ -88,6 +92,67 @@ def test_force_labels_leave_the_rate_to_the_base() -> None:
     env = _env_after(5, ResidualConfig(mode="force", scale=1.0))
     label = _labels(env, make_policy("mpc", env.sim))
     assert label.shape == (2, 5, 3)
+
+
+def test_applied_bounds_are_the_residuals_that_command_the_actuator_limits() -> None:
+    # nn_dsc saturates in its start-up transient: its base sits at or past the limits
+    residual = ResidualConfig(mode="force_and_rate", scale=0.5)
+    env = FleetVecEnv("bench_saturation", num_fleets=2, base_policy="nn_dsc", residual=residual)
+    env.seed(4)
+    env.reset()
+    low, high = _applied_bounds(env)
+    assert low.shape == high.shape == (2, 5, 4)
+    assert np.all(low <= high) and np.all(low >= -1.0) and np.all(high <= 1.0)
+    assert np.all(low[..., 3] == -1.0) and np.all(high[..., 3] == 1.0)  # the rate: [-1, 1]
+    tau_min, tau_max = (np.broadcast_to(t, (2, 5, 3)) for t in env.scenario.tau_limits)
+    upper = np.abs(high[..., :3]) < 1.0  # the limit is within the residual's reach
+    lower = np.abs(low[..., :3]) < 1.0
+    assert upper.any() and (~upper).any()
+    at_high = env.controller.compose(high)[..., :3]
+    np.testing.assert_allclose(at_high[upper], tau_max[upper], rtol=1e-12)
+    at_low = env.controller.compose(low)[..., :3]
+    np.testing.assert_allclose(at_low[lower], tau_min[lower], rtol=1e-12)
+    # out of reach: the residual's own limit, below the actuator's (hi = 1), or a base so
+    # far past it that every residual saturates (hi = -1)
+    below, beyond = high[..., :3] == 1.0, high[..., :3] == -1.0
+    assert np.all(below | beyond | upper) and below.any() and beyond.any()
+    assert np.all(at_high[below] <= tau_max[below]) and np.all(at_high[beyond] >= tau_max[beyond])
+
+
+def test_the_applied_loss_is_one_sided_only_where_the_target_sits_at_a_bound() -> None:
+    bounds = torch.tensor([[[-1.0, -0.3, -1.0]], [[0.2, 1.0, 1.0]]])  # (2, R=1, k=3)
+    targets = torch.tensor([[0.2, -0.3, 0.5]])  # at hi, at lo, inside
+    past = torch.tensor([[0.9, -0.8, 0.5]])  # past both bounds, exact inside
+    assert float(_loss(past, targets, bounds)) == 0.0
+    assert float(_loss(past, targets, None)) > 0.0  # the plain loss pulls back to the limit
+    short = torch.tensor([[0.0, -0.3, 0.5]])  # short of the limit: force lost
+    assert float(_loss(short, targets, bounds)) == pytest.approx(0.04 / 3)
+    inside = torch.tensor([[0.2, -0.3, 0.9]])  # past the target inside the bounds: penalized
+    assert float(_loss(inside, targets, bounds)) == pytest.approx(0.16 / 3)
+    output = past.clone().requires_grad_(True)
+    _loss(output, targets, bounds).backward()
+    assert output.grad is not None and not output.grad.any()
+
+
+def test_fit_applied_distills_a_deterministic_student_of_its_own(tmp_path: Path) -> None:
+    config = _config(scenario="bench_saturation", mode="force", scale=0.5)
+    settings = DistillConfig(rounds=2, steps=30, epochs=3, batch_size=256, fit_applied=True)
+    report = distill(config, settings, tmp_path / "a")
+    again = distill(config, settings, tmp_path / "b")
+    plain = distill(
+        config, DistillConfig(rounds=2, steps=30, epochs=3, batch_size=256), tmp_path / "c"
+    )
+    assert again.losses == report.losses and all(np.isfinite(report.losses))
+    assert report.losses[-1] < report.zero_loss
+    assert 0.0 < report.at_limit < 1.0 and report.at_limit == plain.at_limit  # same data
+    assert report.losses != plain.losses
+    first = load_file(str(tmp_path / "a" / "policy.safetensors"))
+    second = load_file(str(tmp_path / "b" / "policy.safetensors"))
+    third = load_file(str(tmp_path / "c" / "policy.safetensors"))
+    assert all(np.array_equal(first[k].numpy(), second[k].numpy()) for k in first)
+    assert not np.array_equal(first["output.weight"].numpy(), third["output.weight"].numpy())
+    record = json.loads((tmp_path / "a" / "config.json").read_text())["distillation"]
+    assert record["fit_applied"] is True and record["at_limit"] == report.at_limit
 
 
 def test_the_student_starts_as_the_base() -> None:
