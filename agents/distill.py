@@ -220,8 +220,9 @@ class DistillReport:
     Attributes:
         folder: The agent folder written.
         samples: Labelled vessel-steps in the final data set.
-        losses: Mean squared error of the student on all data after each round.
-        zero_loss: The same error of the base alone (a = 0) on the final data.
+        losses: The student's loss on all data after each round: the mean squared
+            error, or with ``fit_applied`` the applied-force loss (``_loss``).
+        zero_loss: The same loss of the base alone (a = 0) on the final data.
         clipped: Fraction of the labels' components clipped to [-1, 1].
         at_limit: Fraction of the force labels' components at a bound of the applied
             residual (an actuator limit or the residual's reach), on the final data.
@@ -354,8 +355,8 @@ def _rollout(
         and the applied residual's bounds (2, S, k) (``_applied_bounds``).
     """
     inputs, labels, bounds = [], [], []
+    size = groups[0].env.controller.action_size
     for _ in range(steps):
-        size = groups[0].env.controller.action_size
         label = np.concatenate(
             [_labels(group.env, group.teacher).reshape(-1, size) for group in groups]
         )

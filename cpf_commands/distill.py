@@ -17,7 +17,8 @@ seeds and the data order). ``--out`` receives an ordinary agent folder
   versions, the torch device, the wall time, the per-round record and the
   procedural draw seeds of every round (``draws``);
 - ``rounds.csv``: per DAgger round, ``round``, ``samples`` (labelled
-  vessel-steps so far), ``loss`` (the student's mean squared error on them),
+  vessel-steps so far), ``loss`` (the student's mean squared error on them,
+  or its applied-force loss with ``fit_applied``),
   ``zero_loss`` (the base's, a = 0), ``clipped`` (share of label components
   beyond the residual's reach), ``at_limit`` (share of force label components
   at an actuator limit or the residual's reach) and ``seconds`` (since the start);
