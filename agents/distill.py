@@ -47,7 +47,9 @@ rate stays the base's, so a teacher that plans its own rate (``mpc``,
 Data: one scenario, or a mixture (``TrainConfig.scenario`` a tuple, e.g. the
 suite's training distributions), optionally joined by procedural training
 fleets (``DistillConfig.procedural`` draws of ``cpf_env.scenarios.sampler``,
-seeds 0, 1, ...; with ``redraw`` fresh draws every round, ``draw_seeds``).
+seeds 0, 1, ...; with ``redraw`` fresh draws every round, ``draw_seeds``;
+``DistillConfig.distribution`` widens or narrows the sampler's ranges, e.g.
+faster leaders and weaker actuators).
 Each scenario is a group of fleets (``split_fleets``, seeded as
 ``MixtureVecEnv`` seeds them), stepped one after the other. Held-out
 scenarios and seeds are refused (``splits.check_training``,
@@ -96,7 +98,8 @@ import copy
 import dataclasses
 import functools
 import time
-from dataclasses import dataclass
+from collections.abc import Mapping
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -164,6 +167,12 @@ class DistillConfig:
         fit_applied: Fit the force the plant applies (one-sided where the label sits
             at an actuator limit; see the module's docstring). False: the squared
             error on the clipped residual everywhere.
+        distribution: ``ScenarioDistribution`` fields the procedural fleets are drawn
+            with, over its defaults (a ``[distill.distribution]`` table, ranges as
+            two-element lists), e.g. ``{"v0": (0.05, 0.6), "force_scale": (0.4, 1.0)}``
+            for leaders up to 0.6 m/s and force limits down to 0.4 of nominal.
+            ``max_degree`` (the student's slots) and ``name`` are not settable.
+            Empty: the defaults.
     """
 
     teacher: str = "nn_dsc_privileged"
@@ -175,6 +184,7 @@ class DistillConfig:
     procedural: int = 0
     redraw: bool = False
     fit_applied: bool = False
+    distribution: Mapping[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         if self.teacher not in TEACHERS:
@@ -204,6 +214,12 @@ class DistillConfig:
             raise ValueError(
                 "DistillConfig.redraw draws fresh procedural fleets each round; set "
                 "procedural >= 1 (fleets per round) or leave redraw out."
+            )
+        object.__setattr__(self, "distribution", _distribution_fields(self.distribution))
+        if self.distribution and self.procedural == 0:
+            raise ValueError(
+                "DistillConfig.distribution shapes the procedural fleets; set procedural >= 1 "
+                "(fleets per round) or leave distribution out."
             )
         if not (
             isinstance(self.learning_rate, int | float)
@@ -314,14 +330,21 @@ def _applied_bounds(env: FleetVecEnv) -> NDArray[np.float64]:
 
     Force axes: the residuals whose command reaches the actuator limits,
     (tau_min - tau_base) / reach and (tau_max - tau_base) / reach, clipped to
-    [-1, 1]; the rate (``force_and_rate``): [-1, 1].
+    [-1, 1]; with ``yield_at_limit``, an axis whose base is at a limit has no
+    residual of effect (lo = hi there: a pull back from the limit is dropped,
+    a push past it saturates). The rate (``force_and_rate``): [-1, 1].
     """
     tau_min, tau_max = env.scenario.tau_limits
     base, reach = env.controller.base_actions[..., :3], _force_reach(env)
     bounds = np.full((2, *base.shape[:-1], env.controller.action_size), 1.0)
     bounds[0] = -1.0
-    bounds[0, ..., :3] = np.clip((np.asarray(tau_min) - base) / reach, -1.0, 1.0)
-    bounds[1, ..., :3] = np.clip((np.asarray(tau_max) - base) / reach, -1.0, 1.0)
+    low = np.clip((np.asarray(tau_min) - base) / reach, -1.0, 1.0)
+    high = np.clip((np.asarray(tau_max) - base) / reach, -1.0, 1.0)
+    if env.controller.config.yield_at_limit:
+        at_max, at_min = env.controller.base_at_limits()
+        low = np.where(at_max, high, low)
+        high = np.where(at_min, low, high)
+    bounds[0, ..., :3], bounds[1, ..., :3] = low, high
     return bounds
 
 
@@ -470,11 +493,44 @@ def _learner_residual(config: TrainConfig) -> ResidualConfig:
     return residual
 
 
-def _training_fleets(config: TrainConfig) -> ScenarioDistribution:
-    """The procedural fleets' distribution: degrees up to the learner's slots (at least 2)."""
+def _distribution_fields(fields: Mapping[str, Any]) -> dict[str, Any]:
+    """``DistillConfig.distribution`` checked, with its lists as tuples.
+
+    Raises:
+        ValueError: Not a table, a key that is not a settable ``ScenarioDistribution``
+            field (the settable ones are listed), or values it refuses.
+    """
+    if not isinstance(fields, Mapping):
+        raise ValueError(
+            f"DistillConfig.distribution must be a table of ScenarioDistribution fields, "
+            f"got {fields!r}."
+        )
+    settable = sorted(
+        {f.name for f in dataclasses.fields(ScenarioDistribution)} - {"max_degree", "name"}
+    )
+    unknown = sorted(set(fields) - set(settable))
+    if unknown:
+        raise ValueError(
+            f"DistillConfig.distribution has unknown keys {unknown}; settable "
+            f"ScenarioDistribution fields: {settable} (max_degree follows the student's "
+            "neighbour slots)."
+        )
+    values: dict[str, Any] = {k: tuple(v) if isinstance(v, list) else v for k, v in fields.items()}
+    try:
+        ScenarioDistribution(**values)
+    except (TypeError, ValueError) as error:
+        raise ValueError(f"DistillConfig.distribution: {error}") from None
+    return values
+
+
+def _training_fleets(config: TrainConfig, settings: DistillConfig) -> ScenarioDistribution:
+    """The procedural fleets' distribution: ``settings.distribution``, degrees <= the slots.
+
+    The cap is the learner's neighbour slots, at least 2.
+    """
     slots = _learner_residual(config).neighbour_slots
     assert slots is not None
-    return ScenarioDistribution(max_degree=max(2, slots))
+    return ScenarioDistribution(max_degree=max(2, slots), **settings.distribution)
 
 
 def _group(
@@ -510,7 +566,7 @@ def _groups(config: TrainConfig, settings: DistillConfig) -> list[_Group]:
         scenarios.make_scenario(name, **config.scenario_overrides(name))
         for name in config.scenarios
     ]
-    distribution = _training_fleets(config)
+    distribution = _training_fleets(config, settings)
     draws = [distribution.sample(seed) for seed in draw_seeds(settings, 0)]
     fleets = split_fleets(config.fleets, len(named) + len(draws))
     offsets = np.cumsum([0, *fleets[:-1]]).tolist()
@@ -527,7 +583,7 @@ def _redraw(
     groups: list[_Group], config: TrainConfig, settings: DistillConfig, round_: int
 ) -> list[_Group]:
     """``groups`` with the procedural ones replaced by the draws of ``round_`` (fresh episodes)."""
-    distribution = _training_fleets(config)
+    distribution = _training_fleets(config, settings)
     seeds = iter(draw_seeds(settings, round_))
     offset, replaced = 0, []
     for group in groups:

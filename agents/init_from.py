@@ -67,6 +67,7 @@ RECIPE = (
     "scale",
     "extras",
     "hide_residual_from_base",
+    "yield_at_limit",
     "normalize_observations",
     "shared_slot_statistics",
     "encoder",

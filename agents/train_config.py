@@ -37,8 +37,15 @@ ALGORITHM_NAMES = ("ppo", "sac")
 ENCODERS = ("deepsets",)
 #: Fields added since agent-folder format version 1, and the defaults ``to_json`` leaves out,
 #: so a record at these defaults reads in the versions before them (``encoder`` and
-#: ``history`` came with format version 2; ``asymmetric_critic`` shapes only training).
-SINCE_FORMAT_2: dict[str, Any] = {"encoder": None, "history": 0, "asymmetric_critic": False}
+#: ``history`` came with format version 2; ``asymmetric_critic`` shapes only training;
+#: a version without ``yield_at_limit`` refuses a record that sets it, rather than
+#: composing the residual without it).
+SINCE_FORMAT_2: dict[str, Any] = {
+    "encoder": None,
+    "history": 0,
+    "asymmetric_critic": False,
+    "yield_at_limit": False,
+}
 #: Largest training seed: numpy's legacy seeding, which SB3 calls, takes 32 bits.
 MAX_SEED = 2**32 - 1
 #: Accepted initial log standard deviations: exp(-20) is no noise, exp(5) = 148 already
@@ -73,6 +80,9 @@ class TrainConfig:
         scale: Residual range as a fraction of the limits.
         extras: Local extras appended to the observation (``cpf_env.envs.residual.EXTRAS``).
         hide_residual_from_base: Show the base the applied force minus the residual.
+        yield_at_limit: Drop a force residual that pulls the command back from an
+            actuator limit the base commands (``cpf_env.envs.residual``), in training
+            and wherever the agent runs.
         reward_form: ``"log"`` or ``"quadratic"`` to override the scenario's
             reward form, or None to keep it.
         normalize_observations: Wrap in ``VecNormalize`` (observations only).
@@ -142,6 +152,7 @@ class TrainConfig:
     encoder: str | None = None
     history: int = 0
     asymmetric_critic: bool = False
+    yield_at_limit: bool = False
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "extras", tuple(self.extras))
@@ -205,6 +216,7 @@ class TrainConfig:
             "balance_rewards",
             "shared_slot_statistics",
             "asymmetric_critic",
+            "yield_at_limit",
         )
         for name in flags:
             if not isinstance(getattr(self, name), bool):
@@ -262,6 +274,7 @@ class TrainConfig:
             extras=self.extras,
             hide_residual_from_base=self.hide_residual_from_base,
             neighbour_slots=self.neighbour_slots,
+            yield_at_limit=self.yield_at_limit,
         )
 
     def learner_config(self) -> ResidualConfig:

@@ -164,6 +164,13 @@ def _parser() -> argparse.ArgumentParser:
         "folder, stay local",
     )
     parser.add_argument(
+        "--yield-at-limit",
+        action=argparse.BooleanOptionalAction,
+        default=defaults.yield_at_limit,
+        help="drop a force residual that pulls the command back from an actuator limit the "
+        "base commands (in training and wherever the agent runs)",
+    )
+    parser.add_argument(
         "--reward-weight",
         nargs="+",
         default=[],

@@ -19,6 +19,19 @@ stays the only clip; messages (and theta_dot except in ``force_and_rate``)
 are the base's. tau_limit is the per-axis magnitude max(|tau_min|, |tau_max|).
 With a = 0 the base policy's actions pass through unchanged, bit for bit.
 
+Yielding at a limit (``yield_at_limit``, default False). Where the base
+commands an actuator limit on a force axis (within ``LIMIT_TOLERANCE`` of it,
+or past it), a residual that pulls the command back from that limit is
+dropped on that axis: tau0 = tau_base there. A base at its limit asks for all
+the force there is, because its feedback finds the vessel far from where it
+must be; a residual that takes force away then fights a saturated loop
+that cannot push back, and a small steady bias of the learner becomes a
+steady drift (a vessel that falls behind its fleet for good). A residual
+that adds force in the limit's direction is cut by the plant's saturation
+as before, so on such an axis the residual has no effect at all. Where the
+base is inside its limits nothing changes. The rule reads only the
+vessel's own base command and limits, so it is as local as the learner.
+
 What the base policy is told (``hide_residual_from_base``, default True): the
 observation's last applied force minus the last force residual. A saturation
 auxiliary system (the reference's pi, PAPER eq. [21] in ``docs/model.md``)
@@ -72,6 +85,7 @@ from cpf_env.sim.observation import ObsLayout
 
 __all__ = [
     "EXTRAS",
+    "LIMIT_TOLERANCE",
     "RESIDUAL_MODES",
     "ResidualConfig",
     "ResidualController",
@@ -87,6 +101,9 @@ RESIDUAL_MODES = {"force": 3, "force_and_rate": 4, "kinematic": 3}
 EXTRAS = {"base_action": 4, "base_signals": 7, "multiscale_errors": 9}
 #: Scales (m, m, rad) of the squashed path errors of ``multiscale_errors``.
 MULTISCALE = (0.01, 0.1, 1.0)
+#: A base command within this fraction of tau_limit of an actuator limit is at the
+#: limit for ``yield_at_limit`` (planners stop at the limit up to rounding).
+LIMIT_TOLERANCE = 1e-3
 
 
 @dataclass(frozen=True)
@@ -108,6 +125,9 @@ class ResidualConfig:
             empty ones (all zero, ``a_ij = 0``), as a vessel with fewer
             neighbours sees them. The base policy always sees the scenario's
             own observation.
+        yield_at_limit: Drop a force residual that pulls the command back from an
+            actuator limit the base commands (see the module docstring); force
+            modes only.
     """
 
     mode: str = "force"
@@ -116,6 +136,7 @@ class ResidualConfig:
     extras: tuple[str, ...] = ()
     hide_residual_from_base: bool = True
     neighbour_slots: int | None = None
+    yield_at_limit: bool = False
 
     def __post_init__(self) -> None:
         if self.mode not in RESIDUAL_MODES:
@@ -146,6 +167,13 @@ class ResidualConfig:
                 "after the correction is known. Drop it, or use mode='force'."
             )
         object.__setattr__(self, "extras", extras)
+        if not isinstance(self.yield_at_limit, bool):
+            raise ValueError(f"yield_at_limit must be true or false, got {self.yield_at_limit!r}.")
+        if self.yield_at_limit and self.mode == "kinematic":
+            raise ValueError(
+                "yield_at_limit acts on a force residual; 'kinematic' mode has none. Drop it, "
+                "or use mode='force'."
+            )
         slots = self.neighbour_slots
         if slots is not None and (
             isinstance(slots, bool) or not isinstance(slots, int | np.integer) or slots < 1
@@ -273,6 +301,8 @@ class ResidualController:
             )
         tau_min, tau_max = scenario.tau_limits
         self._tau_scale = np.maximum(np.abs(tau_min), np.abs(tau_max))  # (n, 3)
+        self._near_max = tau_max - LIMIT_TOLERANCE * self._tau_scale
+        self._near_min = tau_min + LIMIT_TOLERANCE * self._tau_scale
         self._theta_dot_max = float(scenario.theta_dot_max)
         self.action_size = config.action_size
         self.input_size = config.input_size(self.layout)
@@ -360,6 +390,9 @@ class ResidualController:
             return self.base_actions.copy()
         command = self.base_actions.copy()
         force = scale * self._tau_scale * a[..., :3]
+        if self.config.yield_at_limit:
+            at_max, at_min = self.base_at_limits()
+            force[(at_max & (force < 0.0)) | (at_min & (force > 0.0))] = 0.0
         command[..., :3] += force
         self._force_residual = force
         if self.config.mode == "force_and_rate":
@@ -369,6 +402,15 @@ class ResidualController:
         else:
             self.residual = force
         return command
+
+    def base_at_limits(self) -> tuple[NDArray[np.bool_], NDArray[np.bool_]]:
+        """Where the base's last force command is at (or past) tau_max and tau_min.
+
+        Returns:
+            Two (B, n, 3) masks, within ``LIMIT_TOLERANCE`` x tau_limit of the limit.
+        """
+        base = self.base_actions[..., :3]
+        return base >= self._near_max, base <= self._near_min
 
     # --- helpers --------------------------------------------------------------------------
 

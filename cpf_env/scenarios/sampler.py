@@ -13,7 +13,9 @@ fleets that training draws from instead:
   all laid out along a common random heading with 4 m lateral spacing;
 * a current of random direction and speed, Gauss-Markov waves and wind of
   random strength;
-* packet loss and delay; model spread; leader speed.
+* packet loss and delay; model spread; leader speed;
+* actuator limits: the nominal force limits times a drawn ``force_scale``
+  (1 by default, so the default draws keep the nominal limits).
 
 Every draw passes ``Scenario``'s checks and ``Graph.validate_for_consensus``.
 ``sample(seed)`` is deterministic: the same seed gives an equal scenario.
@@ -39,6 +41,7 @@ import dataclasses
 import functools
 import math
 from dataclasses import dataclass
+from typing import cast
 
 import numpy as np
 
@@ -50,7 +53,13 @@ from cpf_env.scenarios import splits
 from cpf_env.scenarios.scenario import InitialState, Scenario
 from cpf_env.scenarios.suite import BENCH_STEPS, HEADING_STD, POSITION_STD, THETA_STD
 
-__all__ = ["GRAPH_FAMILIES", "PATH_FAMILIES", "ScenarioDistribution", "check_not_held_out"]
+__all__ = [
+    "GRAPH_FAMILIES",
+    "NOMINAL_TAU_MAX",
+    "PATH_FAMILIES",
+    "ScenarioDistribution",
+    "check_not_held_out",
+]
 
 #: Graph families the distribution draws from.
 GRAPH_FAMILIES = ("chain", "ring", "star", "random")
@@ -61,9 +70,20 @@ SPACING = 4.0
 
 Range = tuple[float, float]
 
+#: The nominal force limits (N, N, N m) that ``force_scale`` multiplies: ``Scenario``'s default.
+NOMINAL_TAU_MAX = cast(
+    tuple[float, float, float],
+    next(f.default for f in dataclasses.fields(Scenario) if f.name == "tau_max"),
+)
+
 
 def _check_range(name: str, value: Range, low: float, high: float) -> None:
-    lo, hi = value
+    try:
+        lo, hi = value
+    except (TypeError, ValueError):
+        raise ValueError(
+            f"ScenarioDistribution.{name} = {value!r} must be a range (lo, hi) of two numbers."
+        ) from None
     if not (math.isfinite(lo) and math.isfinite(hi) and low <= lo <= hi <= high):
         raise ValueError(
             f"ScenarioDistribution.{name} = {value} must be a range (lo, hi) with "
@@ -181,6 +201,9 @@ class ScenarioDistribution:
         loss: Packet-loss probability range.
         delay: Transport delay range (control steps).
         model_spread: Relative model spread range.
+        force_scale: Range of the factor on the nominal force limits
+            (``NOMINAL_TAU_MAX``), one draw for the whole fleet; drawn last, so
+            widening it leaves every other draw of a seed as it was.
         max_steps: Episode length (control steps).
         name: Prefix of the drawn scenarios' names (``<name>_<seed>``).
     """
@@ -196,6 +219,7 @@ class ScenarioDistribution:
     loss: Range = (0.0, 0.4)
     delay: tuple[int, int] = (0, 6)
     model_spread: Range = (0.0, 0.3)
+    force_scale: Range = (1.0, 1.0)
     max_steps: int = BENCH_STEPS
     name: str = "procedural"
 
@@ -223,6 +247,7 @@ class ScenarioDistribution:
         _check_range("loss", self.loss, 0.0, 0.95)
         _check_range("delay", self.delay, 0, self.max_steps - 1)
         _check_range("model_spread", self.model_spread, 0.0, 0.9)
+        _check_range("force_scale", self.force_scale, 0.1, 2.0)
 
     def _graph_kinds(self, n: int) -> list[str]:
         """The families that fit a fleet of n under ``max_degree``."""
@@ -301,13 +326,17 @@ class ScenarioDistribution:
             loss_probability=float(rng.uniform(*self.loss)),
             delay_steps=int(rng.integers(self.delay[0], self.delay[1] + 1)),
         )
+        spread, v0 = float(rng.uniform(*self.model_spread)), float(rng.uniform(*self.v0))
+        force_scale = float(rng.uniform(*self.force_scale))
+        surge, sway, yaw = NOMINAL_TAU_MAX
         scenario = Scenario(
             name=f"{self.name}_{seed}",
             paths=paths,
             topology=graph,
             initial=initial,
-            model_spread=float(rng.uniform(*self.model_spread)),
-            v0=float(rng.uniform(*self.v0)),
+            model_spread=spread,
+            v0=v0,
+            tau_max=(force_scale * surge, force_scale * sway, force_scale * yaw),
             disturbances=disturbances,
             links=links,
             max_steps=self.max_steps,
@@ -330,4 +359,6 @@ class ScenarioDistribution:
             "paths": sorted({type(p).__name__ for p in scenario.paths}),
             "links": dataclasses.asdict(scenario.links),
             "model_spread": scenario.model_spread,
+            "v0": scenario.v0_schedule.values[0],
+            "tau_max": scenario.tau_limits[1][0].tolist(),
         }

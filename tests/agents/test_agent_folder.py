@@ -349,7 +349,8 @@ def test_a_version_2_mlp_with_history_round_trips(tmp_path: Path) -> None:
 
 
 def test_a_fresh_mlp_folder_holds_only_the_fields_of_format_1(tmp_path: Path) -> None:
-    """No 'encoder', 'history', 'asymmetric_critic' nor 'actor': older versions read it."""
+    """No 'encoder', 'history', 'asymmetric_critic', 'yield_at_limit' nor 'actor': older
+    versions read it."""
     config = dataclasses.replace(HISTORY_CONFIG, history=0)
     folder = tmp_path / "mlp"
     folder.mkdir()
@@ -360,11 +361,19 @@ def test_a_fresh_mlp_folder_holds_only_the_fields_of_format_1(tmp_path: Path) ->
     record = json.loads((folder / "config.json").read_text())
     assert set(record) == {"config"}
     fields = {f.name for f in dataclasses.fields(TrainConfig)}
-    assert set(record["config"]) == fields - {"encoder", "history", "asymmetric_critic"}
+    assert set(record["config"]) == fields - {
+        "encoder",
+        "history",
+        "asymmetric_critic",
+        "yield_at_limit",
+    }
     assert TrainConfig.from_json(record["config"]) == config
     assert json.loads((folder / "manifest.json").read_text())["format_version"] == 1
     assert read_agent(folder)[1].input_size == 26
-    for other in (HISTORY_CONFIG, ENCODER_CONFIG):  # set: written, and read back
+    yielding = dataclasses.replace(config, yield_at_limit=True)
+    for other in (HISTORY_CONFIG, ENCODER_CONFIG, yielding):  # set: written, and read back
         assert TrainConfig.from_json(json.loads(json.dumps(other.to_json()))) == other
+    assert yielding.to_json()["yield_at_limit"] is True
+    assert yielding.residual_config().yield_at_limit
     assert "encoder" not in HISTORY_CONFIG.to_json()
     assert ENCODER_CONFIG.to_json()["history"] == 2

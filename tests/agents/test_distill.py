@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import dataclasses
 import importlib.util
 import json
 from pathlib import Path
@@ -19,6 +20,7 @@ from agents.distill import (
     DistillConfig,
     _applied_bounds,
     _group,
+    _groups,
     _labels,
     _loss,
     distill,
@@ -34,7 +36,7 @@ from cpf_commands.distill import distill_main
 from cpf_commands.train_eval import TestSplitEvaluator
 from cpf_env import scenarios
 from cpf_env.envs.residual import ResidualConfig
-from cpf_env.scenarios.sampler import ScenarioDistribution
+from cpf_env.scenarios.sampler import NOMINAL_TAU_MAX, ScenarioDistribution
 from cpf_env.sim.fleet import observation_layout
 from cpf_env.sim.observation import SLOTS
 
@@ -69,6 +71,39 @@ def test_teacher_names_are_checked() -> None:
         DistillConfig(procedural=1, redraw=1)  # type: ignore[arg-type]
     with pytest.raises(ValueError, match="fit_applied must be true or false"):
         DistillConfig(fit_applied="yes")  # type: ignore[arg-type]
+
+
+def test_the_procedural_distribution_is_checked() -> None:
+    settings = DistillConfig(procedural=1, distribution={"v0": [0.1, 0.6]})
+    assert settings.distribution == {"v0": (0.1, 0.6)}  # TOML lists become ranges
+    with pytest.raises(ValueError, match=r"unknown keys \['max_degree'\].*slots"):
+        DistillConfig(procedural=1, distribution={"max_degree": 3})
+    with pytest.raises(ValueError, match=r"distribution: ScenarioDistribution.force_scale"):
+        DistillConfig(procedural=1, distribution={"force_scale": [0.0, 1.0]})
+    with pytest.raises(ValueError, match=r"v0 = \(0.5,\) must be a range \(lo, hi\) of two"):
+        DistillConfig(procedural=1, distribution={"v0": [0.5]})
+    with pytest.raises(ValueError, match="must be a table"):
+        DistillConfig(procedural=1, distribution="wide")  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match="set procedural >= 1"):
+        DistillConfig(distribution={"v0": [0.1, 0.6]})
+
+
+def test_the_procedural_fleets_are_drawn_from_the_configured_distribution(
+    tmp_path: Path,
+) -> None:
+    config = _config(scenario=("bench_mild",), fleets=2, neighbour_slots=4)
+    wide = {"v0": (0.55, 0.6), "force_scale": (0.5, 0.5)}
+    settings = DistillConfig(rounds=1, steps=4, epochs=1, procedural=1, distribution=wide)
+    fleet = _groups(config, settings)[-1].env.sim.scenario
+    expected = ScenarioDistribution(max_degree=4, **wide).sample(0)
+    assert fleet == expected and fleet.name == "procedural_0"
+    np.testing.assert_array_equal(fleet.tau_limits[1], np.tile(NOMINAL_TAU_MAX, (fleet.n, 1)) / 2)
+    assert 0.55 <= fleet.v0_schedule.values[0] <= 0.6
+    plain = _groups(config, DistillConfig(rounds=1, steps=4, epochs=1, procedural=1))[-1]
+    assert plain.env.sim.scenario == ScenarioDistribution(max_degree=4).sample(0) != fleet
+    distill(config, settings, tmp_path / "s")
+    record = json.loads((tmp_path / "s" / "config.json").read_text())["distillation"]
+    assert record["distribution"] == {"v0": [0.55, 0.6], "force_scale": [0.5, 0.5]}
 
 
 @pytest.mark.parametrize("teacher", ["nn_dsc_privileged", "mpc", "oracle"])
@@ -117,6 +152,61 @@ def test_applied_bounds_are_the_residuals_that_command_the_actuator_limits() -> 
     below, beyond = high[..., :3] == 1.0, high[..., :3] == -1.0
     assert np.all(below | beyond | upper) and below.any() and beyond.any()
     assert np.all(at_high[below] <= tau_max[below]) and np.all(at_high[beyond] >= tau_max[beyond])
+
+
+def test_a_residual_that_yields_at_a_limit_has_no_bounds_of_effect_there() -> None:
+    residual = ResidualConfig(mode="force_and_rate", scale=0.5)
+    gated = dataclasses.replace(residual, yield_at_limit=True)
+    envs = []
+    for config in (residual, gated):
+        env = FleetVecEnv("bench_saturation", num_fleets=2, base_policy="nn_dsc", residual=config)
+        env.seed(4)
+        env.reset()
+        tau_min, tau_max = env.scenario.tau_limits
+        env.controller.base_actions[0, 0, :3] = tau_max[0]  # at the limits, within reach
+        env.controller.base_actions[0, 1, :3] = tau_min[1]
+        envs.append(env)
+    plain, bounds = _applied_bounds(envs[0]), _applied_bounds(envs[1])
+    at_max, at_min = envs[1].controller.base_at_limits()
+    at_limit = at_max | at_min
+    assert at_max[0, 0].all() and at_min[0, 1].all() and (~at_limit).any()
+    assert np.all(plain[0, 0, 0, :3] < 0.0) and np.all(plain[1, 0, 1, :3] > 0.0)  # plain: room
+    low, high = bounds[..., :3]
+    assert np.array_equal(low[at_limit], high[at_limit])  # no residual changes the force there
+    np.testing.assert_array_equal(bounds[..., :3][:, ~at_limit], plain[..., :3][:, ~at_limit])
+    np.testing.assert_array_equal(bounds[..., 3], plain[..., 3])  # the rate: [-1, 1]
+    # every residual inside the plain bounds applies the same force on an axis at a limit
+    rng = np.random.default_rng(0)
+    for _ in range(5):
+        a = rng.uniform(-1.0, 1.0, size=(2, 5, 4))
+        command = envs[1].controller.compose(a)[..., :3]
+        tau_min, tau_max = envs[1].scenario.tau_limits
+        applied = np.clip(command, tau_min, tau_max)
+        base = np.clip(envs[1].controller.base_actions[..., :3], tau_min, tau_max)
+        np.testing.assert_allclose(applied[at_limit], base[at_limit], rtol=1e-12)
+
+
+def test_a_student_that_yields_at_a_limit_yields_wherever_it_is_loaded(tmp_path: Path) -> None:
+    config = _config(scenario="bench_saturation", mode="force", scale=0.5, yield_at_limit=True)
+    settings = DistillConfig(rounds=1, steps=20, epochs=2, batch_size=256, fit_applied=True)
+    distill(config, settings, tmp_path / "s")
+    record = json.loads((tmp_path / "s" / "config.json").read_text())
+    assert record["config"]["yield_at_limit"] is True
+    policy = load_policy(tmp_path / "s")  # bench_saturation, on nn_dsc: saturated at first
+    sim = FleetVecEnv("bench_saturation", num_fleets=2).sim
+    obs = sim.reset(seeds=[1, 2])
+    pulled_back = 0
+    for _ in range(20):
+        command = policy.act_batch(obs)
+        at_max, at_min = policy._controller.base_at_limits()
+        residual = policy.diagnostics["residual"]
+        assert not np.any(residual[at_max] < 0.0) and not np.any(residual[at_min] > 0.0)
+        base = policy._controller.base_actions[..., :3]
+        np.testing.assert_array_equal(command[..., :3], base + residual)
+        pulled_back += int(np.sum((at_max | at_min) & (residual == 0.0)))
+        assert np.all(residual[~(at_max | at_min)] != 0.0)  # the student acts elsewhere
+        obs = sim.step(command)
+    assert pulled_back > 0  # the start-up transient reached the limits, and the rule acted
 
 
 def test_the_applied_loss_is_one_sided_only_where_the_target_sits_at_a_bound() -> None:

@@ -133,10 +133,61 @@ def test_extras_are_the_documented_signals() -> None:
     np.testing.assert_allclose(inputs[..., d + 17 : d + 20], np.tanh(z1 / 1.0))
 
 
+def test_a_residual_yields_to_a_base_at_an_actuator_limit() -> None:
+    """With yield_at_limit, a pull back from a limit the base commands is dropped, axis by axis."""
+    scenario = scenarios.get("wang2014")
+    sim = FleetSim(scenario, num_fleets=1)
+    obs = sim.reset(seeds=[0])
+    limit = np.array([9.2, 4.5, 3.0])
+    # per vessel: the base's force (N, N, N m) and the residual's sign on every axis
+    base = np.array(
+        [
+            limit,  # at tau_max
+            limit * 1.5,  # past tau_max (an analytic base saturating)
+            limit * (1 - 0.5e-3),  # within the tolerance of tau_max
+            limit * (1 - 0.01),  # inside the limits
+            -limit,  # at tau_min
+        ]
+    )
+    signs = np.array([-1, 1, -1])  # the residual pulls back on surge and yaw, pushes on sway
+    a = np.tile(0.4 * signs, (1, 5, 1)).astype(np.float64)
+    commands = {}
+    for gate in (False, True):
+        loop = ResidualController(
+            scenario,
+            make_policy("nn_dsc", scenario),
+            1,
+            ResidualConfig(scale=0.5, yield_at_limit=gate),
+        )
+        loop.observe(obs)
+        loop.base_actions[0, :, :3] = base
+        commands[gate] = loop.compose(a)
+        applied_residual = loop.residual.copy()
+    force = 0.5 * limit * a[0]
+    np.testing.assert_allclose(commands[False][0, :, :3], base + force, rtol=1e-14)
+    pulled_back = np.zeros((5, 3), dtype=bool)
+    pulled_back[:3] = signs < 0  # at or past tau_max, the negative residuals
+    pulled_back[4] = signs > 0  # at tau_min, the positive one
+    expected = np.where(pulled_back, base, base + force)
+    np.testing.assert_allclose(commands[True][0, :, :3], expected, rtol=1e-14)
+    np.testing.assert_array_equal(applied_residual[0], np.where(pulled_back, 0.0, force))
+    assert np.array_equal(commands[True][0, 3], commands[False][0, 3])  # inside: unchanged
+    assert np.array_equal(commands[True][..., 3:], commands[False][..., 3:])  # rate, messages
+    loop.base_actions[0, :, :3] = base * 0.5  # nothing at a limit: the plain rule, bit for bit
+    plain = ResidualController(
+        scenario, make_policy("nn_dsc", scenario), 1, ResidualConfig(scale=0.5)
+    )
+    plain.observe(obs)
+    plain.base_actions[0, :, :3] = base * 0.5
+    assert np.array_equal(loop.compose(a), plain.compose(a))
+
+
 @pytest.mark.parametrize(
     ("options", "message"),
     [
         ({"mode": "torque"}, "residual mode"),
+        ({"yield_at_limit": 1}, "yield_at_limit must be true or false"),
+        ({"yield_at_limit": True, "mode": "kinematic"}, "'kinematic' mode has none"),
         ({"scale": 0.0}, "residual scale"),
         ({"scale": float("nan")}, "residual scale"),
         ({"extras": ("v0_of_everyone",)}, "extras"),

@@ -10,6 +10,7 @@ import pytest
 from cpf_env.scenarios import splits
 from cpf_env.scenarios.sampler import (
     GRAPH_FAMILIES,
+    NOMINAL_TAU_MAX,
     PATH_FAMILIES,
     ScenarioDistribution,
     check_not_held_out,
@@ -104,6 +105,21 @@ def test_evaluation_splits_are_refused(name: str, split: str) -> None:
         check_not_held_out(held.replace(name="procedural_1", description=""))
 
 
+def test_force_scale_scales_the_limits_and_leaves_every_other_draw() -> None:
+    nominal, weak = ScenarioDistribution(), ScenarioDistribution(force_scale=(0.4, 1.0))
+    scales = []
+    for seed in range(30):
+        plain, drawn = nominal.sample(seed), weak.sample(seed)
+        np.testing.assert_array_equal(plain.tau_limits[1], np.tile(NOMINAL_TAU_MAX, (plain.n, 1)))
+        scale = drawn.tau_limits[1] / plain.tau_limits[1]
+        assert np.allclose(scale, scale[0, 0]) and 0.4 <= scale[0, 0] <= 1.0
+        np.testing.assert_array_equal(drawn.tau_limits[0], -drawn.tau_limits[1])
+        assert drawn.replace(tau_max=NOMINAL_TAU_MAX) == plain  # the scale is drawn last
+        scales.append(scale[0, 0])
+    assert np.ptp(scales) > 0.3
+    assert nominal.describe(plain)["tau_max"] == list(NOMINAL_TAU_MAX)
+
+
 def test_bad_distributions_are_refused() -> None:
     with pytest.raises(ValueError, match="sizes"):
         ScenarioDistribution(sizes=(1, 4))
@@ -111,3 +127,7 @@ def test_bad_distributions_are_refused() -> None:
         ScenarioDistribution(path_families=("spiral",))
     with pytest.raises(ValueError, match="loss"):
         ScenarioDistribution(loss=(0.5, 0.2))
+    with pytest.raises(ValueError, match=r"force_scale = \(0.0, 1.0\) must be a range"):
+        ScenarioDistribution(force_scale=(0.0, 1.0))
+    with pytest.raises(ValueError, match="of two numbers"):
+        ScenarioDistribution(v0=(0.1,))  # type: ignore[arg-type]
