@@ -25,6 +25,13 @@ mean|, floor)`` and the lower end of its 95 % bootstrap interval is above
 zero (a real, not a noisy, regression). The floors ignore differences
 below what matters physically on a 1.255 m model ship (1 mm, 1 mrad, 1 %
 of the distance v0 T, any extra failure).
+
+A mean can hide one bad episode among many good ones (a vessel that ends
+one episode in ten a metre off its place). ``worst_episode_regressed``
+reads the worst episode of each guarded metric instead, with the same
+tolerance and floor against the reference's worst episode; it does not
+change the label, and ``cpf-bench`` prints it next to the regressions
+(``views.regression_lines``).
 """
 
 from __future__ import annotations
@@ -46,6 +53,7 @@ __all__ = [
     "suite_cost_difference",
     "verdict",
     "verdicts",
+    "worst_episode_regressed",
 ]
 
 #: Relative tolerance of a guarded metric, as a fraction of the reference's mean.
@@ -101,6 +109,22 @@ def _regressed(cell: CellResult, base: CellResult) -> tuple[str, ...]:
         )
         tolerance = max(RELATIVE_TOLERANCE * abs(float(base.metrics[metric].mean())), floor)
         if mean > tolerance and low > 0.0:
+            worse.append(label)
+    return tuple(worse)
+
+
+def worst_episode_regressed(cell: CellResult, base: CellResult) -> tuple[str, ...]:
+    """The guarded metrics whose worst episode in ``cell`` is worse than ``base``'s worst.
+
+    Worse by more than ``max(RELATIVE_TOLERANCE x |base's worst|, floor)``;
+    the worst is the largest value, or the smallest of a metric where higher
+    is better. Not part of the verdict's label.
+    """
+    worse = []
+    for metric, (label, floor, higher_better) in GUARDED.items():
+        sign = -1.0 if higher_better else 1.0
+        own, reference = (float(np.max(sign * c.metrics[metric])) for c in (cell, base))
+        if own - reference > max(RELATIVE_TOLERANCE * abs(reference), floor):
             worse.append(label)
     return tuple(worse)
 

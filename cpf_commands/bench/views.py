@@ -7,7 +7,7 @@ the same rows give the same bytes.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 
 import numpy as np
 from matplotlib.figure import Figure
@@ -22,6 +22,7 @@ from cpf_commands.bench.verdict import (
     RELATIVE_TOLERANCE,
     Verdict,
     verdicts,
+    worst_episode_regressed,
 )
 
 __all__ = [
@@ -76,23 +77,51 @@ def regression_lines(cells: Sequence[CellResult], reference: str, margin: float)
     """One line per verdict with a regressed guarded metric: the means, policy vs reference.
 
     Final-window means in SI units (m, rad; progress as a fraction of v0 T,
-    failures as a fraction of the episodes).
+    failures as a fraction of the episodes). Then one line per verdict whose
+    worst episode regressed on a metric its mean did not
+    (``verdict.worst_episode_regressed``): the worst episodes' values.
     """
     by_key = {(cell.policy, cell.scenario): cell for cell in cells}
     label_of = {label: name for name, (label, _, _) in GUARDED.items()}
-    lines = []
+    lines, tails = [], []
     for result in verdicts(cells, reference, margin):
-        if not result.regressed:
-            continue
         cell, base = by_key[result.policy, result.scenario], by_key[reference, result.scenario]
-        values = ", ".join(
-            f"{label} {float(np.mean(cell.metrics[label_of[label]])):.3g}"
-            f"{_UNITS.get(label, '')} vs {float(np.mean(base.metrics[label_of[label]])):.3g}"
-            f"{_UNITS.get(label, '')}"
-            for label in result.regressed
-        )
-        lines.append(f"  {result.policy} on {result.scenario}, worse than {reference}: {values}")
-    return lines
+        if result.regressed:
+            values = _values(cell, base, result.regressed, label_of, np.mean)
+            lines.append(
+                f"  {result.policy} on {result.scenario}, worse than {reference}: {values}"
+            )
+        tail = [m for m in worst_episode_regressed(cell, base) if m not in result.regressed]
+        if tail:
+            values = ", ".join(
+                _values(cell, base, (label,), label_of, _worst(label_of[label])) for label in tail
+            )
+            tails.append(
+                f"  {result.policy} on {result.scenario}, worst episode worse than "
+                f"{reference}'s worst: {values}"
+            )
+    return lines + tails
+
+
+def _worst(metric: str) -> Callable[[np.ndarray], float]:
+    """The worst-episode statistic of a guarded metric: its max, or its min if higher is better."""
+    return np.min if GUARDED[metric][2] else np.max
+
+
+def _values(
+    cell: CellResult,
+    base: CellResult,
+    labels: Sequence[str],
+    label_of: dict[str, str],
+    statistic: Callable[[np.ndarray], float],
+) -> str:
+    """``label value vs value`` of each guarded metric, policy then reference, with units."""
+    return ", ".join(
+        f"{label} {float(statistic(cell.metrics[label_of[label]])):.3g}"
+        f"{_UNITS.get(label, '')} vs {float(statistic(base.metrics[label_of[label]])):.3g}"
+        f"{_UNITS.get(label, '')}"
+        for label in labels
+    )
 
 
 def _interval(row: dict[str, object] | None, estimate: str = "mean") -> str:

@@ -124,6 +124,36 @@ def test_marl_eval_export_has_the_nested_layout(tmp_path):
     assert "speed_estimate_error_rms" in metrics and len(metrics["cross_track_error_rms"]) == 1
 
 
+def test_one_bad_episode_is_named_without_changing_the_verdict():
+    from cpf_commands.bench.ranking import terminal_report
+    from cpf_commands.bench.report import summarize
+    from cpf_commands.bench.verdict import worst_episode_regressed
+
+    formation = np.full(len(SEEDS), 0.005)
+    formation[3] = 1.1  # one episode in ten ends a metre off the formation
+    cell = _cell("p", BASE_COST - 50.0, formation_error_rms_window=formation)
+    assert verdict(cell, REFERENCE).label == "beats"  # the mean's interval reaches below zero
+    assert worst_episode_regressed(cell, REFERENCE) == ("formation",)
+    text = terminal_report(summarize([REFERENCE, cell], "nn_dsc"), [REFERENCE, cell], "nn_dsc")
+    assert (
+        "p on bench_mild, worst episode worse than nn_dsc's worst: formation 1.1 m vs 0.01 m"
+        in (text)
+    )
+    assert "p on bench_mild, worse than nn_dsc" not in text
+    # within the tolerance, below the floor, or better: not named
+    for value in (0.0105, 0.0109, 0.001):
+        close = np.full(len(SEEDS), 0.005)
+        close[3] = value
+        near = _cell("q", BASE_COST - 50.0, cross_track_error_rms_window=close)
+        assert worst_episode_regressed(near, REFERENCE) == ()
+    progress = np.full(len(SEEDS), 0.9)
+    progress[0] = 0.5  # one episode that made half the way: higher is better
+    slow = _cell("r", BASE_COST - 50.0, progress_window=progress)
+    assert worst_episode_regressed(slow, REFERENCE) == ("progress",)
+    failed = _cell("s", BASE_COST - 50.0, terminated=np.eye(len(SEEDS))[0])
+    assert "failures" in worst_episode_regressed(failed, REFERENCE)
+
+
 def test_terminal_names_the_regressed_metrics_with_their_values():
     from cpf_commands.bench.ranking import terminal_report
     from cpf_commands.bench.report import summarize
