@@ -61,7 +61,7 @@ BENCHES = {
     },
     **{
         f"bench_{split}{variant}": "mpc_tuned"
-        for variant in ("_tuned", "_tuned_deepsets", "_tuned_applied", "_tuned_yield")
+        for variant in ("_tuned", "_tuned_deepsets", "_tuned_applied", "_tuned_yield", "_tuned_yield_told")
         for split in ("test", "shift", "procedural")
     },
 }
