@@ -5,9 +5,9 @@ r"""Print results/student/README.md's tables from the committed benchmark episod
 
 For each of ``bench_test``, ``bench_shift`` and ``bench_procedural``, and
 their ``_k6`` (6-slot students), ``_deepsets`` (encoder and history
-students), ``_tuned``, ``_tuned_deepsets``, ``_tuned_applied`` and
-``_tuned_yield`` versions (students on ``mpc_tuned``, which there takes
-``mpc``'s place below) (those that exist),
+students), ``_tuned``, ``_tuned_deepsets``, ``_tuned_applied``,
+``_tuned_yield`` and ``_tuned_yield_told`` versions (students on
+``mpc_tuned``, which there takes ``mpc``'s place below) (those that exist),
 one row per scenario: the mean episode cost of ``nn_dsc``,
 ``mpc`` and ``oracle`` (where it ran) and of each student (one per training
 seed), each student's paired cost difference to ``mpc`` (mean over seeds
@@ -61,7 +61,13 @@ BENCHES = {
     },
     **{
         f"bench_{split}{variant}": "mpc_tuned"
-        for variant in ("_tuned", "_tuned_deepsets", "_tuned_applied", "_tuned_yield", "_tuned_yield_told")
+        for variant in (
+            "_tuned",
+            "_tuned_deepsets",
+            "_tuned_applied",
+            "_tuned_yield",
+            "_tuned_yield_told",
+        )
         for split in ("test", "shift", "procedural")
     },
 }
