@@ -53,6 +53,7 @@ __all__ = [
     "suite_cost_difference",
     "verdict",
     "verdicts",
+    "worst_episode",
     "worst_episode_regressed",
 ]
 
@@ -113,18 +114,22 @@ def _regressed(cell: CellResult, base: CellResult) -> tuple[str, ...]:
     return tuple(worse)
 
 
+def worst_episode(metric: str, values: np.ndarray) -> float:
+    """A guarded metric's worst episode value: its largest, smallest if higher is better."""
+    return float(np.min(values) if GUARDED[metric][2] else np.max(values))
+
+
 def worst_episode_regressed(cell: CellResult, base: CellResult) -> tuple[str, ...]:
     """The guarded metrics whose worst episode in ``cell`` is worse than ``base``'s worst.
 
-    Worse by more than ``max(RELATIVE_TOLERANCE x |base's worst|, floor)``;
-    the worst is the largest value, or the smallest of a metric where higher
-    is better. Not part of the verdict's label.
+    Worse (``worst_episode``) by more than ``max(RELATIVE_TOLERANCE x |base's
+    worst|, floor)``. Not part of the verdict's label.
     """
     worse = []
     for metric, (label, floor, higher_better) in GUARDED.items():
-        sign = -1.0 if higher_better else 1.0
-        own, reference = (float(np.max(sign * c.metrics[metric])) for c in (cell, base))
-        if own - reference > max(RELATIVE_TOLERANCE * abs(reference), floor):
+        own, reference = (worst_episode(metric, c.metrics[metric]) for c in (cell, base))
+        excess = reference - own if higher_better else own - reference
+        if excess > max(RELATIVE_TOLERANCE * abs(reference), floor):
             worse.append(label)
     return tuple(worse)
 

@@ -22,6 +22,7 @@ from cpf_commands.bench.verdict import (
     RELATIVE_TOLERANCE,
     Verdict,
     verdicts,
+    worst_episode,
     worst_episode_regressed,
 )
 
@@ -82,20 +83,17 @@ def regression_lines(cells: Sequence[CellResult], reference: str, margin: float)
     (``verdict.worst_episode_regressed``): the worst episodes' values.
     """
     by_key = {(cell.policy, cell.scenario): cell for cell in cells}
-    label_of = {label: name for name, (label, _, _) in GUARDED.items()}
     lines, tails = [], []
     for result in verdicts(cells, reference, margin):
         cell, base = by_key[result.policy, result.scenario], by_key[reference, result.scenario]
         if result.regressed:
-            values = _values(cell, base, result.regressed, label_of, np.mean)
+            values = _values(cell, base, result.regressed, lambda _, v: float(np.mean(v)))
             lines.append(
                 f"  {result.policy} on {result.scenario}, worse than {reference}: {values}"
             )
         tail = [m for m in worst_episode_regressed(cell, base) if m not in result.regressed]
         if tail:
-            values = ", ".join(
-                _values(cell, base, (label,), label_of, _worst(label_of[label])) for label in tail
-            )
+            values = _values(cell, base, tail, worst_episode)
             tails.append(
                 f"  {result.policy} on {result.scenario}, worst episode worse than "
                 f"{reference}'s worst: {values}"
@@ -103,23 +101,21 @@ def regression_lines(cells: Sequence[CellResult], reference: str, margin: float)
     return lines + tails
 
 
-def _worst(metric: str) -> Callable[[np.ndarray], float]:
-    """The worst-episode statistic of a guarded metric: its max, or its min if higher is better."""
-    return np.min if GUARDED[metric][2] else np.max
-
-
 def _values(
     cell: CellResult,
     base: CellResult,
     labels: Sequence[str],
-    label_of: dict[str, str],
-    statistic: Callable[[np.ndarray], float],
+    statistic: Callable[[str, np.ndarray], float],
 ) -> str:
-    """``label value vs value`` of each guarded metric, policy then reference, with units."""
+    """``label value vs value`` of guarded metrics (short labels), policy then reference.
+
+    ``statistic(metric, episode values)`` gives each value; units as printed (``_UNITS``).
+    """
+    metric_of = {label: name for name, (label, _, _) in GUARDED.items()}
     return ", ".join(
-        f"{label} {float(statistic(cell.metrics[label_of[label]])):.3g}"
-        f"{_UNITS.get(label, '')} vs {float(statistic(base.metrics[label_of[label]])):.3g}"
-        f"{_UNITS.get(label, '')}"
+        f"{label} {statistic(metric_of[label], cell.metrics[metric_of[label]]):.3g}"
+        f"{_UNITS.get(label, '')} vs "
+        f"{statistic(metric_of[label], base.metrics[metric_of[label]]):.3g}{_UNITS.get(label, '')}"
         for label in labels
     )
 
