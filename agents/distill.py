@@ -24,6 +24,22 @@ base it runs on; where the teacher's correction is beyond the residual's
 reach the label is clipped (``DistillReport.clipped`` says how often; raise
 ``TrainConfig.scale`` if it is large).
 
+Which base the label is taken on (``DistillConfig.label_base``). By default
+(``"env"``) it is the env's base, which is shown the applied force minus the
+residual (``hide_residual_from_base``): a base with a force observer
+(``mpc_tuned``) takes the student's residual for a disturbance and cancels
+it, so tau_base already holds minus the observer's copy of the residual and
+the label a* holds it back plus the teacher's correction. A steady residual
+of the student then labels itself: nothing in the data pulls it to zero, and
+what the student holds there is arbitrary (seen as a jump of its output
+wherever its inputs jump, e.g. when the graph switches). With ``"told"`` the
+label is taken on a twin of the base that acts on the same observations
+with the full applied force shown (the base as ``hide_residual_from_base =
+false`` runs it): the label is the teacher's correction alone, and a
+residual the student does not need is labelled zero. The rollouts, the
+plant and the applied bounds stay the env's base's: the student is deployed
+on it unchanged.
+
 The loss. By default it is the mean squared error between the student's
 pre-clip output u and the clipped label. With ``DistillConfig.fit_applied``
 it is taken on the force the vessel receives. The plant saturates the
@@ -112,6 +128,7 @@ from agents.device import torch_device
 from agents.history_env import HistoryVecEnv
 from agents.loading import one_torch_thread
 from agents.mixture_env import split_fleets
+from agents.resolve import resolve_base_policy
 from agents.schedule import EvaluationLog, Evaluator
 from agents.slot_statistics import shared_slot_statistics
 from agents.train_config import TrainConfig
@@ -127,6 +144,7 @@ from cpf_env.scenarios.sampler import ScenarioDistribution
 from cpf_env.scenarios.splits import EVALUATION_SEED, check_training
 
 __all__ = [
+    "LABEL_BASES",
     "TEACHERS",
     "DistillConfig",
     "DistillReport",
@@ -144,6 +162,8 @@ LABEL_MODES = ("force", "force_and_rate")
 
 #: Names a teacher may have: ``baselines.POLICIES`` and ``baselines.PRIVILEGED``.
 TEACHERS = tuple(sorted(ALL_POLICIES))
+#: The base a label is taken on (``DistillConfig.label_base``).
+LABEL_BASES = ("env", "told")
 
 
 @dataclass(frozen=True)
@@ -173,6 +193,10 @@ class DistillConfig:
             for leaders up to 0.6 m/s and force limits down to 0.4 of nominal.
             ``max_degree`` (the student's slots) and ``name`` are not settable.
             Empty: the defaults.
+        label_base: The base the teacher's command is turned into a residual on
+            (``LABEL_BASES``): ``"env"``, the env's base; ``"told"``, a twin of it
+            told the full applied force (see the module's docstring; needs a base
+            that hides the residual, the default).
     """
 
     teacher: str = "nn_dsc_privileged"
@@ -185,6 +209,7 @@ class DistillConfig:
     redraw: bool = False
     fit_applied: bool = False
     distribution: Mapping[str, Any] = field(default_factory=dict)
+    label_base: str = "env"
 
     def __post_init__(self) -> None:
         if self.teacher not in TEACHERS:
@@ -210,6 +235,11 @@ class DistillConfig:
                 raise ValueError(
                     f"DistillConfig.{name} must be true or false, got {getattr(self, name)!r}."
                 )
+        if self.label_base not in LABEL_BASES:
+            raise ValueError(
+                f"DistillConfig.label_base must be one of {list(LABEL_BASES)}, "
+                f"got {self.label_base!r}."
+            )
         if self.redraw and self.procedural == 0:
             raise ValueError(
                 "DistillConfig.redraw draws fresh procedural fleets each round; set "
@@ -292,6 +322,8 @@ class _Group:
         env: The group's ``FleetVecEnv`` (its simulator, base and residual controller).
         view: What the student reads: ``env``, or ``HistoryVecEnv(env, H)`` with a history.
         teacher: The teacher, bound to ``env.sim`` (a privileged one reads it).
+        twin: With ``label_base="told"``, the base told the full applied force
+            (the labels' base); None: the labels are taken on ``env``'s base.
         obs: The student's last inputs (B n, d) of this group.
         draw: The procedural draw seed, or None for a named scenario.
     """
@@ -299,23 +331,34 @@ class _Group:
     env: FleetVecEnv
     view: FleetVecEnv | HistoryVecEnv
     teacher: FleetPolicy
+    twin: FleetPolicy | None
     obs: NDArray[np.float32]
     draw: int | None
 
 
-def _labels(env: FleetVecEnv, teacher: FleetPolicy) -> NDArray[np.float64]:
-    """The teacher's command as a residual on the env's base, (B, n, k), unclipped.
+def _labels(
+    env: FleetVecEnv, teacher: FleetPolicy, twin: FleetPolicy | None = None
+) -> NDArray[np.float64]:
+    """The teacher's command as a residual on the labels' base, (B, n, k), unclipped.
 
     The teacher acts once (its states advance one step) on the fleets' true
-    observations.
+    observations; so does ``twin``, the base told the full applied force
+    (``label_base="told"``), on the same observations, which report that
+    force. Without a twin the base is the env's, which acted on the present
+    observation when the env took it.
     """
-    command = np.asarray(teacher.act_batch(env.sim.arrays.obs), dtype=np.float64)
+    obs = np.asarray(env.sim.arrays.obs, dtype=np.float64)
+    command = np.asarray(teacher.act_batch(obs), dtype=np.float64)
     controller = env.controller
-    force = (command[..., :3] - controller.base_actions[..., :3]) / _force_reach(env)
+    if twin is None:
+        base = controller.base_actions
+    else:
+        base = np.asarray(twin.act_batch(obs), dtype=np.float64)
+    force = (command[..., :3] - base[..., :3]) / _force_reach(env)
     if controller.config.mode == "force":
         return force
     rate_reach = controller.config.scale * float(env.scenario.theta_dot_max)
-    rate = (command[..., 3] - controller.base_actions[..., 3]) / rate_reach
+    rate = (command[..., 3] - base[..., 3]) / rate_reach
     return np.concatenate([force, rate[..., None]], axis=-1)
 
 
@@ -381,7 +424,7 @@ def _rollout(
     size = groups[0].env.controller.action_size
     for _ in range(steps):
         label = np.concatenate(
-            [_labels(group.env, group.teacher).reshape(-1, size) for group in groups]
+            [_labels(g.env, g.teacher, g.twin).reshape(-1, size) for g in groups]
         )
         bound = np.concatenate(
             [_applied_bounds(group.env).reshape(2, -1, size) for group in groups], axis=1
@@ -404,6 +447,8 @@ def _rollout(
             ended = np.asarray(dones).reshape(-1, group.env.n)[:, 0]
             if ended.any():
                 group.teacher.reset_fleets(ended)
+                if group.twin is not None:
+                    group.twin.reset_fleets(ended)
             start = stop
     return np.concatenate(inputs), np.concatenate(labels), np.concatenate(bounds, axis=1)
 
@@ -465,6 +510,16 @@ def check_distillation(config: TrainConfig, settings: DistillConfig) -> None:
         raise ValueError(
             f"distill over {groups} scenarios (training scenarios and procedural draws) needs "
             f"at least one fleet each; got fleets={config.fleets}. Raise fleets."
+        )
+    if settings.label_base == "told" and (
+        config.base == "none" or not config.hide_residual_from_base
+    ):
+        raise ValueError(
+            "label_base='told' takes the labels on a twin of the base told the full applied "
+            "force, which differs from the env's base only when a base hides the residual "
+            f"from it; this run has base={config.base!r}, hide_residual_from_base="
+            f'{config.hide_residual_from_base}. Leave label_base out ("env") or use the '
+            "default hide_residual_from_base = true with a base."
         )
     draws = settings.procedural * (settings.rounds if settings.redraw else 1)
     if draws > EVALUATION_SEED:
@@ -541,7 +596,10 @@ def _group(
     offset: int,
     draw: int | None,
 ) -> _Group:
-    """One group's env (seeded ``config.seed + offset``, reset), the student's view, the teacher."""
+    """One group's env (seeded ``config.seed + offset``, reset), the student's view, the teacher.
+
+    With ``label_base="told"`` also the base's twin (``_Group.twin``), reset.
+    """
     base = None if config.base == "none" else config.base  # mpc runs fleet by fleet
     env = FleetVecEnv(
         scenario, num_fleets=fleets, base_policy=base, residual=_learner_residual(config)
@@ -553,7 +611,12 @@ def _group(
     obs = np.asarray(view.reset(), dtype=np.float32)
     teacher = make_policy(settings.teacher, env.sim)
     teacher.reset()
-    return _Group(env, view, teacher, obs, draw)
+    twin = None
+    if settings.label_base == "told":
+        twin = resolve_base_policy(config.base, scenario)
+        assert twin is not None  # check_distillation refuses base="none"
+        twin.reset()
+    return _Group(env, view, teacher, twin, obs, draw)
 
 
 def _groups(config: TrainConfig, settings: DistillConfig) -> list[_Group]:

@@ -6,7 +6,7 @@ r"""Print results/student/README.md's tables from the committed benchmark episod
 For each of ``bench_test``, ``bench_shift`` and ``bench_procedural``, and
 their ``_k6`` (6-slot students), ``_deepsets`` (encoder and history
 students), ``_tuned``, ``_tuned_deepsets``, ``_tuned_applied``,
-``_tuned_yield`` and ``_tuned_yield_told`` versions (students on
+``_tuned_yield``, ``_tuned_yield_told`` and ``_tuned_yield_twin`` versions (students on
 ``mpc_tuned``, which there takes ``mpc``'s place below) (those that exist),
 one row per scenario: the mean episode cost of ``nn_dsc``,
 ``mpc`` and ``oracle`` (where it ran) and of each student (one per training
@@ -67,6 +67,7 @@ BENCHES = {
             "_tuned_applied",
             "_tuned_yield",
             "_tuned_yield_told",
+            "_tuned_yield_twin",
         )
         for split in ("test", "shift", "procedural")
     },

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
-from conftest import STUDENT_TOML
+from conftest import ROOT, STUDENT_TOML
 from safetensors.torch import load_file
 
 from agents import load_policy
@@ -23,6 +23,8 @@ from agents.distill import (
     _groups,
     _labels,
     _loss,
+    _rollout,
+    check_distillation,
     distill,
     draw_seeds,
     student_actions,
@@ -32,9 +34,10 @@ from agents.train_config import TrainConfig
 from agents.vec_env import FleetVecEnv
 from baselines import make_policy
 from cpf_commands.bench.run import run_bench
-from cpf_commands.distill import distill_main
+from cpf_commands.distill import distill_main, read_distill_config
 from cpf_commands.train_eval import TestSplitEvaluator
 from cpf_env import scenarios
+from cpf_env.envs.input_statistics import InputStatistics
 from cpf_env.envs.residual import ResidualConfig
 from cpf_env.scenarios.sampler import NOMINAL_TAU_MAX, ScenarioDistribution
 from cpf_env.sim.fleet import observation_layout
@@ -71,6 +74,8 @@ def test_teacher_names_are_checked() -> None:
         DistillConfig(procedural=1, redraw=1)  # type: ignore[arg-type]
     with pytest.raises(ValueError, match="fit_applied must be true or false"):
         DistillConfig(fit_applied="yes")  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match=r"label_base must be one of \['env', 'told'\]"):
+        DistillConfig(label_base="shadow")
 
 
 def test_the_procedural_distribution_is_checked() -> None:
@@ -127,6 +132,57 @@ def test_force_labels_leave_the_rate_to_the_base() -> None:
     env = _env_after(5, ResidualConfig(mode="force", scale=1.0))
     label = _labels(env, make_policy("mpc", env.sim))
     assert label.shape == (2, 5, 3)
+
+
+def _constant_residual_labels(label_base: str, residual: float, steps: int) -> np.ndarray:
+    """Labels (steps, B, n, 3) of a student whose output is (r, 0, -r) on every step."""
+    config = _config(base="mpc_tuned", mode="force", scale=0.5)
+    settings = DistillConfig(teacher="nn_dsc", label_base=label_base)
+    group = _group(config, settings, scenarios.make_scenario("bench_current_waves"), 2, 0, None)
+    size = group.obs.shape[1]
+    student = student_actor(config, size, 3)
+    with torch.no_grad():
+        student.output.bias[:] = torch.tensor([residual, 0.0, -residual])
+    _, labels, _ = _rollout([group], student, InputStatistics(np.zeros(size), np.ones(size)), steps)
+    return labels.reshape(steps, 2, 5, 3)
+
+
+def test_labels_on_the_told_twin_leave_out_the_residual_the_base_cancels() -> None:
+    # mpc_tuned's force observer is shown the applied force minus the residual, so
+    # it takes a steady residual for a disturbance and cancels it (time constant
+    # 0.2 s): after 6 s the env's base commands exactly the residual less than the
+    # twin told the whole force, and a label taken on it holds the residual again.
+    steps, residual = 120, 0.2
+    on_env = _constant_residual_labels("env", residual, steps)
+    on_twin = _constant_residual_labels("told", residual, steps)
+    difference = on_env - on_twin
+    np.testing.assert_array_equal(difference[0], 0.0)  # before any residual acted
+    np.testing.assert_allclose(
+        difference[-1], np.tile([residual, 0.0, -residual], (2, 5, 1)), atol=1e-6
+    )
+    # without a residual the twin is the env's base, bit for bit, for every step
+    np.testing.assert_array_equal(
+        _constant_residual_labels("env", 0.0, steps), _constant_residual_labels("told", 0.0, steps)
+    )
+
+
+@pytest.mark.parametrize(
+    "path",
+    sorted(p for p in (ROOT / "examples/student").rglob("*.toml") if "[distill]" in p.read_text()),
+    ids=lambda p: p.stem,
+)
+def test_the_example_distillation_files_are_valid(path: Path) -> None:
+    config, settings = read_distill_config(path, seed=0)
+    check_distillation(config, settings)
+
+
+def test_told_labels_need_a_base_that_hides_the_residual(tmp_path: Path) -> None:
+    told = dataclasses.replace(TINY, label_base="told")
+    with pytest.raises(ValueError, match=r"label_base='told'.*hide_residual_from_base=False"):
+        distill(_config(hide_residual_from_base=False), told, tmp_path / "x")
+    with pytest.raises(ValueError, match=r"label_base='told'.*base='none'"):
+        distill(_config(base="none", mode="force_and_rate", scale=1.0), told, tmp_path / "x")
+    assert not (tmp_path / "x").exists()
 
 
 def test_applied_bounds_are_the_residuals_that_command_the_actuator_limits() -> None:
