@@ -26,19 +26,23 @@ reach the label is clipped (``DistillReport.clipped`` says how often; raise
 
 Which base the label is taken on (``DistillConfig.label_base``). By default
 (``"env"``) it is the env's base, which is shown the applied force minus the
-residual (``hide_residual_from_base``): a base with a force observer
-(``mpc_tuned``) takes the student's residual for a disturbance and cancels
-it, so tau_base already holds minus the observer's copy of the residual and
+residual (``hide_residual_from_base``): a base with a residual-force observer
+(``mpc``, ``mpc_tuned``) takes the student's residual for a disturbance and
+cancels it, so tau_base already holds minus the observer's copy of the residual and
 the label a* holds it back plus the teacher's correction. A steady residual
 of the student then labels itself: nothing in the data pulls it to zero, and
 what the student holds there is arbitrary (seen as a jump of its output
-wherever its inputs jump, e.g. when the graph switches). With ``"told"`` the
-label is taken on a twin of the base that acts on the same observations
-with the full applied force shown (the base as ``hide_residual_from_base =
-false`` runs it): the label is the teacher's correction alone, and a
-residual the student does not need is labelled zero. The rollouts, the
+wherever its inputs jump, e.g. when the graph switches). With ``"twin"`` the
+label is taken on a twin of the env's base: a copy of it, seeded and reset
+as the env seeds and resets it, that acts on the same observations with the
+whole applied force shown (the base as ``hide_residual_from_base = false``
+runs it). With no residual the twin commands what the env's base does, bit
+for bit; with one, the label is the teacher's correction alone, and a
+residual the teacher does not ask for is labelled zero. The rollouts, the
 plant and the applied bounds stay the env's base's: the student is deployed
-on it unchanged.
+on it unchanged. Only the observer bases (``agents.fleetwise.WHOLE_BATCH_BASES``)
+take it: ``nn_dsc``'s auxiliary system, shown the whole force, would take
+the residual for saturation.
 
 The loss. By default it is the mean squared error between the student's
 pre-clip output u and the clipped label. With ``DistillConfig.fit_applied``
@@ -125,10 +129,10 @@ from numpy.typing import NDArray
 
 from agents.agent_folder import PolicyNetwork, build_actor, write_agent
 from agents.device import torch_device
+from agents.fleetwise import WHOLE_BATCH_BASES
 from agents.history_env import HistoryVecEnv
 from agents.loading import one_torch_thread
 from agents.mixture_env import split_fleets
-from agents.resolve import resolve_base_policy
 from agents.schedule import EvaluationLog, Evaluator
 from agents.slot_statistics import shared_slot_statistics
 from agents.train_config import TrainConfig
@@ -163,7 +167,7 @@ LABEL_MODES = ("force", "force_and_rate")
 #: Names a teacher may have: ``baselines.POLICIES`` and ``baselines.PRIVILEGED``.
 TEACHERS = tuple(sorted(ALL_POLICIES))
 #: The base a label is taken on (``DistillConfig.label_base``).
-LABEL_BASES = ("env", "told")
+LABEL_BASES = ("env", "twin")
 
 
 @dataclass(frozen=True)
@@ -194,9 +198,9 @@ class DistillConfig:
             ``max_degree`` (the student's slots) and ``name`` are not settable.
             Empty: the defaults.
         label_base: The base the teacher's command is turned into a residual on
-            (``LABEL_BASES``): ``"env"``, the env's base; ``"told"``, a twin of it
-            told the full applied force (see the module's docstring; needs a base
-            that hides the residual, the default).
+            (``LABEL_BASES``): ``"env"``, the env's base; ``"twin"``, a copy of it
+            shown the whole applied force (see the module's docstring; needs an
+            observer base, ``mpc`` or ``mpc_tuned``, that hides the residual).
     """
 
     teacher: str = "nn_dsc_privileged"
@@ -322,8 +326,9 @@ class _Group:
         env: The group's ``FleetVecEnv`` (its simulator, base and residual controller).
         view: What the student reads: ``env``, or ``HistoryVecEnv(env, H)`` with a history.
         teacher: The teacher, bound to ``env.sim`` (a privileged one reads it).
-        twin: With ``label_base="told"``, the base told the full applied force
-            (the labels' base); None: the labels are taken on ``env``'s base.
+        twin: With ``label_base="twin"``, the copy of ``env``'s base shown the whole
+            applied force (the labels' base); None: the labels are taken on
+            ``env``'s base.
         obs: The student's last inputs (B n, d) of this group.
         draw: The procedural draw seed, or None for a named scenario.
     """
@@ -342,9 +347,9 @@ def _labels(
     """The teacher's command as a residual on the labels' base, (B, n, k), unclipped.
 
     The teacher acts once (its states advance one step) on the fleets' true
-    observations; so does ``twin``, the base told the full applied force
-    (``label_base="told"``), on the same observations, which report that
-    force. Without a twin the base is the env's, which acted on the present
+    observations; so does ``twin``, the copy of the env's base shown the whole
+    applied force (``label_base="twin"``), on the same observations, which
+    report that force. Without a twin the base is the env's, which acted on the present
     observation when the env took it.
     """
     obs = np.asarray(env.sim.arrays.obs, dtype=np.float64)
@@ -511,15 +516,16 @@ def check_distillation(config: TrainConfig, settings: DistillConfig) -> None:
             f"distill over {groups} scenarios (training scenarios and procedural draws) needs "
             f"at least one fleet each; got fleets={config.fleets}. Raise fleets."
         )
-    if settings.label_base == "told" and (
-        config.base == "none" or not config.hide_residual_from_base
+    if settings.label_base == "twin" and (
+        config.base not in WHOLE_BATCH_BASES or not config.hide_residual_from_base
     ):
         raise ValueError(
-            "label_base='told' takes the labels on a twin of the base told the full applied "
-            "force, which differs from the env's base only when a base hides the residual "
-            f"from it; this run has base={config.base!r}, hide_residual_from_base="
-            f'{config.hide_residual_from_base}. Leave label_base out ("env") or use the '
-            "default hide_residual_from_base = true with a base."
+            'label_base = "twin" takes the labels on a copy of the base shown the whole '
+            "applied force: it is for a base with a residual-force observer "
+            f"({', '.join(WHOLE_BATCH_BASES)}) that hides the residual (hide_residual_from_base "
+            f'= true, the default); this run has base = "{config.base}", '
+            f"hide_residual_from_base = {str(config.hide_residual_from_base).lower()}. "
+            'Leave label_base out (it defaults to "env") or change those settings.'
         )
     draws = settings.procedural * (settings.rounds if settings.redraw else 1)
     if draws > EVALUATION_SEED:
@@ -598,24 +604,25 @@ def _group(
 ) -> _Group:
     """One group's env (seeded ``config.seed + offset``, reset), the student's view, the teacher.
 
-    With ``label_base="told"`` also the base's twin (``_Group.twin``), reset.
+    With ``label_base="twin"`` also the base's twin (``_Group.twin``): a copy
+    of the env's base taken before the env resets it, then reset with the
+    seed the env gives it.
     """
     base = None if config.base == "none" else config.base  # mpc runs fleet by fleet
     env = FleetVecEnv(
         scenario, num_fleets=fleets, base_policy=base, residual=_learner_residual(config)
     )
-    env.seed(config.seed + offset)
+    seeds = env.seed(config.seed + offset)
+    twin = None
+    if settings.label_base == "twin":
+        twin = copy.deepcopy(env.controller.base)  # not yet reset: as the env's base is
+        twin.reset(seed=seeds[0])  # the seed the env's reset gives its base
     view: FleetVecEnv | HistoryVecEnv = env
     if config.history:
         view = HistoryVecEnv(env, config.history)
     obs = np.asarray(view.reset(), dtype=np.float32)
     teacher = make_policy(settings.teacher, env.sim)
     teacher.reset()
-    twin = None
-    if settings.label_base == "told":
-        twin = resolve_base_policy(config.base, scenario)
-        assert twin is not None  # check_distillation refuses base="none"
-        twin.reset()
     return _Group(env, view, teacher, twin, obs, draw)
 
 

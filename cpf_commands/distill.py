@@ -5,7 +5,7 @@ The run is one TOML file: its top-level keys are ``agents.TrainConfig`` fields
 ``mode``, ``scale``, ``fleets``, ``net_arch``, ...) and its ``[distill]`` table
 holds ``agents.distill.DistillConfig`` fields (``teacher``, ``rounds``,
 ``steps``, ``epochs``, ``batch_size``, ``learning_rate``, ``procedural``,
-``redraw``, ``fit_applied``), with the procedural fleets' ``ScenarioDistribution``
+``redraw``, ``fit_applied``, ``label_base``), with the procedural fleets' ``ScenarioDistribution``
 ranges in a ``[distill.distribution]`` table (e.g. ``v0 = [0.05, 0.5]``,
 ``force_scale = [0.5, 1.0]``). The student may be an MLP over K neighbour slots or, with
 ``encoder = "deepsets"`` (and ``shared_slot_statistics = true``), a
