@@ -28,8 +28,8 @@ Which base the label is taken on (``DistillConfig.label_base``). By default
 (``"env"``) it is the env's base, which is shown the applied force minus the
 residual (``hide_residual_from_base``): a base with a residual-force observer
 (``mpc``, ``mpc_tuned``) takes the student's residual for a disturbance and
-cancels it, so tau_base already holds minus the observer's copy of the residual and
-the label a* holds it back plus the teacher's correction. A steady residual
+cancels it, so tau_base already holds minus the observer's copy of the
+residual and the label a* holds it back plus the teacher's correction. A steady residual
 of the student then labels itself: nothing in the data pulls it to zero, and
 what the student holds there is arbitrary (seen as a jump of its output
 wherever its inputs jump, e.g. when the graph switches). With ``"twin"`` the
@@ -349,8 +349,8 @@ def _labels(
     The teacher acts once (its states advance one step) on the fleets' true
     observations; so does ``twin``, the copy of the env's base shown the whole
     applied force (``label_base="twin"``), on the same observations, which
-    report that force. Without a twin the base is the env's, which acted on the present
-    observation when the env took it.
+    report that force. Without a twin the base is the env's, which acted on
+    the present observation when the env took it.
     """
     obs = np.asarray(env.sim.arrays.obs, dtype=np.float64)
     command = np.asarray(teacher.act_batch(obs), dtype=np.float64)
