@@ -18,7 +18,9 @@ minibatches of 1,600 fleet-steps. With ``--encoder`` the actor reads the
 neighbour slots through the DeepSets encoder (``agents.marl.models``: slot MLP
 of width 32, mean over the linked slots, then 64 x 64; inputs normalized with
 statistics shared by the slots), so the saved policy runs on any degree; the
-critic stays the 64 x 64 MLP.
+critic stays the 64 x 64 MLP. With ``--privileged-state`` MAPPO's critic
+also reads what no vessel observes (the task's ``privileged_state``): an
+asymmetric actor-critic; the saved actor is as local as ever.
 
 Every ``--eval-every`` iterations the actor plays one episode on each of
 ``--eval-fleets`` fixed training seeds (0, 1, ...; unstaggered, deterministic
@@ -158,6 +160,12 @@ def main() -> None:
         "(agents.marl.models; the task's shared_slot_statistics on)",
     )
     parser.add_argument(
+        "--privileged-state",
+        action="store_true",
+        help="MAPPO's critic also reads what no vessel observes (the task's privileged_state: "
+        "the true lumped force, v0, each vessel's offset from the fleet's mean path variable)",
+    )
+    parser.add_argument(
         "--eval-every", type=int, default=2, help="evaluate on fixed seeds every N iterations"
     )
     parser.add_argument(
@@ -167,6 +175,8 @@ def main() -> None:
         "--eval-steps", type=int, default=None, help="evaluation episode length (scenario's)"
     )
     args = parser.parse_args()
+    if args.privileged_state and args.algorithm != "mappo":
+        parser.error("--privileged-state tells MAPPO's centralized critic; IPPO's reads no state")
     torch.set_num_threads(1)
 
     from benchmarl.algorithms import IppoConfig, MappoConfig
@@ -197,6 +207,7 @@ def main() -> None:
     critic.num_cells = [64, 64]
     task = CpfTask[args.task.upper()].get_from_yaml()
     task.config["stagger"] = args.stagger
+    task.config["privileged_state"] = args.privileged_state
     if args.max_steps is not None:
         task.config["max_steps"] = args.max_steps
     model: MlpConfig | NeighbourSetMlpConfig = critic
@@ -264,6 +275,7 @@ def main() -> None:
             "at_start": at_start,
         },
         "stagger": bool(task.config["stagger"]),
+        "privileged_state": args.privileged_state,
         "versions": {
             "torch": torch.__version__,
             "torchrl": __import__("torchrl").__version__,

@@ -55,13 +55,21 @@ def make_env(
             (``agents.slot_statistics.shared_slot_statistics``, ``raw_weights=True``):
             the inputs a ``NeighbourSetEncoder`` reads (``agents.marl.models``).
         **options: ``TorchRLFleetEnv``'s own (``device``, ``seed``, ``normalize``,
-            ``normalization_steps``, ``state``) and ``Scenario`` field overrides.
+            ``normalization_steps``, ``state``, ``privileged_state``) and ``Scenario``
+            field overrides.
 
     Raises:
         ValueError: An unknown base policy name, ``shared_slot_statistics`` without
             ``normalize=True`` (or any error of ``TorchRLFleetEnv``).
     """
-    env_options = {"device", "seed", "normalize", "normalization_steps", "state"}
+    env_options = {
+        "device",
+        "seed",
+        "normalize",
+        "normalization_steps",
+        "state",
+        "privileged_state",
+    }
     own = {key: value for key, value in options.items() if key in env_options}
     overrides = {key: value for key, value in options.items() if key not in env_options}
     resolved = make_scenario(scenario, **overrides)

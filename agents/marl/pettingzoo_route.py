@@ -57,6 +57,12 @@ class CpfPettingZooTaskClass(CpfTaskClass):
             ValueError: Discrete actions, a held-out scenario or evaluation seeds.
         """
         config, first = self.training_config(continuous_actions, seed, int(num_envs) + 1)
+        if config.privileged_state:
+            raise ValueError(
+                "privileged_state is a field of the native tasks (cpf/<task>): the PettingZoo "
+                "route's state is the ParallelEnv's state(), which holds no unobserved "
+                "quantity. Set privileged_state: false here, or train on the native task."
+            )
         scenario = make_scenario(config.scenario, max_steps=config.max_steps, **config.overrides)
         built = itertools.count()
 

@@ -78,6 +78,10 @@ class CpfTaskConfig:
             links' weights left raw (``agents.marl.envs.make_env``): the inputs of the
             neighbour-encoder actor (``agents.marl.models``).
         state: Give centralized critics the global state.
+        privileged_state: Append what no vessel observes to that state (the true
+            lumped force, v0, each vessel's offset from the fleet's mean path
+            variable; ``TorchRLFleetEnv``): an asymmetric actor-critic, whose
+            critic is told the truth and whose actor stays local. Native route only.
         stagger: Spread the fleets' horizons (``EpisodeCore``; on, as on every
             batched route; one fleet per worker on the PettingZoo route has nothing
             to spread).
@@ -94,6 +98,7 @@ class CpfTaskConfig:
     normalization_steps: int = 200
     shared_slot_statistics: bool = False
     state: bool = True
+    privileged_state: bool = False
     stagger: bool = True
     overrides: dict[str, Any] = dataclasses.field(default_factory=dict)
 
@@ -160,6 +165,7 @@ class CpfTaskClass(TaskClass):
                 normalization_steps=config.normalization_steps,
                 shared_slot_statistics=config.shared_slot_statistics,
                 state=config.state,
+                privileged_state=config.privileged_state,
                 max_steps=config.max_steps,
                 **config.overrides,
             )

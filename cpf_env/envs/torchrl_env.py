@@ -30,7 +30,10 @@ key                            shape        meaning
 ("vessel", "done"/...)         [B, n, 1]    bool done, terminated, truncated of each vessel
 "done"/"terminated"/...        [B, 1]       bool, the fleet's flags (equal to its vessels')
 "state"                        [B, 10 n]    float32 global state (``state=True``): the
-                                            ParallelEnv's ``state()`` of each fleet
+                                            ParallelEnv's ``state()`` of each fleet;
+                               [B, 15 n]    with ``privileged_state=True`` followed by
+                                            each vessel's unobserved state (5 n, vessel
+                                            by vessel; ``evaluation.privileged``)
 ("vessel", "info", <name>)     [B, n, ...]  ``EpisodeCore.info_arrays(info_level)``: none
                                             by default; "minimal": the four errors;
                                             "full": every diagnostic (float32, bool)
@@ -76,6 +79,7 @@ from cpf_env.envs.input_statistics import InputStatistics, estimate_input_statis
 from cpf_env.envs.policy import FleetPolicy
 from cpf_env.envs.residual import ResidualConfig
 from cpf_env.envs.torchrl_specs import GROUP, FleetSpecs
+from cpf_env.evaluation.privileged import unobserved_state
 from cpf_env.scenarios import Scenario, make_scenario
 
 __all__ = ["GROUP", "TorchRLFleetEnv"]
@@ -118,6 +122,13 @@ class TorchRLFleetEnv(EnvBase):
             given statistics.
         normalization_steps: Control periods pooled by ``normalize=True``.
         state: Also output the global ``"state"`` [B, 10 n] for centralized critics.
+        privileged_state: Append to ``"state"`` what no vessel observes,
+            ``cpf_env.evaluation.privileged.unobserved_state`` of every vessel (the
+            true lumped force over the force scale, v0 now, theta_i minus the
+            fleet's mean; ``UNOBSERVED_SIZE`` = 5 each), flattened vessel by vessel:
+            [B, 15 n]. For a critic only (an asymmetric actor-critic); needs
+            ``state=True``. After a step the entry is the state each fleet ended
+            its step in, before any reset, as for every ``"next"`` entry.
         **overrides: ``Scenario`` field overrides, as in ``cpf_env.parallel_env``.
 
     Attributes:
@@ -128,6 +139,8 @@ class TorchRLFleetEnv(EnvBase):
         n: Vessels per fleet.
         group_map: ``{"vessel": ["vessel_0", ...]}``, as TorchRL's multi-agent envs.
         input_statistics: The ``InputStatistics`` applied, or None.
+        state: Whether ``"state"`` is output.
+        privileged_state: Whether it holds the unobserved state too.
     """
 
     def __init__(
@@ -143,10 +156,18 @@ class TorchRLFleetEnv(EnvBase):
         normalize: bool | InputStatistics = False,
         normalization_steps: int = 200,
         state: bool = False,
+        privileged_state: bool = False,
         **overrides: Any,
     ) -> None:
         resolved = _checked_device(device)
         self.info_level = check_info_level(info_level)
+        self.state = check_flag(state, "state")
+        self.privileged_state = check_flag(privileged_state, "privileged_state")
+        if self.privileged_state and not self.state:
+            raise ValueError(
+                'privileged_state=True appends to the global "state", which is off: pass '
+                "state=True as well (or leave privileged_state off)."
+            )
         self.scenario = make_scenario(scenario, **overrides)
         if isinstance(base_policy, str):
             raise TypeError(
@@ -155,11 +176,12 @@ class TorchRLFleetEnv(EnvBase):
             )
         self.core = EpisodeCore(self.scenario, num_fleets, base_policy, residual, stagger)
         self.sim, self.num_fleets, self.n = self.core.sim, self.core.num_fleets, self.core.n
-        self.state = check_flag(state, "state")
         self.group_map = {GROUP: [f"vessel_{i}" for i in range(self.n)]}
         self.input_statistics = self._statistics(normalize, normalization_steps)
         super().__init__(device=resolved, batch_size=torch.Size([self.num_fleets]))
-        specs = FleetSpecs.build(self.core, self.info_level, self.state, self.device)
+        specs = FleetSpecs.build(
+            self.core, self.info_level, self.state, self.device, self.privileged_state
+        )
         self.observation_spec = specs.observation
         self.full_action_spec = specs.action
         self.full_reward_spec = specs.reward
@@ -292,7 +314,11 @@ class TorchRLFleetEnv(EnvBase):
         vessels = TensorDict(group, batch_size=(B, n), device=device, non_blocking=non_blocking)
         root: dict[str, Any] = {**flags, GROUP: vessels}
         if self.state:
-            root["state"] = torch.from_numpy(core.state())
+            state = core.state()
+            if self.privileged_state:
+                unobserved = unobserved_state(self.sim).reshape(B, -1)
+                state = np.concatenate([state, unobserved], axis=1)
+            root["state"] = torch.from_numpy(state)
         return TensorDict(
             root, batch_size=self.batch_size, device=device, non_blocking=non_blocking
         )

@@ -14,6 +14,7 @@ import torch
 from torchrl.data import Bounded, Categorical, Composite, Unbounded
 
 from cpf_env.envs.core import EpisodeCore
+from cpf_env.evaluation.privileged import UNOBSERVED_SIZE
 
 __all__ = ["DONE_KEYS", "GROUP", "STATE_PER_VESSEL", "FleetSpecs"]
 
@@ -35,7 +36,12 @@ class FleetSpecs(NamedTuple):
 
     @classmethod
     def build(
-        cls, core: EpisodeCore, info_level: str, state: bool, device: torch.device
+        cls,
+        core: EpisodeCore,
+        info_level: str,
+        state: bool,
+        device: torch.device,
+        privileged: bool = False,
     ) -> FleetSpecs:
         """The specs of the core's B fleets.
 
@@ -45,6 +51,8 @@ class FleetSpecs(NamedTuple):
                 ``core.info_arrays(info_level)`` per vessel under ``"info"``.
             state: Add the global ``"state"`` [B, 10 n].
             device: Where the specs live.
+            privileged: The state also holds each vessel's unobserved state:
+                [B, (10 + ``UNOBSERVED_SIZE``) n].
         """
         B, n, input_size = core.num_fleets, core.n, core.input_size
         group = torch.Size([B, n])
@@ -67,7 +75,7 @@ class FleetSpecs(NamedTuple):
             observation["info"] = composite(infos, group)
         root: dict[str, Any] = {GROUP: composite(observation, group)}
         if state:
-            size = STATE_PER_VESSEL * n
+            size = (STATE_PER_VESSEL + (UNOBSERVED_SIZE if privileged else 0)) * n
             root["state"] = Unbounded((B, size), dtype=torch.float32, device=device)
         low, high = (torch.from_numpy(b).expand(B, n, -1) for b in core.action_bounds())
         action = Bounded(low, high, dtype=torch.float32, device=device)

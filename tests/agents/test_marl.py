@@ -45,7 +45,9 @@ SMALL = {
 }
 
 
-def small_experiment(algorithm: str, folder: Path, route: type = CpfTask):  # type: ignore[no-untyped-def]
+def small_experiment(  # type: ignore[no-untyped-def]
+    algorithm: str, folder: Path, route: type = CpfTask, **task_config: object
+):
     from benchmarl.algorithms import IppoConfig, MappoConfig
     from benchmarl.experiment import Experiment, ExperimentConfig
     from benchmarl.models import MlpConfig
@@ -55,7 +57,7 @@ def small_experiment(algorithm: str, folder: Path, route: type = CpfTask):  # ty
         setattr(config, key, value)
     config.save_folder = str(folder)
     task = route.BENCH_LOSSY_LINKS.get_from_yaml()  # type: ignore[attr-defined]
-    task.config["normalization_steps"] = 20
+    task.config.update({"normalization_steps": 20, **task_config})
     algorithm_config = {"mappo": MappoConfig, "ippo": IppoConfig}[algorithm].get_from_yaml()
     model = MlpConfig.get_from_yaml()
     model.num_cells = [32, 32]
@@ -106,6 +108,39 @@ def test_the_task_env_is_the_residual_env_with_state_and_statistics() -> None:
     assert set(task.observation_spec(env).keys(True, True)) == {("vessel", "observation")}
     assert task.state_spec(env)["state"].shape == (50,)  # type: ignore[index]
     assert task.action_spec(env)["vessel", "action"].shape == (5, 3)
+
+
+def test_mappos_critic_reads_the_privileged_state_and_the_actor_stays_local(
+    tmp_path: Path,
+) -> None:
+    torch.set_num_threads(1)
+    task = CpfTask.BENCH_LOSSY_LINKS.get_from_yaml()
+    assert task.config["privileged_state"] is False
+    task.config.update({"normalization_steps": 10, "privileged_state": True})
+    env = task.get_env_fun(3, True, 7, "cpu")()
+    assert env.privileged_state
+    assert task.state_spec(env)["state"].shape == (75,)  # type: ignore[index]  # (10 + 5) x 5
+    assert set(task.observation_spec(env).keys(True, True)) == {("vessel", "observation")}
+    experiment = small_experiment("mappo", tmp_path, privileged_state=True)
+    critic = experiment.losses["vessel"].critic_network
+    assert "state" in critic.in_keys
+    assert ("vessel", "observation") not in critic.in_keys
+    widths = [m.in_features for m in critic.modules() if isinstance(m, torch.nn.Linear)]
+    assert widths[0] == 75
+    experiment.run()
+    assert experiment.n_iters_performed == 2
+    folder = policy_folder.save_marl_policy(experiment, tmp_path / "agent", "mappo")
+    record = json.loads((folder / "config.json").read_text())
+    assert record["sizes"] == [26, 32, 32, 3]  # the actor reads the local observation only
+
+
+def test_the_pettingzoo_route_refuses_the_privileged_state() -> None:
+    from agents.marl.pettingzoo_route import CpfPettingZooTask
+
+    task = CpfPettingZooTask.BENCH_MILD.get_from_yaml()
+    task.config["privileged_state"] = True
+    with pytest.raises(ValueError, match="train on the native task"):
+        task.get_env_fun(2, True, 0, "cpu")
 
 
 def test_make_env_resolves_names_and_refuses_unknown_ones() -> None:

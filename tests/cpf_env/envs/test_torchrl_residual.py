@@ -108,6 +108,49 @@ def test_state_is_the_parallel_envs_state_of_each_fleet() -> None:
         assert np.array_equal(step["next", "state"][k].numpy(), parallel.state())
 
 
+def test_the_privileged_state_appends_the_unobserved_state_and_ends_with_the_fleet() -> None:
+    """[10 n physical | 5 n unobserved]; at a horizon "next" holds the state the fleet ended in."""
+    from cpf_env.evaluation.privileged import UNOBSERVED_SIZE, unobserved_state
+
+    settings = {"num_fleets": 3, "seed": 4, "overrides": {"max_steps": 40}}
+    told = residual_env("bench_current_waves", state=True, privileged_state=True, **settings)  # type: ignore[arg-type]
+    plain = residual_env("bench_current_waves", state=True, **settings)  # type: ignore[arg-type]
+    stepped = residual_env("bench_current_waves", state=True, privileged_state=True, **settings)  # type: ignore[arg-type]
+    size = 10 * 5
+    assert told.observation_spec["state"].shape == (3, size + UNOBSERVED_SIZE * 5)
+    td, td_plain, td_stepped = told.reset(), plain.reset(), stepped.reset()
+    action = torch.full((3, 5, 3), 0.3)
+    ended = 0
+    for _ in range(45):  # the stagger ends fleets at steps 40, 27 and 14, one more at 54
+        step, td = told.step_and_maybe_reset(td.set((GROUP, "action"), action))
+        step_plain, td_plain = plain.step_and_maybe_reset(td_plain.set((GROUP, "action"), action))
+        state = step["next", "state"].numpy()
+        assert np.array_equal(state[:, :size], step_plain["next", "state"].numpy())
+        # the same step without the reset: the simulator as each fleet ended its step
+        after = stepped.step(td_stepped.set((GROUP, "action"), action))["next"]
+        truth = unobserved_state(stepped.sim).reshape(3, -1)
+        np.testing.assert_array_equal(state[:, size:], truth)
+        np.testing.assert_array_equal(state, after["state"].numpy())
+        done = step["next", "done"].numpy()[:, 0]
+        ended += int(done.sum())
+        if done.any():  # the twin resets the same fleets, as the collector did
+            td_stepped = stepped.reset(after.set("_reset", step["next", "done"]))
+        else:
+            td_stepped = after
+        v0 = np.array([told.sim.v0_at(float(t)) for t in told.sim.time], dtype=np.float32)
+        told_v0 = state[~done, size + 3 :: UNOBSERVED_SIZE]  # (running fleets, n)
+        assert told_v0.shape[1] == 5 and (told_v0 == v0[~done, None]).all()
+    assert ended >= 3
+    check_env_specs(told)
+
+
+def test_the_privileged_state_needs_the_state() -> None:
+    with pytest.raises(ValueError, match="pass state=True as well"):
+        TorchRLFleetEnv("bench_mild", num_fleets=2, privileged_state=True)
+    with pytest.raises(ValueError, match="privileged_state"):
+        TorchRLFleetEnv("bench_mild", num_fleets=2, state=True, privileged_state="yes")  # type: ignore[arg-type]
+
+
 def test_normalized_inputs_are_the_statistics_applied_to_the_raw_inputs() -> None:
     raw = residual_env("bench_mild", 2, seed=3, overrides={"max_steps": 30})
     scaled = residual_env(
