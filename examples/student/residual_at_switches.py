@@ -47,8 +47,12 @@ def main() -> None:
     parser.add_argument("folder", help="an agent folder")
     parser.add_argument("--scenario", default="bench_switching_shift")
     parser.add_argument("--seeds", type=int, nargs="+", default=[10000, 10001])
+    parser.add_argument(
+        "--max-steps", type=int, default=None, help="episode length (default: the scenario's)"
+    )
     args = parser.parse_args()
-    scenario = make_scenario(args.scenario)
+    overrides = {} if args.max_steps is None else {"max_steps": args.max_steps}
+    scenario = make_scenario(args.scenario, **overrides)
     if not isinstance(scenario.topology, SwitchingTopology):
         parser.error(
             f"{args.scenario} has a fixed graph; choose a switching one (bench_switching)."
