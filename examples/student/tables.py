@@ -68,6 +68,7 @@ BENCHES = {
             "_tuned_yield",
             "_tuned_yield_told",
             "_tuned_yield_twin",
+            "_tuned_deepsets_twin",
         )
         for split in ("test", "shift", "procedural")
     },
