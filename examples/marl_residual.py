@@ -176,7 +176,10 @@ def main() -> None:
     )
     args = parser.parse_args()
     if args.privileged_state and args.algorithm != "mappo":
-        parser.error("--privileged-state tells MAPPO's centralized critic; IPPO's reads no state")
+        parser.error(
+            "--privileged-state is for MAPPO's centralized critic; IPPO's critics read no "
+            "global state (use --algorithm mappo)."
+        )
     torch.set_num_threads(1)
 
     from benchmarl.algorithms import IppoConfig, MappoConfig

@@ -16,7 +16,7 @@ from cpf_env.scenarios import make_scenario
 STUDENT = ROOT / "results/student/agents/student_mpc_tuned_yield_twin_s0"
 
 
-def test_the_yaw_residual_jumps_on_the_switch_steps_and_the_heading_is_the_benchs(
+def test_the_yaw_residual_jumps_on_the_switch_steps_and_the_heading_is_the_rollouts(
     monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
     pytest.importorskip("torch")
@@ -31,7 +31,8 @@ def test_the_yaw_residual_jumps_on_the_switch_steps_and_the_heading_is_the_bench
     # the graph switches every 100 steps: the student's yaw residual moves there
     # (a mask off by one step would read two ordinary steps)
     assert on_switch > 10 * between > 0
-    heading = float(re.search(r"heading error \(final-window RMS, rad\): (\S+)", out)[1])  # type: ignore[index]
+    heading = float(re.search(r"heading error \(final-window RMS, rad\): ([0-9.e+-]+)", out)[1])  # type: ignore[index]
     scenario = make_scenario("bench_switching_shift", max_steps=400)
     alone = rollout(load_policy(STUDENT, scenario=scenario), scenario, [10000])
-    assert heading == pytest.approx(float(alone["heading_error_rms_window"][0]), rel=5e-3)
+    expected = float(alone["heading_error_rms_window"][0])
+    assert heading == pytest.approx(expected, rel=1e-2)  # printed to 3 significant digits

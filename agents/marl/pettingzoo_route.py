@@ -54,14 +54,16 @@ class CpfPettingZooTaskClass(CpfTaskClass):
         """A maker of one-fleet envs; the i-th env it builds is seeded ``seed + i``.
 
         Raises:
-            ValueError: Discrete actions, a held-out scenario or evaluation seeds.
+            ValueError: Discrete actions, a held-out scenario, evaluation seeds or
+                ``privileged_state`` (the native tasks' field).
         """
         config, first = self.training_config(continuous_actions, seed, int(num_envs) + 1)
         if config.privileged_state:
             raise ValueError(
                 "privileged_state is a field of the native tasks (cpf/<task>): the PettingZoo "
                 "route's state is the ParallelEnv's state(), which holds no unobserved "
-                "quantity. Set privileged_state: false here, or train on the native task."
+                "quantity. Set privileged_state: false in this task's config, or train on "
+                "the native task."
             )
         scenario = make_scenario(config.scenario, max_steps=config.max_steps, **config.overrides)
         built = itertools.count()

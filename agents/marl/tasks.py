@@ -119,6 +119,11 @@ def checked_config(config: dict[str, Any]) -> CpfTaskConfig:
         raise ValueError("a cpf task config needs 'scenario' (a registered scenario name).")
     checked = CpfTaskConfig(**config)
     checked.residual()  # checks mode, scale and extras
+    if checked.privileged_state and not checked.state:
+        raise ValueError(
+            "privileged_state: true appends to the global state, which this task config "
+            "turns off: set state: true as well, or privileged_state: false."
+        )
     return checked
 
 

@@ -166,7 +166,7 @@ class TorchRLFleetEnv(EnvBase):
         if self.privileged_state and not self.state:
             raise ValueError(
                 'privileged_state=True appends to the global "state", which is off: pass '
-                "state=True as well (or leave privileged_state off)."
+                "state=True as well, or leave privileged_state off."
             )
         self.scenario = make_scenario(scenario, **overrides)
         if isinstance(base_policy, str):

@@ -41,7 +41,7 @@ class FleetSpecs(NamedTuple):
         info_level: str,
         state: bool,
         device: torch.device,
-        privileged: bool = False,
+        privileged_state: bool = False,
     ) -> FleetSpecs:
         """The specs of the core's B fleets.
 
@@ -51,7 +51,7 @@ class FleetSpecs(NamedTuple):
                 ``core.info_arrays(info_level)`` per vessel under ``"info"``.
             state: Add the global ``"state"`` [B, 10 n].
             device: Where the specs live.
-            privileged: The state also holds each vessel's unobserved state:
+            privileged_state: The state also holds each vessel's unobserved state:
                 [B, (10 + ``UNOBSERVED_SIZE``) n].
         """
         B, n, input_size = core.num_fleets, core.n, core.input_size
@@ -75,7 +75,7 @@ class FleetSpecs(NamedTuple):
             observation["info"] = composite(infos, group)
         root: dict[str, Any] = {GROUP: composite(observation, group)}
         if state:
-            size = (STATE_PER_VESSEL + (UNOBSERVED_SIZE if privileged else 0)) * n
+            size = (STATE_PER_VESSEL + (UNOBSERVED_SIZE if privileged_state else 0)) * n
             root["state"] = Unbounded((B, size), dtype=torch.float32, device=device)
         low, high = (torch.from_numpy(b).expand(B, n, -1) for b in core.action_bounds())
         action = Bounded(low, high, dtype=torch.float32, device=device)

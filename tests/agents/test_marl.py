@@ -134,6 +134,13 @@ def test_mappos_critic_reads_the_privileged_state_and_the_actor_stays_local(
     assert record["sizes"] == [26, 32, 32, 3]  # the actor reads the local observation only
 
 
+def test_a_task_config_with_the_privileged_state_needs_the_state() -> None:
+    task = CpfTask.BENCH_MILD.get_from_yaml()
+    task.config.update({"state": False, "privileged_state": True})
+    with pytest.raises(ValueError, match="set state: true as well"):
+        task.get_env_fun(2, True, 0, "cpu")
+
+
 def test_the_pettingzoo_route_refuses_the_privileged_state() -> None:
     from agents.marl.pettingzoo_route import CpfPettingZooTask
 
@@ -224,7 +231,9 @@ def test_two_mappo_iterations_on_the_pettingzoo_route_with_distinct_worker_seeds
     assert experiment.total_frames == 400
 
 
-@pytest.mark.parametrize("actor", [[], ["--encoder"]], ids=["mlp", "encoder"])
+@pytest.mark.parametrize(
+    "actor", [[], ["--encoder"], ["--privileged-state"]], ids=["mlp", "encoder", "told_critic"]
+)
 def test_the_training_example_writes_a_curve_and_a_policy(tmp_path: Path, actor: list[str]) -> None:
     script = Path(__file__).resolve().parents[2] / "examples" / "marl_residual.py"
     out = tmp_path / "run"
@@ -241,14 +250,24 @@ def test_the_training_example_writes_a_curve_and_a_policy(tmp_path: Path, actor:
     run = json.loads((out / "run.json").read_text())
     assert run["vessel_steps"] == 64 * 100 * 5
     assert run["stagger"] is True and run["evaluation"]["max_steps"] == 20
+    assert run["privileged_state"] is ("--privileged-state" in actor)
     assert run["evaluation"]["at_start"] == run["evaluation"]["base"]  # the zeroed actor
     record = json.loads((out / "config.json").read_text())
     assert record["task"]["stagger"] is True
-    assert record["task"]["shared_slot_statistics"] is bool(actor) and ("actor" in record) is bool(
-        actor
-    )
+    encoder = "--encoder" in actor
+    assert record["task"]["shared_slot_statistics"] is encoder and ("actor" in record) is encoder
+    assert record["task"]["privileged_state"] is ("--privileged-state" in actor)
     policy = load_policy(out, scenario="bench_lossy_links")
     assert policy.name == "run"
+
+
+def test_the_training_example_refuses_the_privileged_state_for_ippo(tmp_path: Path) -> None:
+    script = Path(__file__).resolve().parents[2] / "examples" / "marl_residual.py"
+    command = [sys.executable, str(script), "--algorithm", "ippo", "--privileged-state",
+               "--out", str(tmp_path / "run")]  # fmt: skip
+    result = subprocess.run(command, capture_output=True, text=True, cwd=tmp_path)
+    assert result.returncode == 2 and "use --algorithm mappo" in result.stderr
+    assert not (tmp_path / "run").exists()
 
 
 def constant_actor(value: float):  # type: ignore[no-untyped-def]

@@ -140,7 +140,7 @@ def test_the_privileged_state_appends_the_unobserved_state_and_ends_with_the_fle
         v0 = np.array([told.sim.v0_at(float(t)) for t in told.sim.time], dtype=np.float32)
         told_v0 = state[~done, size + 3 :: UNOBSERVED_SIZE]  # (running fleets, n)
         assert told_v0.shape[1] == 5 and (told_v0 == v0[~done, None]).all()
-    assert ended >= 3
+    assert ended == 3
     check_env_specs(told)
 
 
