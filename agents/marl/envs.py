@@ -16,11 +16,12 @@ from __future__ import annotations
 from typing import Any
 
 from agents.resolve import resolve_base_policy
-from cpf_env.envs.core import DEFAULT_INFO_LEVEL
+from cpf_env.envs.core import DEFAULT_INFO_LEVEL, check_flag
 from cpf_env.envs.input_statistics import InputStatistics, estimate_input_statistics
 from cpf_env.envs.policy import FleetPolicy
 from cpf_env.envs.residual import ResidualConfig
-from cpf_env.envs.torchrl_env import TorchRLFleetEnv
+from cpf_env.envs.torchrl_env import StateFeatures, TorchRLFleetEnv
+from cpf_env.evaluation.privileged import UNOBSERVED_SIZE, unobserved_state
 from cpf_env.scenarios import Scenario, make_scenario
 from cpf_env.sim.fleet import observation_layout
 
@@ -36,6 +37,7 @@ def make_env(
     info_level: str = DEFAULT_INFO_LEVEL,
     policy_options: dict[str, Any] | None = None,
     shared_slot_statistics: bool = False,
+    privileged_state: bool = False,
     **options: Any,
 ) -> TorchRLFleetEnv:
     """A residual ``TorchRLFleetEnv`` over a base policy given by name (``FleetVecEnv``'s).
@@ -54,13 +56,17 @@ def make_env(
             with the slots' pooled statistics and leave the links' weights a_ij raw
             (``agents.slot_statistics.shared_slot_statistics``, ``raw_weights=True``):
             the inputs a ``NeighbourSetEncoder`` reads (``agents.marl.models``).
+        privileged_state: With ``state=True``, append to the global ``"state"`` what no
+            vessel observes (``cpf_env.evaluation.privileged.unobserved_state``: the true
+            lumped force over the force scale, v0, theta_i minus the fleet's mean; 5 per
+            vessel): [B, 15 n], for an asymmetric actor-critic.
         **options: ``TorchRLFleetEnv``'s own (``device``, ``seed``, ``normalize``,
-            ``normalization_steps``, ``state``, ``privileged_state``) and ``Scenario``
-            field overrides.
+            ``normalization_steps``, ``state``) and ``Scenario`` field overrides.
 
     Raises:
         ValueError: An unknown base policy name, ``shared_slot_statistics`` without
-            ``normalize=True`` (or any error of ``TorchRLFleetEnv``).
+            ``normalize=True``, ``privileged_state`` without ``state=True`` (or any
+            error of ``TorchRLFleetEnv``).
     """
     env_options = {
         "device",
@@ -68,10 +74,16 @@ def make_env(
         "normalize",
         "normalization_steps",
         "state",
-        "privileged_state",
     }
     own = {key: value for key, value in options.items() if key in env_options}
     overrides = {key: value for key, value in options.items() if key not in env_options}
+    if check_flag(privileged_state, "privileged_state") and own.get("state") is not True:
+        raise ValueError(
+            "privileged_state=True appends to the global state, which is off: pass state=True "
+            "as well, or leave privileged_state off."
+        )
+    if privileged_state:
+        own["extra_state"] = StateFeatures(UNOBSERVED_SIZE, unobserved_state)
     resolved = make_scenario(scenario, **overrides)
     base = resolve_base_policy(base_policy, resolved, policy_options)
     residual = ResidualConfig() if residual is None else residual

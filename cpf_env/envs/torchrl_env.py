@@ -31,9 +31,8 @@ key                            shape        meaning
 "done"/"terminated"/...        [B, 1]       bool, the fleet's flags (equal to its vessels')
 "state"                        [B, 10 n]    float32 global state (``state=True``): the
                                             ParallelEnv's ``state()`` of each fleet;
-                               [B, 15 n]    with ``privileged_state=True`` followed by
-                                            each vessel's unobserved state (5 n, vessel
-                                            by vessel; ``evaluation.privileged``)
+                               [B, (10+k) n] with ``extra_state``: followed by its
+                                            features (B, n, k), vessel by vessel
 ("vessel", "info", <name>)     [B, n, ...]  ``EpisodeCore.info_arrays(info_level)``: none
                                             by default; "minimal": the four errors;
                                             "full": every diagnostic (float32, bool)
@@ -66,7 +65,8 @@ Example:
 
 from __future__ import annotations
 
-from typing import Any
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 import torch
@@ -79,10 +79,25 @@ from cpf_env.envs.input_statistics import InputStatistics, estimate_input_statis
 from cpf_env.envs.policy import FleetPolicy
 from cpf_env.envs.residual import ResidualConfig
 from cpf_env.envs.torchrl_specs import GROUP, FleetSpecs
-from cpf_env.evaluation.privileged import unobserved_state
 from cpf_env.scenarios import Scenario, make_scenario
 
-__all__ = ["GROUP", "TorchRLFleetEnv"]
+if TYPE_CHECKING:
+    from cpf_env.sim.fleet import FleetSim
+
+__all__ = ["GROUP", "StateFeatures", "TorchRLFleetEnv"]
+
+
+class StateFeatures(NamedTuple):
+    """Per-vessel features appended to the global ``"state"`` (``extra_state=``).
+
+    Attributes:
+        size: k, the features per vessel (>= 1).
+        compute: The ``FleetSim`` -> (B, n, k) features, read once the simulator holds
+            an episode (float; output as float32).
+    """
+
+    size: int
+    compute: Callable[[FleetSim], NDArray[Any]]
 
 
 def _checked_device(device: str | torch.device) -> torch.device:
@@ -122,13 +137,13 @@ class TorchRLFleetEnv(EnvBase):
             given statistics.
         normalization_steps: Control periods pooled by ``normalize=True``.
         state: Also output the global ``"state"`` [B, 10 n] for centralized critics.
-        privileged_state: Append to ``"state"`` what no vessel observes,
-            ``cpf_env.evaluation.privileged.unobserved_state`` of every vessel (the
-            true lumped force over the force scale, v0 now, theta_i minus the
-            fleet's mean; ``UNOBSERVED_SIZE`` = 5 each), flattened vessel by vessel:
-            [B, 15 n]. For a critic only (an asymmetric actor-critic); needs
-            ``state=True``. After a step the entry is the state each fleet ended
-            its step in, before any reset, as for every ``"next"`` entry.
+        extra_state: ``StateFeatures``: k features per vessel computed from the
+            ``FleetSim`` and appended to ``"state"`` vessel by vessel: [B, (10 + k) n].
+            For a critic only, e.g. what no vessel observes for an asymmetric
+            actor-critic (``agents.marl.envs.make_env(privileged_state=True)`` gives
+            ``cpf_env.evaluation.privileged.unobserved_state``, k = 5); needs
+            ``state=True``. After a step it reads the simulator as each fleet ended
+            its step, before any reset, as every ``"next"`` entry does.
         **overrides: ``Scenario`` field overrides, as in ``cpf_env.parallel_env``.
 
     Attributes:
@@ -140,7 +155,7 @@ class TorchRLFleetEnv(EnvBase):
         group_map: ``{"vessel": ["vessel_0", ...]}``, as TorchRL's multi-agent envs.
         input_statistics: The ``InputStatistics`` applied, or None.
         state: Whether ``"state"`` is output.
-        privileged_state: Whether it holds the unobserved state too.
+        extra_state: The ``StateFeatures`` it also holds, or None.
     """
 
     def __init__(
@@ -156,18 +171,23 @@ class TorchRLFleetEnv(EnvBase):
         normalize: bool | InputStatistics = False,
         normalization_steps: int = 200,
         state: bool = False,
-        privileged_state: bool = False,
+        extra_state: StateFeatures | None = None,
         **overrides: Any,
     ) -> None:
         resolved = _checked_device(device)
         self.info_level = check_info_level(info_level)
         self.state = check_flag(state, "state")
-        self.privileged_state = check_flag(privileged_state, "privileged_state")
-        if self.privileged_state and not self.state:
+        if extra_state is not None and not (isinstance(extra_state, StateFeatures) and self.state):
             raise ValueError(
-                'privileged_state=True appends to the global "state", which is off: pass '
-                "state=True as well, or leave privileged_state off."
+                'extra_state= holds features appended to the global "state": pass '
+                f"StateFeatures(size, compute) and state=True (got "
+                f"{type(extra_state).__name__} and state={self.state})."
             )
+        if extra_state is not None and not (
+            isinstance(extra_state.size, int) and extra_state.size >= 1
+        ):
+            raise ValueError(f"StateFeatures.size must be an int >= 1, got {extra_state.size!r}.")
+        self.extra_state = extra_state
         self.scenario = make_scenario(scenario, **overrides)
         if isinstance(base_policy, str):
             raise TypeError(
@@ -179,9 +199,8 @@ class TorchRLFleetEnv(EnvBase):
         self.group_map = {GROUP: [f"vessel_{i}" for i in range(self.n)]}
         self.input_statistics = self._statistics(normalize, normalization_steps)
         super().__init__(device=resolved, batch_size=torch.Size([self.num_fleets]))
-        specs = FleetSpecs.build(
-            self.core, self.info_level, self.state, self.device, self.privileged_state
-        )
+        extra = 0 if extra_state is None else extra_state.size
+        specs = FleetSpecs.build(self.core, self.info_level, self.state, self.device, extra)
         self.observation_spec = specs.observation
         self.full_action_spec = specs.action
         self.full_reward_spec = specs.reward
@@ -247,6 +266,18 @@ class TorchRLFleetEnv(EnvBase):
         return self._output(step=True)
 
     # --- helpers --------------------------------------------------------------------------
+    def _extra_state(self) -> NDArray[np.float32]:
+        """The extra state's features, float32 (B, n, k), or a ValueError saying what came."""
+        assert self.extra_state is not None
+        features = np.asarray(self.extra_state.compute(self.sim))
+        expected = (self.num_fleets, self.n, self.extra_state.size)
+        if features.shape != expected:
+            raise ValueError(
+                f"extra_state.compute must return (B, n, k) = {expected} features, got shape "
+                f"{features.shape}."
+            )
+        return features.astype(np.float32, copy=False)
+
     def _fleets_to_reset(self, tensordict: TensorDictBase | None) -> NDArray[np.int64] | None:
         """Indices of the fleets the reset masks select, or None for all (no mask given)."""
         if tensordict is None:
@@ -315,9 +346,8 @@ class TorchRLFleetEnv(EnvBase):
         root: dict[str, Any] = {**flags, GROUP: vessels}
         if self.state:
             state = core.state()
-            if self.privileged_state:
-                unobserved = unobserved_state(self.sim).reshape(B, -1)
-                state = np.concatenate([state, unobserved], axis=1)
+            if self.extra_state is not None:
+                state = np.concatenate([state, self._extra_state().reshape(B, -1)], axis=1)
             root["state"] = torch.from_numpy(state)
         return TensorDict(
             root, batch_size=self.batch_size, device=device, non_blocking=non_blocking

@@ -14,7 +14,6 @@ import torch
 from torchrl.data import Bounded, Categorical, Composite, Unbounded
 
 from cpf_env.envs.core import EpisodeCore
-from cpf_env.evaluation.privileged import UNOBSERVED_SIZE
 
 __all__ = ["DONE_KEYS", "GROUP", "STATE_PER_VESSEL", "FleetSpecs"]
 
@@ -41,7 +40,7 @@ class FleetSpecs(NamedTuple):
         info_level: str,
         state: bool,
         device: torch.device,
-        privileged_state: bool = False,
+        extra_state_size: int = 0,
     ) -> FleetSpecs:
         """The specs of the core's B fleets.
 
@@ -51,8 +50,8 @@ class FleetSpecs(NamedTuple):
                 ``core.info_arrays(info_level)`` per vessel under ``"info"``.
             state: Add the global ``"state"`` [B, 10 n].
             device: Where the specs live.
-            privileged_state: The state also holds each vessel's unobserved state:
-                [B, (10 + ``UNOBSERVED_SIZE``) n].
+            extra_state_size: k, the features per vessel appended to the state:
+                [B, (10 + k) n].
         """
         B, n, input_size = core.num_fleets, core.n, core.input_size
         group = torch.Size([B, n])
@@ -75,7 +74,7 @@ class FleetSpecs(NamedTuple):
             observation["info"] = composite(infos, group)
         root: dict[str, Any] = {GROUP: composite(observation, group)}
         if state:
-            size = (STATE_PER_VESSEL + (UNOBSERVED_SIZE if privileged_state else 0)) * n
+            size = (STATE_PER_VESSEL + extra_state_size) * n
             root["state"] = Unbounded((B, size), dtype=torch.float32, device=device)
         low, high = (torch.from_numpy(b).expand(B, n, -1) for b in core.action_bounds())
         action = Bounded(low, high, dtype=torch.float32, device=device)

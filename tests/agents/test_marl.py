@@ -25,6 +25,7 @@ from agents import load_policy
 from agents.folder_files import AgentFolderError
 from agents.marl import envs, policy_folder
 from agents.marl.tasks import CONF, CpfTask, CpfTaskClass
+from cpf_env.evaluation.privileged import unobserved_state
 from cpf_env.scenarios import paper, suite
 
 pytestmark = pytest.mark.benchmarl
@@ -118,7 +119,7 @@ def test_mappos_critic_reads_the_privileged_state_and_the_actor_stays_local(
     assert task.config["privileged_state"] is False
     task.config.update({"normalization_steps": 10, "privileged_state": True})
     env = task.get_env_fun(3, True, 7, "cpu")()
-    assert env.privileged_state
+    assert env.extra_state is not None and env.extra_state.compute is unobserved_state
     assert task.state_spec(env)["state"].shape == (75,)  # type: ignore[index]  # (10 + 5) x 5
     assert set(task.observation_spec(env).keys(True, True)) == {("vessel", "observation")}
     experiment = small_experiment("mappo", tmp_path, privileged_state=True)
@@ -148,6 +149,13 @@ def test_the_pettingzoo_route_refuses_the_privileged_state() -> None:
     task.config["privileged_state"] = True
     with pytest.raises(ValueError, match="train on the native task"):
         task.get_env_fun(2, True, 0, "cpu")
+
+
+def test_make_env_tells_the_state_what_no_vessel_observes_only_with_the_state() -> None:
+    env = envs.make_env("bench_mild", 2, state=True, privileged_state=True, max_steps=20)
+    assert env.observation_spec["state"].shape == (2, 75)
+    with pytest.raises(ValueError, match="pass state=True as well"):
+        envs.make_env("bench_mild", 2, privileged_state=True)
 
 
 def test_make_env_resolves_names_and_refuses_unknown_ones() -> None:

@@ -15,7 +15,7 @@ from baselines import make_policy
 from cpf_env import FleetSim, scenarios
 from cpf_env.envs.input_statistics import InputStatistics
 from cpf_env.envs.residual import ResidualConfig, ResidualController
-from cpf_env.envs.torchrl_env import GROUP, TorchRLFleetEnv
+from cpf_env.envs.torchrl_env import GROUP, StateFeatures, TorchRLFleetEnv
 
 pytestmark = pytest.mark.torchrl
 
@@ -108,14 +108,16 @@ def test_state_is_the_parallel_envs_state_of_each_fleet() -> None:
         assert np.array_equal(step["next", "state"][k].numpy(), parallel.state())
 
 
-def test_the_privileged_state_appends_the_unobserved_state_and_ends_with_the_fleet() -> None:
+def test_the_extra_state_is_appended_and_read_as_the_fleet_ended_its_step() -> None:
     """[10 n physical | 5 n unobserved]; at a horizon "next" holds the state the fleet ended in."""
     from cpf_env.evaluation.privileged import UNOBSERVED_SIZE, unobserved_state
 
     settings = {"num_fleets": 3, "seed": 4, "overrides": {"max_steps": 40}}
-    told = residual_env("bench_current_waves", state=True, privileged_state=True, **settings)  # type: ignore[arg-type]
+    features = StateFeatures(UNOBSERVED_SIZE, unobserved_state)
+    told_env = {"state": True, "extra_state": features, **settings}
+    told = residual_env("bench_current_waves", **told_env)  # type: ignore[arg-type]
     plain = residual_env("bench_current_waves", state=True, **settings)  # type: ignore[arg-type]
-    stepped = residual_env("bench_current_waves", state=True, privileged_state=True, **settings)  # type: ignore[arg-type]
+    stepped = residual_env("bench_current_waves", **told_env)  # type: ignore[arg-type]
     size = 10 * 5
     assert told.observation_spec["state"].shape == (3, size + UNOBSERVED_SIZE * 5)
     td, td_plain, td_stepped = told.reset(), plain.reset(), stepped.reset()
@@ -144,11 +146,21 @@ def test_the_privileged_state_appends_the_unobserved_state_and_ends_with_the_fle
     check_env_specs(told)
 
 
-def test_the_privileged_state_needs_the_state() -> None:
-    with pytest.raises(ValueError, match="pass state=True as well"):
-        TorchRLFleetEnv("bench_mild", num_fleets=2, privileged_state=True)
-    with pytest.raises(ValueError, match="privileged_state"):
-        TorchRLFleetEnv("bench_mild", num_fleets=2, state=True, privileged_state="yes")  # type: ignore[arg-type]
+def test_the_extra_state_is_checked() -> None:
+    from cpf_env.evaluation.privileged import unobserved_state
+
+    features = StateFeatures(5, unobserved_state)
+    with pytest.raises(ValueError, match="StateFeatures\\(size, compute\\) and state=True"):
+        TorchRLFleetEnv("bench_mild", num_fleets=2, extra_state=features)
+    with pytest.raises(ValueError, match="got function"):
+        TorchRLFleetEnv("bench_mild", num_fleets=2, state=True, extra_state=unobserved_state)  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match="size must be an int >= 1"):
+        TorchRLFleetEnv("bench_mild", num_fleets=2, state=True, extra_state=StateFeatures(0, len))  # type: ignore[arg-type]
+    wrong = TorchRLFleetEnv(
+        "bench_mild", num_fleets=2, state=True, extra_state=StateFeatures(4, unobserved_state)
+    )
+    with pytest.raises(ValueError, match=r"= \(2, 5, 4\) features, got shape \(2, 5, 5\)"):
+        wrong.reset()
 
 
 def test_normalized_inputs_are_the_statistics_applied_to_the_raw_inputs() -> None:
