@@ -72,6 +72,7 @@ BENCHES = {
         )
         for split in ("test", "shift", "procedural")
     },
+    "bench_procedural_large_deepsets_twin": "mpc_tuned",
 }
 STUDENT = "agents/student"
 
