@@ -68,13 +68,7 @@ def make_env(
             ``normalize=True``, ``privileged_state`` without ``state=True`` (or any
             error of ``TorchRLFleetEnv``).
     """
-    env_options = {
-        "device",
-        "seed",
-        "normalize",
-        "normalization_steps",
-        "state",
-    }
+    env_options = {"device", "seed", "normalize", "normalization_steps", "state"}
     own = {key: value for key, value in options.items() if key in env_options}
     overrides = {key: value for key, value in options.items() if key not in env_options}
     if check_flag(privileged_state, "privileged_state") and own.get("state") is not True:
