@@ -4,8 +4,9 @@
 learner's raw inputs and its correction:
 
 - input ``inputs`` (B, n, k) float32: the learner's inputs in their own units
-  (what ``ResidualController.observe`` gives), n the training scenario's
-  fleet size (the residual range is per vessel);
+  (what ``ResidualController.observe`` gives), n the fleet size of the
+  scenario it is exported for (``scenario=``, default the training
+  scenario's; the residual range is per vessel);
 - the saved normalization (``(x - mean) / sqrt(var + eps)``, clipped);
 - the actor (``agents.agent_folder.PolicyNetwork``);
 - output ``action`` (B, n, a) float32 in [-1, 1] (clipped or tanh-squashed);
@@ -55,6 +56,7 @@ import json
 import re
 import tempfile
 import warnings
+from dataclasses import replace
 from pathlib import Path
 from typing import Any, cast
 
@@ -72,7 +74,7 @@ from agents.folder_files import (
     read_file,
     sha256,
 )
-from agents.loading import TrainedPolicy
+from agents.loading import TrainedPolicy, load_policy
 from agents.train_config import TrainConfig
 from cpf_env.infra import atomic
 from cpf_env.scenarios import Scenario, make_scenario
@@ -104,7 +106,8 @@ def residual_range(config: TrainConfig, scenario: Scenario) -> NDArray[np.float3
     if residual.mode == "kinematic":
         offsets = np.asarray(residual.kinematic_scale, dtype=np.float64)
         return np.tile(offsets, (scenario.n, 1)).astype(np.float32)
-    controller = ResidualController(scenario, None, 1, residual)
+    # only its limits are read: any neighbour slots do (an encoder's graph takes any K')
+    controller = ResidualController(scenario, None, 1, replace(residual, neighbour_slots=None))
     limits = np.asarray(controller._tau_scale, dtype=np.float64)  # (n, 3)
     if residual.mode == "force_and_rate":
         rate = np.full((scenario.n, 1), controller._theta_dot_max)
@@ -140,7 +143,11 @@ class _Graph(torch.nn.Module):
 
 
 def export_onnx(
-    folder: str | Path, out: str | Path, checks: int = 1000, slots: int | None = None
+    folder: str | Path,
+    out: str | Path,
+    checks: int = 1000,
+    slots: int | None = None,
+    scenario: str | Scenario | None = None,
 ) -> float:
     """Export an agent folder to ONNX and check it against the torch policy.
 
@@ -151,6 +158,10 @@ def export_onnx(
             ONNX actions are compared with torch's.
         slots: Neighbour slots K' of the graph's input, for an agent with a
             neighbour encoder (default: its training K); None for an MLP.
+        scenario: The fleet the graph is built for, a registered name or a
+            ``Scenario``: its size n (the graph's vessel axis) and each vessel's force
+            limits (the ``residual`` output's scaling). Default: the training
+            scenario. An encoder agent exported for a larger fleet runs there.
 
     Returns:
         The largest absolute difference between the ONNX and torch actions.
@@ -159,7 +170,7 @@ def export_onnx(
         ImportError: onnx or onnxruntime is missing.
         AgentFolderError: The folder is not a valid agent folder.
         ValueError: ``slots`` for an agent without an encoder, < 1, or more than the
-            n - 1 neighbours a vessel of the training scenario's fleet of n can have.
+            n - 1 neighbours a vessel of the fleet of n can have; an unknown scenario.
     """
     try:
         import onnx
@@ -168,10 +179,16 @@ def export_onnx(
     source = Path(folder)
     record, network, normalization = read_agent(source)
     config = training_config(record["config"], source / "config.json")
-    scenario = make_scenario(config.home_scenario, **config.scenario_overrides())
-    size, normalization = _static_input(network, normalization, record, slots, scenario.n)
-    graph = _Graph(network, normalization, residual_range(config, scenario)).eval()
-    example = torch.zeros(1, scenario.n, size, dtype=torch.float32)
+    fleet = (
+        make_scenario(config.home_scenario, **config.scenario_overrides())
+        if scenario is None
+        else make_scenario(scenario)
+    )
+    if scenario is not None:  # the folder must run there (an MLP: degree <= its K) to export for it
+        load_policy(source, scenario=fleet)
+    size, normalization = _static_input(network, normalization, record, slots, fleet.n)
+    graph = _Graph(network, normalization, residual_range(config, fleet)).eval()
+    example = torch.zeros(1, fleet.n, size, dtype=torch.float32)
     target = Path(out)
     with tempfile.TemporaryDirectory() as scratch:  # its own: no name to collide or link
         exported = Path(scratch) / "graph.onnx"
@@ -198,7 +215,8 @@ def export_onnx(
     rows = _check_inputs(size, normalization, checks)
     with torch.no_grad():
         expected = network(torch.from_numpy(_normalized(rows, normalization))).numpy()
-    got = OnnxActor(target)(rows)
+    padded = np.resize(rows, (-(-checks // fleet.n) * fleet.n, size))  # whole fleets of n
+    got = OnnxActor(target)(padded)[:checks]
     return float(np.max(np.abs(got - expected)))
 
 
@@ -232,9 +250,9 @@ def _static_input(
     trained = int(record["actor"]["slots"])
     if slots is not None and not 1 <= slots <= n - 1:
         raise ValueError(
-            f"--slots must be in [1, {n - 1}]: the graph runs fleets of n = {n} vessels (the "
-            f"training scenario's), whose vessels have at most n - 1 = {n - 1} neighbours; "
-            f"got {slots}."
+            f"--slots must be in [1, {n - 1}]: the graph runs fleets of n = {n} vessels, whose "
+            f"vessels have at most n - 1 = {n - 1} neighbours; got {slots}. For a larger "
+            "fleet, export for it (--scenario NAME)."
         )
     count = trained if slots is None else slots
     if normalization is not None:

@@ -4,8 +4,10 @@ The graph holds the normalization, the network, the action bounds and the
 residual scaling (``agents.onnx_policy``, which documents the input layout);
 ``cpf-bench --policies nn_dsc agent.onnx`` runs it through onnxruntime. An
 agent with a neighbour encoder is exported for ``--slots K`` neighbour slots
-(default its training K; at most n - 1, n the training scenario's fleet size,
-which the graph is tied to). Needs the ``onnx`` extra.
+(default its training K; at most n - 1). The graph is tied to one fleet size
+n: the training scenario's, or with ``--scenario NAME`` that scenario's (and its
+force limits), so an encoder agent runs on a larger fleet than it trained on.
+Needs the ``onnx`` extra.
 
 Example::
 
@@ -43,8 +45,14 @@ def _parser() -> argparse.ArgumentParser:
         type=int,
         default=None,
         help="neighbour slots of the graph's input, for an agent with a neighbour encoder "
-        "(default: its training K), from 1 to n - 1 (n: the training scenario's fleet size); "
+        "(default: its training K), from 1 to n - 1 (n: the fleet size of --scenario); "
         "the graph then runs graphs of degree <= K",
+    )
+    parser.add_argument(
+        "--scenario",
+        default=None,
+        help="the registered scenario whose fleet the graph is built for: its size n and "
+        "force limits (default: the training scenario)",
     )
     return parser
 
@@ -88,7 +96,9 @@ def export_main(argv: Sequence[str] | None = None) -> int:
         needed = 2 * weights.stat().st_size + 2**20 if weights.is_file() else 0
         atomic.check_writable(args.out, needed)
         with atomic.FolderLock(args.out, "another cpf-export"):
-            difference = export_onnx(args.folder, args.out, checks=args.checks, slots=args.slots)
+            difference = export_onnx(
+                args.folder, args.out, checks=args.checks, slots=args.slots, scenario=args.scenario
+            )
     except (ImportError, ValueError, OSError, atomic.FolderLockedError) as error:
         parser.error(str(error))
     print(

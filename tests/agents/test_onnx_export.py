@@ -17,6 +17,7 @@ from agents.onnx_policy import OnnxActor, load_onnx_policy  # noqa: E402
 from cpf_commands.bench.run import run_bench  # noqa: E402
 from cpf_commands.export import export_main  # noqa: E402
 from cpf_env import FleetSim  # noqa: E402
+from cpf_env.scenarios import make_scenario  # noqa: E402
 
 AGENT = ROOT / "results/residual_rl/agents/residual_ppo_bench_lossy_links_5m_s0"
 
@@ -150,6 +151,26 @@ def test_an_encoder_agent_exported_for_four_slots_acts_as_torch_on_a_five_vessel
     assert np.abs(np.concatenate(torch_actions)).max() > 1e-4  # the actions are not all zero
 
 
+def test_an_encoder_agent_exported_for_a_larger_fleet_acts_as_torch_there(
+    encoder_agent: Path, tmp_path: Path
+) -> None:
+    """Trained on bench_mild's 5 vessels, exported for the 7-vessel star of degree 6."""
+    out = tmp_path / "star7.onnx"
+    name = "bench_large_fleet_shift"
+    assert export_main([str(encoder_agent), str(out), "--slots", "6", "--scenario", name]) == 0
+    torch_policy = load_policy(encoder_agent, scenario=name)
+    onnx_policy = load_onnx_policy(out, scenario=name)
+    assert onnx_policy.actor.n == 7
+    sim = FleetSim(make_scenario(name), num_fleets=2)
+    obs = sim.reset(seeds=[0, 1])
+    for _ in range(20):
+        command = torch_policy.act_batch(obs)
+        np.testing.assert_allclose(onnx_policy.act_batch(obs), command, rtol=1e-4, atol=1e-6)
+        obs = sim.step(command)
+    with pytest.raises(ValueError, match="exported for fleets of 7 vessels"):
+        load_onnx_policy(out)  # the training scenario has 5
+
+
 def test_an_encoder_agent_with_history_runs_from_onnx_as_from_torch(
     encoder_agent: Path, tmp_path: Path
 ) -> None:
@@ -190,7 +211,19 @@ def test_more_slots_than_a_vessel_can_have_neighbours_are_refused(
     assert caught.value.code == 2
     error = capsys.readouterr().err
     assert "--slots must be in [1, 4]" in error and "n = 5 vessels" in error
+    assert "export for it (--scenario NAME)" in error
     assert f"got {slots}" in error and not out.exists()
+
+
+def test_an_mlp_agent_is_not_exported_for_a_fleet_of_higher_degree(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "a.onnx"
+    with pytest.raises(SystemExit):
+        export_main([str(AGENT), str(out), "--scenario", "bench_large_fleet_shift"])
+    error = capsys.readouterr().err
+    assert "train with --neighbour-slots to run on graphs of higher degree" in error
+    assert not out.exists()
 
 
 def test_slots_for_an_mlp_agent_are_refused(
