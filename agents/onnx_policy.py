@@ -179,13 +179,11 @@ def export_onnx(
     source = Path(folder)
     record, network, normalization = read_agent(source)
     config = training_config(record["config"], source / "config.json")
-    fleet = (
-        make_scenario(config.home_scenario, **config.scenario_overrides())
-        if scenario is None
-        else make_scenario(scenario)
-    )
-    if scenario is not None:  # the folder must run there (an MLP: degree <= its K) to export for it
-        load_policy(source, scenario=fleet)
+    if scenario is None:
+        fleet = make_scenario(config.home_scenario, **config.scenario_overrides())
+    else:
+        fleet = make_scenario(scenario)
+        load_policy(source, scenario=fleet)  # the folder must run there (an MLP: degree <= K)
     size, normalization = _static_input(network, normalization, record, slots, fleet.n)
     graph = _Graph(network, normalization, residual_range(config, fleet)).eval()
     example = torch.zeros(1, fleet.n, size, dtype=torch.float32)

@@ -177,16 +177,17 @@ class TorchRLFleetEnv(EnvBase):
         resolved = _checked_device(device)
         self.info_level = check_info_level(info_level)
         self.state = check_flag(state, "state")
-        if extra_state is not None and not (isinstance(extra_state, StateFeatures) and self.state):
-            raise ValueError(
-                'extra_state= holds features appended to the global "state": pass '
-                f"StateFeatures(size, compute) and state=True (got "
-                f"{type(extra_state).__name__} and state={self.state})."
-            )
-        if extra_state is not None and not (
-            isinstance(extra_state.size, int) and extra_state.size >= 1
-        ):
-            raise ValueError(f"StateFeatures.size must be an int >= 1, got {extra_state.size!r}.")
+        if extra_state is not None:
+            if not (isinstance(extra_state, StateFeatures) and self.state):
+                raise ValueError(
+                    'extra_state= holds features appended to the global "state": pass '
+                    f"StateFeatures(size, compute) and state=True (got "
+                    f"{type(extra_state).__name__} and state={self.state})."
+                )
+            if not (isinstance(extra_state.size, int) and extra_state.size >= 1):
+                raise ValueError(
+                    f"StateFeatures.size must be an int >= 1, got {extra_state.size!r}."
+                )
         self.extra_state = extra_state
         self.scenario = make_scenario(scenario, **overrides)
         if isinstance(base_policy, str):

@@ -6,8 +6,10 @@ r"""Print results/student/README.md's tables from the committed benchmark episod
 For each of ``bench_test``, ``bench_shift`` and ``bench_procedural``, and
 their ``_k6`` (6-slot students), ``_deepsets`` (encoder and history
 students), ``_tuned``, ``_tuned_deepsets``, ``_tuned_applied``,
-``_tuned_yield``, ``_tuned_yield_told`` and ``_tuned_yield_twin`` versions (students on
-``mpc_tuned``, which there takes ``mpc``'s place below) (those that exist),
+``_tuned_yield``, ``_tuned_yield_told``, ``_tuned_yield_twin`` and
+``_tuned_deepsets_twin`` versions, and ``bench_procedural_large_deepsets_twin``
+(students on ``mpc_tuned``, which there takes ``mpc``'s place below) (those
+that exist),
 one row per scenario: the mean episode cost of ``nn_dsc``,
 ``mpc`` and ``oracle`` (where it ran) and of each student (one per training
 seed), each student's paired cost difference to ``mpc`` (mean over seeds
