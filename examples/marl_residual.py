@@ -28,6 +28,11 @@ action, ``--eval-steps`` long: default the scenario's own length, as
 ``cpf-bench`` plays it) against the base policy alone on the same seeds
 (``agents.marl.fixed_seeds.FixedSeedEvaluation``): the training returns mostly
 measure the episodes' random starts, these differences measure the actor.
+With ``--keep-best`` the saved actor is the evaluated one with the highest
+fixed-seed return minus the base's, the actor before training (the base
+itself, 0) included, instead of the last: selection on training seeds, so
+``cpf-bench``'s evaluation seeds stay unseen (SB3's ``EvalCallback`` keeps
+its best model the same way).
 
 Writes into ``--out``: the policy folder's files, ``curve.csv`` (per
 iteration: frames, vessel-steps, collection and training seconds, mean reward
@@ -36,15 +41,20 @@ seconds since start; on evaluated iterations the actor's return and
 second-half reward per vessel-step on the fixed seeds, each also minus the
 base's, and the return's part of each reward term) and ``run.json``
 (settings, versions, totals, end-to-end vessel-steps/s without the
-evaluations, the evaluation before training and the base's numbers).
+evaluations, the evaluation before training and the base's numbers, and
+``kept``: which iteration's actor the folder holds, 0 for the one before
+training). Nothing else: BenchMARL's own run folder (its pickled config)
+goes to a temporary folder that is removed at the end.
 """
 
 from __future__ import annotations  # noqa: I001  (BenchMARL after agents.marl.tasks: the alias)
 
 import argparse
+import copy
 import csv
 import io
 import json
+import tempfile
 import time
 from pathlib import Path
 from typing import Any
@@ -85,6 +95,11 @@ class Curve(Callback):
         evaluation: The fixed-seed evaluation, or None.
         every: Evaluate after iterations ``every``, ``2 every``, ... and the last.
         iterations: The number of iterations of the run.
+
+    Attributes:
+        best: With ``keep_best``, (iteration, fixed-seed return minus the base's, the
+            actor's state dict) of the best evaluation so far; ``note_start`` records
+            the actor before training as iteration 0.
     """
 
     def __init__(
@@ -93,6 +108,7 @@ class Curve(Callback):
         super().__init__()
         self.n, self.rows, self.start = n, [], time.perf_counter()
         self.evaluation, self.every, self.iterations = evaluation, every, iterations
+        self.best: tuple[int, float, dict[str, torch.Tensor]] | None = None
         self.frames = 0
         self._collected = self.start
         self._last = self.start
@@ -131,9 +147,17 @@ class Curve(Callback):
             assert self.experiment is not None
             scores = self.evaluation.evaluate(self.experiment.policy)
             row.update({f"eval_{name}": value for name, value in scores.items()})
+            if self.best is not None and scores["return_minus_base"] > self.best[1]:
+                self.note(iteration, scores["return_minus_base"])
         self._last = time.perf_counter()
         row["evaluation_seconds"] = self._last - now
         row["seconds"] = self._last - self.start
+
+    def note(self, iteration: int, gain: float) -> None:
+        """Keep a copy of the actor as the best so far (iteration 0: before training)."""
+        assert self.experiment is not None
+        actor = self.experiment.algorithm.get_policy_for_loss("vessel")
+        self.best = (iteration, gain, copy.deepcopy(actor.state_dict()))
 
 
 def main() -> None:
@@ -174,7 +198,15 @@ def main() -> None:
     parser.add_argument(
         "--eval-steps", type=int, default=None, help="evaluation episode length (scenario's)"
     )
+    parser.add_argument(
+        "--keep-best",
+        action="store_true",
+        help="save the actor of the best fixed-seed evaluation (the one before training "
+        "included) instead of the last",
+    )
     args = parser.parse_args()
+    if args.keep_best and args.eval_fleets < 1:
+        parser.error("--keep-best selects on the fixed-seed evaluation: give --eval-fleets >= 1.")
     if args.privileged_state and args.algorithm != "mappo":
         parser.error(
             "--privileged-state is for MAPPO's centralized critic; IPPO's critics read no "
@@ -187,6 +219,8 @@ def main() -> None:
     from benchmarl.models import MlpConfig
 
     config = ExperimentConfig.get_from_yaml()
+    # BenchMARL writes its own run folder (a pickled config); the run's record is run.json.
+    scratch = tempfile.TemporaryDirectory(prefix="benchmarl-")
     settings = {
         "max_n_iters": args.iterations,
         "max_n_frames": None,
@@ -200,7 +234,7 @@ def main() -> None:
         "render": False,
         "checkpoint_at_end": False,
         "create_json": False,
-        "save_folder": str(args.out.parent),
+        "save_folder": scratch.name,
     }
     for key, value in settings.items():
         setattr(config, key, value)
@@ -249,9 +283,16 @@ def main() -> None:
             max_steps=args.eval_steps,
         )
         base, at_start = curve.evaluation.base, curve.evaluation.evaluate(experiment.policy)
+        if args.keep_best:
+            curve.note(0, at_start["return_minus_base"])
     started = time.perf_counter()
     experiment.run()
     seconds = time.perf_counter() - started
+    kept: dict[str, Any] = {"rule": "last", "iteration": experiment.n_iters_performed}
+    if curve.best is not None:
+        iteration, gain, state = curve.best
+        experiment.algorithm.get_policy_for_loss("vessel").load_state_dict(state)
+        kept = {"rule": "best", "iteration": iteration, "eval_return_minus_base": gain}
     save_marl_policy(experiment, args.out, args.algorithm)
     vessel_steps = experiment.total_frames * curve.n
     evaluation_seconds = sum(r["evaluation_seconds"] for r in curve.rows)
@@ -279,6 +320,7 @@ def main() -> None:
         },
         "stagger": bool(task.config["stagger"]),
         "privileged_state": args.privileged_state,
+        "kept": kept,
         "versions": {
             "torch": torch.__version__,
             "torchrl": __import__("torchrl").__version__,
@@ -291,6 +333,7 @@ def main() -> None:
     writer.writerows(curve.rows)
     atomic.write_text(args.out / "curve.csv", text.getvalue())
     atomic.write_text(args.out / "run.json", json.dumps(run, indent=2) + "\n")
+    scratch.cleanup()
     print(json.dumps({k: run[k] for k in ("iterations", "vessel_steps", "seconds")}))
     print(f"end to end: {run['vessel_steps_per_second']:,.0f} vessel-steps/s")
     print("last rows:", *curve.rows[-3:], sep="\n")

@@ -267,14 +267,24 @@ def test_the_training_example_writes_a_curve_and_a_policy(tmp_path: Path, actor:
     assert record["task"]["privileged_state"] is ("--privileged-state" in actor)
     policy = load_policy(out, scenario="bench_lossy_links")
     assert policy.name == "run"
+    assert [path.name for path in tmp_path.iterdir()] == ["run"]  # nothing of BenchMARL's left
 
 
-def test_the_training_example_refuses_the_privileged_state_for_ippo(tmp_path: Path) -> None:
+@pytest.mark.parametrize(
+    ("options", "message"),
+    [
+        (["--algorithm", "ippo", "--privileged-state"], "use --algorithm mappo"),
+        (["--keep-best", "--eval-fleets", "0"], "give --eval-fleets >= 1"),
+    ],
+    ids=["told_critic_for_ippo", "keep_best_without_evaluation"],
+)
+def test_the_training_example_refuses_options_that_do_not_fit(
+    tmp_path: Path, options: list[str], message: str
+) -> None:
     script = Path(__file__).resolve().parents[2] / "examples" / "marl_residual.py"
-    command = [sys.executable, str(script), "--algorithm", "ippo", "--privileged-state",
-               "--out", str(tmp_path / "run")]  # fmt: skip
+    command = [sys.executable, str(script), *options, "--out", str(tmp_path / "run")]
     result = subprocess.run(command, capture_output=True, text=True, cwd=tmp_path)
-    assert result.returncode == 2 and "use --algorithm mappo" in result.stderr
+    assert result.returncode == 2 and message in result.stderr
     assert not (tmp_path / "run").exists()
 
 
@@ -383,3 +393,27 @@ def test_a_neighbour_encoder_actor_trains_saves_and_runs_on_a_higher_degree(
     star.reset()
     actions = star.act_batch(observation)
     assert actions.shape[:2] == (2, 5) and np.isfinite(actions).all()
+
+
+def test_the_training_example_keeps_the_best_evaluated_actor(tmp_path: Path) -> None:
+    script = Path(__file__).resolve().parents[2] / "examples" / "marl_residual.py"
+    env = {**os.environ, "NUMBA_NUM_THREADS": "1"}
+    common = [sys.executable, str(script), "--iterations", "3", "--eval-every", "1",
+              "--eval-fleets", "2", "--eval-steps", "20"]  # fmt: skip
+    folders = {}
+    for name, extra in (("last", []), ("best", ["--keep-best"])):
+        folders[name] = tmp_path / name
+        command = [*common, "--out", str(folders[name]), *extra]
+        result = subprocess.run(command, capture_output=True, text=True, env=env, cwd=tmp_path)
+        assert result.returncode == 0, result.stderr[-2000:]
+    with (folders["best"] / "curve.csv").open() as text:
+        gains = [0.0] + [float(row["eval_return_minus_base"]) for row in csv.DictReader(text)]
+    run = json.loads((folders["best"] / "run.json").read_text())
+    best = max(range(len(gains)), key=gains.__getitem__)
+    assert run["kept"] == {"rule": "best", "iteration": best, "eval_return_minus_base": gains[best]}
+    last = json.loads((folders["last"] / "run.json").read_text())["kept"]
+    assert last == {"rule": "last", "iteration": 3}
+    same = [(folders[name] / "policy.safetensors").read_bytes() for name in ("last", "best")]
+    assert (same[0] == same[1]) is (best == 3)  # the same seed trains the same actors
+    policy = load_policy(folders["best"], scenario="bench_lossy_links")
+    assert policy.name == "best"
