@@ -13,8 +13,8 @@ estimator settings (``baselines.mpc_tuned.K5``, ``K6`` and
 
 =================================  ==========================================================
 ``mpc_tuned_told_dynamics``        its own true model and true lumped residual force: what a
-                                   perfect estimator on the vessel's own history would give,
-                                   the most a local learner with history could infer
+                                   perfect estimator of the vessel's own dynamics would give
+                                   ``mpc_tuned``
 ``mpc_tuned_told_links``           every neighbour's present path variable and message
 ``mpc_tuned_told_v0``              the true v0 now
 ``mpc_tuned_privileged``           all three
@@ -56,7 +56,8 @@ def main(argv: list[str] | None = None) -> list[CellResult]:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--split", choices=("test", "shift"), default="test")
     parser.add_argument("--seeds", type=int, default=20, help="episodes per cell (default 20)")
-    parser.add_argument("--steps", type=int, default=None, help="horizon (default: the scenario's)")
+    parser.add_argument("--steps", type=int, default=None,
+                        help="episode length in control steps (default: scenario's)")  # fmt: skip
     parser.add_argument("--scenarios", nargs="+", default=list_suite(), metavar="NAME",
                         help="suite scenarios (default: all seven)")  # fmt: skip
     parser.add_argument("--out", default=None, help="output folder (default: print only)")

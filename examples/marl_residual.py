@@ -97,9 +97,10 @@ class Curve(Callback):
         iterations: The number of iterations of the run.
 
     Attributes:
-        best: With ``keep_best``, (iteration, fixed-seed return minus the base's, the
-            actor's state dict) of the best evaluation so far; ``note_start`` records
-            the actor before training as iteration 0.
+        best: (iteration, fixed-seed return minus the base's, the actor's state dict)
+            of the best evaluation so far, or None: selection off. ``main`` turns it
+            on (``--keep-best``) by calling ``note`` on the actor before training
+            (iteration 0); each later evaluation that beats it calls ``note`` again.
     """
 
     def __init__(
@@ -159,9 +160,21 @@ class Curve(Callback):
         actor = self.experiment.algorithm.get_policy_for_loss("vessel")
         self.best = (iteration, gain, copy.deepcopy(actor.state_dict()))
 
+    def restore_best(self) -> dict[str, Any]:
+        """Put the best actor noted back into the experiment; return ``run.json``'s ``kept``.
+
+        Without selection (``best`` None) the actor stays the last iteration's.
+        """
+        if self.best is None:
+            return {"rule": "last", "iteration": len(self.rows)}
+        assert self.experiment is not None
+        iteration, gain, state = self.best
+        self.experiment.algorithm.get_policy_for_loss("vessel").load_state_dict(state)
+        return {"rule": "best", "iteration": iteration, "eval_return_minus_base": gain}
+
 
 def main() -> None:
-    """Parse the arguments, train, save."""
+    """Parse the arguments, then train and save (``train``)."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--algorithm", choices=("mappo", "ippo"), default="mappo")
     parser.add_argument("--task", default="bench_lossy_links")
@@ -213,14 +226,18 @@ def main() -> None:
             "global state (use --algorithm mappo)."
         )
     torch.set_num_threads(1)
+    # BenchMARL writes its own run folder (a pickled config); the run's record is run.json.
+    with tempfile.TemporaryDirectory(prefix="benchmarl-") as scratch:
+        train(args, scratch)
 
+
+def train(args: argparse.Namespace, scratch: str) -> None:
+    """Train as ``args`` say, BenchMARL's run folder under ``scratch``; write ``args.out``."""
     from benchmarl.algorithms import IppoConfig, MappoConfig
     from benchmarl.experiment import Experiment, ExperimentConfig
     from benchmarl.models import MlpConfig
 
     config = ExperimentConfig.get_from_yaml()
-    # BenchMARL writes its own run folder (a pickled config); the run's record is run.json.
-    scratch = tempfile.TemporaryDirectory(prefix="benchmarl-")
     settings = {
         "max_n_iters": args.iterations,
         "max_n_frames": None,
@@ -234,7 +251,7 @@ def main() -> None:
         "render": False,
         "checkpoint_at_end": False,
         "create_json": False,
-        "save_folder": scratch.name,
+        "save_folder": scratch,
     }
     for key, value in settings.items():
         setattr(config, key, value)
@@ -288,11 +305,7 @@ def main() -> None:
     started = time.perf_counter()
     experiment.run()
     seconds = time.perf_counter() - started
-    kept: dict[str, Any] = {"rule": "last", "iteration": experiment.n_iters_performed}
-    if curve.best is not None:
-        iteration, gain, state = curve.best
-        experiment.algorithm.get_policy_for_loss("vessel").load_state_dict(state)
-        kept = {"rule": "best", "iteration": iteration, "eval_return_minus_base": gain}
+    kept = curve.restore_best()
     save_marl_policy(experiment, args.out, args.algorithm)
     vessel_steps = experiment.total_frames * curve.n
     evaluation_seconds = sum(r["evaluation_seconds"] for r in curve.rows)
@@ -333,7 +346,6 @@ def main() -> None:
     writer.writerows(curve.rows)
     atomic.write_text(args.out / "curve.csv", text.getvalue())
     atomic.write_text(args.out / "run.json", json.dumps(run, indent=2) + "\n")
-    scratch.cleanup()
     print(json.dumps({k: run[k] for k in ("iterations", "vessel_steps", "seconds")}))
     print(f"end to end: {run['vessel_steps_per_second']:,.0f} vessel-steps/s")
     print("last rows:", *curve.rows[-3:], sep="\n")

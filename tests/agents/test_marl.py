@@ -10,6 +10,7 @@ import os
 import subprocess
 import sys
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -19,6 +20,7 @@ if importlib.util.find_spec("benchmarl") is None:  # importing it needs agents.m
     pytest.skip("BenchMARL is not installed (docs/marl.md)", allow_module_level=True)
 
 import torch
+from safetensors.torch import load_file
 from torchrl.envs.utils import ExplorationType, set_exploration_type
 
 from agents import load_policy
@@ -395,6 +397,28 @@ def test_a_neighbour_encoder_actor_trains_saves_and_runs_on_a_higher_degree(
     assert actions.shape[:2] == (2, 5) and np.isfinite(actions).all()
 
 
+def test_keeping_the_best_puts_the_noted_actor_back() -> None:
+    spec = importlib.util.spec_from_file_location(
+        "marl_residual", Path(__file__).resolve().parents[2] / "examples" / "marl_residual.py"
+    )
+    assert spec is not None and spec.loader is not None
+    example = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(example)
+    actor = torch.nn.Linear(3, 2)
+    curve = example.Curve(n=5, evaluation=None, every=1, iterations=3)
+    algorithm = SimpleNamespace(get_policy_for_loss=lambda _: actor)
+    curve.experiment = SimpleNamespace(algorithm=algorithm)
+    curve.rows = [{}, {}, {}]
+    assert curve.restore_best() == {"rule": "last", "iteration": 3}  # no selection: untouched
+    curve.note(2, 41.5)
+    noted = {key: value.clone() for key, value in actor.state_dict().items()}
+    with torch.no_grad():
+        actor.weight.add_(1.0)  # training goes on past the best
+    assert curve.restore_best() == {"rule": "best", "iteration": 2, "eval_return_minus_base": 41.5}
+    for key, value in actor.state_dict().items():
+        assert torch.equal(value, noted[key])
+
+
 def test_the_training_example_keeps_the_best_evaluated_actor(tmp_path: Path) -> None:
     script = Path(__file__).resolve().parents[2] / "examples" / "marl_residual.py"
     env = {**os.environ, "NUMBA_NUM_THREADS": "1"}
@@ -413,7 +437,17 @@ def test_the_training_example_keeps_the_best_evaluated_actor(tmp_path: Path) -> 
     assert run["kept"] == {"rule": "best", "iteration": best, "eval_return_minus_base": gains[best]}
     last = json.loads((folders["last"] / "run.json").read_text())["kept"]
     assert last == {"rule": "last", "iteration": 3}
-    same = [(folders[name] / "policy.safetensors").read_bytes() for name in ("last", "best")]
-    assert (same[0] == same[1]) is (best == 3)  # the same seed trains the same actors
+    kept = load_file(folders["best"] / "policy.safetensors")
+    if best == 0:  # the actor before training: its mean output zeroed
+        assert not kept["output.weight"].any() and not kept["output.bias"].any()
+    else:  # the same seed trains the same actors: a run stopped there saved the same one
+        if best < 3:
+            folders["stopped"] = tmp_path / "stopped"
+            command = [*common[:3], str(best), *common[4:], "--out", str(folders["stopped"])]
+            result = subprocess.run(command, capture_output=True, text=True, env=env, cwd=tmp_path)
+            assert result.returncode == 0, result.stderr[-2000:]
+        same = folders["last" if best == 3 else "stopped"] / "policy.safetensors"
+        assert same.read_bytes() == (folders["best"] / "policy.safetensors").read_bytes()
+    assert sorted(path.name for path in tmp_path.iterdir()) == sorted(folders)
     policy = load_policy(folders["best"], scenario="bench_lossy_links")
     assert policy.name == "best"
