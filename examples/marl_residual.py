@@ -98,7 +98,7 @@ class Curve(Callback):
 
     Attributes:
         best: (iteration, fixed-seed return minus the base's, the actor's state dict)
-            of the best evaluation so far, or None: selection off. ``main`` turns it
+            of the best evaluation so far, or None: selection off. ``train`` turns it
             on (``--keep-best``) by calling ``note`` on the actor before training
             (iteration 0); each later evaluation that beats it calls ``note`` again.
     """
