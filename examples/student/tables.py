@@ -7,7 +7,8 @@ For each of ``bench_test``, ``bench_shift`` and ``bench_procedural``, and
 their ``_k6`` (6-slot students), ``_deepsets`` (encoder and history
 students), ``_tuned``, ``_tuned_deepsets``, ``_tuned_applied``,
 ``_tuned_yield``, ``_tuned_yield_told``, ``_tuned_yield_twin`` and
-``_tuned_deepsets_twin`` versions, and ``bench_procedural_large_deepsets_twin``
+``_tuned_deepsets_twin`` versions, ``bench_procedural_large_deepsets_twin``
+and ``bench_paper_scenarios_twin`` (the paper's seven named scenarios)
 (students on ``mpc_tuned``, which there takes ``mpc``'s place below) (those
 that exist),
 one row per scenario: the mean episode cost of ``nn_dsc``,
@@ -75,6 +76,7 @@ BENCHES = {
         for split in ("test", "shift", "procedural")
     },
     "bench_procedural_large_deepsets_twin": "mpc_tuned",
+    "bench_paper_scenarios_twin": "mpc_tuned",
 }
 STUDENT = "agents/student"
 
