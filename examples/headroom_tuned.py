@@ -8,8 +8,8 @@ r"""What a local controller could still gain over ``mpc_tuned``: its headroom, s
 
 ``cpf-bench`` of ``oracle``, ``mpc_tuned`` and the members of
 ``baselines.mpc_told`` (and ``mpc_privileged``) built with ``mpc_tuned``'s
-estimator settings (``baselines.mpc_tuned.K5``, ``K6`` and
-``baselines.mpc.SPEED_RATE``), against ``mpc_tuned`` as the reference:
+estimator settings (``MPCTuned.DEFAULTS``: ``baselines.mpc_tuned.K5``, ``K6``
+and ``baselines.mpc.SPEED_RATE``), against ``mpc_tuned`` as the reference:
 
 =================================  ==========================================================
 ``mpc_tuned_told_dynamics``        its own true model and true lumped residual force: what a
@@ -35,14 +35,11 @@ import sys
 from functools import partial
 
 import baselines
-from baselines.mpc import SPEED_RATE
-from baselines.mpc_tuned import K5, K6
+from baselines.mpc_tuned import MPCTuned
 from cpf_commands.bench.report import CellResult
 from cpf_commands.bench.run import run_bench
 from cpf_env.scenarios.suite import list_suite
 
-#: ``mpc_tuned``'s estimator settings, given to every told variant.
-TUNED = {"k5": K5, "k6": K6, "speed_rate": SPEED_RATE}
 #: Label in the bench -> the ``baselines.mpc_told`` / ``baselines.mpc`` policy it builds.
 TOLD = {
     "mpc_tuned_told_dynamics": "mpc_told_dynamics",
@@ -64,7 +61,7 @@ def main(argv: list[str] | None = None) -> list[CellResult]:
     args = parser.parse_args(argv)
     policies = {"oracle": "oracle", "mpc_tuned": "mpc_tuned"}
     for label, name in TOLD.items():
-        policies[label] = partial(baselines.make_policy, name, **TUNED)
+        policies[label] = partial(baselines.make_policy, name, **MPCTuned.DEFAULTS)
     given = sys.argv[1:] if argv is None else argv
     command = shlex.join(["python", "examples/headroom_tuned.py", *given])
     cells = run_bench(policies, args.scenarios, seeds=args.seeds, steps=args.steps, out=args.out,

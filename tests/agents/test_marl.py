@@ -32,6 +32,9 @@ from cpf_env.scenarios import paper, suite
 
 pytestmark = pytest.mark.benchmarl
 
+#: The BenchMARL training example the tests below run.
+SCRIPT = Path(__file__).resolve().parents[2] / "examples" / "marl_residual.py"
+
 #: Two short iterations: 4 fleets x 50 steps per batch, one minibatch pass.
 SMALL = {
     "max_n_iters": 2,
@@ -245,9 +248,8 @@ def test_two_mappo_iterations_on_the_pettingzoo_route_with_distinct_worker_seeds
     "actor", [[], ["--encoder"], ["--privileged-state"]], ids=["mlp", "encoder", "told_critic"]
 )
 def test_the_training_example_writes_a_curve_and_a_policy(tmp_path: Path, actor: list[str]) -> None:
-    script = Path(__file__).resolve().parents[2] / "examples" / "marl_residual.py"
     out = tmp_path / "run"
-    command = [sys.executable, str(script), "--iterations", "1", "--out", str(out),
+    command = [sys.executable, str(SCRIPT), "--iterations", "1", "--out", str(out),
                "--eval-fleets", "2", "--eval-steps", "20", *actor]  # fmt: skip
     env = {**os.environ, "NUMBA_NUM_THREADS": "1"}
     result = subprocess.run(command, capture_output=True, text=True, env=env, cwd=tmp_path)
@@ -283,8 +285,7 @@ def test_the_training_example_writes_a_curve_and_a_policy(tmp_path: Path, actor:
 def test_the_training_example_refuses_options_that_do_not_fit(
     tmp_path: Path, options: list[str], message: str
 ) -> None:
-    script = Path(__file__).resolve().parents[2] / "examples" / "marl_residual.py"
-    command = [sys.executable, str(script), *options, "--out", str(tmp_path / "run")]
+    command = [sys.executable, str(SCRIPT), *options, "--out", str(tmp_path / "run")]
     result = subprocess.run(command, capture_output=True, text=True, cwd=tmp_path)
     assert result.returncode == 2 and message in result.stderr
     assert not (tmp_path / "run").exists()
@@ -398,9 +399,7 @@ def test_a_neighbour_encoder_actor_trains_saves_and_runs_on_a_higher_degree(
 
 
 def test_keeping_the_best_puts_the_noted_actor_back() -> None:
-    spec = importlib.util.spec_from_file_location(
-        "marl_residual", Path(__file__).resolve().parents[2] / "examples" / "marl_residual.py"
-    )
+    spec = importlib.util.spec_from_file_location("marl_residual", SCRIPT)
     assert spec is not None and spec.loader is not None
     example = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(example)
@@ -420,9 +419,8 @@ def test_keeping_the_best_puts_the_noted_actor_back() -> None:
 
 
 def test_the_training_example_keeps_the_best_evaluated_actor(tmp_path: Path) -> None:
-    script = Path(__file__).resolve().parents[2] / "examples" / "marl_residual.py"
     env = {**os.environ, "NUMBA_NUM_THREADS": "1"}
-    common = [sys.executable, str(script), "--iterations", "3", "--eval-every", "1",
+    common = [sys.executable, str(SCRIPT), "--iterations", "3", "--eval-every", "1",
               "--eval-fleets", "2", "--eval-steps", "20"]  # fmt: skip
     folders = {}
     for name, extra in (("last", []), ("best", ["--keep-best"])):
