@@ -23,7 +23,7 @@ that never happens below a degree of 19). Everything used is on board (its
 neighbours' messages and link weights, what it hears of v0, its own force
 limits and nominal model): deployable (``baselines.POLICIES``). The values
 were chosen on the suite's training seeds (0-4), never on the evaluation
-seeds: ``examples/mpc_tuning.py`` prints the sweep (docs/benchmark.md has it).
+seeds: ``studies/headroom/mpc_tuning.py`` prints the sweep (docs/benchmark.md has it).
 """
 
 from __future__ import annotations

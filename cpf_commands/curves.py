@@ -33,7 +33,7 @@ base policy (the correction starts at zero).
 
 Example::
 
-    cpf-curves runs/lossy_s0 runs/lossy_s1 runs/lossy_s2 --out results/curves_lossy
+    cpf-curves runs/lossy_s0 runs/lossy_s1 runs/lossy_s2 --out runs/curves_lossy
 """
 
 from __future__ import annotations

@@ -40,7 +40,7 @@ fits the student; it is recorded in ``run.json``, not in the agent's
 
 Example::
 
-    cpf-distill --config examples/student/student_mpc.toml --seed 0 --out runs/student_s0
+    cpf-distill --config studies/student/student_mpc.toml --seed 0 --out runs/student_s0
 """
 
 from __future__ import annotations

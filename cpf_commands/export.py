@@ -11,7 +11,7 @@ Needs the ``onnx`` extra.
 
 Example::
 
-    cpf-export results/residual_rl/agents/residual_ppo_bench_lossy_links_5m_s0 agent.onnx
+    cpf-export results/agents/residual_ppo_s0 agent.onnx
 """
 
 from __future__ import annotations

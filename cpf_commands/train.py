@@ -117,7 +117,7 @@ def _parser() -> argparse.ArgumentParser:
         metavar="SCENARIO",
         help="training scenario; several (or 'suite', the benchmark suite) train one agent on "
         "their mixture (the suite agent of docs/results.md: --config "
-        "examples/suite_agent/hyperparameters.toml). Choices: "
+        "examples/hyperparameters/suite_residual_ppo.toml). Choices: "
         + ", ".join([*training_scenarios(), "suite"]),
     )
     parser.add_argument(

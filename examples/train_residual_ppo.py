@@ -202,7 +202,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         help="train; evaluate (bench + report); report (summary.md from the bench's CSVs)",
     )
     parser.add_argument("--runs", default="runs/residual_rl", help="training run folders")
-    parser.add_argument("--results", default="results/residual_rl", help="evaluation output")
+    parser.add_argument(
+        "--results", default="runs/residual_rl_evaluation", help="evaluation output"
+    )
     parser.add_argument("--timesteps", type=int, default=1_500_000, help="per training run")
     parser.add_argument("--train-seeds", type=int, nargs="+", default=[0, 1, 2], help="seeds")
     parser.add_argument("--fleets", type=int, default=64, help="fleets per training run")

@@ -34,7 +34,7 @@ def test_every_baseline_meets_the_contract(name: str) -> None:
 def test_a_trained_agent_and_the_zero_policy_meet_it() -> None:
     from agents import load_policy
 
-    agent = ROOT / "results" / "residual_rl" / "agents" / "residual_ppo_bench_lossy_links_5m_s0"
+    agent = ROOT / "tests" / "fixtures" / "agents" / "residual_ppo_lossy_links"
     assert isinstance(load_policy(agent, "bench_lossy_links"), FleetPolicy)
     assert isinstance(ZeroPolicy(4), FleetPolicy)
 

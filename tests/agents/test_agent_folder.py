@@ -23,7 +23,7 @@ from cpf_commands.bench.cli import bench_main
 from cpf_commands.run.cli import run_main
 from cpf_env import FleetSim
 
-AGENT = ROOT / "results/residual_rl/agents/residual_ppo_bench_lossy_links_5m_s0"
+AGENT = ROOT / "tests/fixtures/agents/residual_ppo_lossy_links"
 
 
 class _Payload:

@@ -25,7 +25,7 @@ from cpf_env.evaluation.privileged import UNOBSERVED_SIZE, lumped_uncertainty, u
 from cpf_env.sim.observation import THETA
 
 TINY = {"fleets": 2, "n_steps": 16, "batch_size": 80, "n_epochs": 1, "net_arch": (16, 16)}
-STUDENT = Path(__file__).parents[2] / "results" / "student" / "agents" / "student_mpc_deepsets_s0"
+STUDENT = Path(__file__).parents[2] / "tests" / "fixtures" / "agents" / "student_mpc_deepsets"
 
 
 def test_the_unobserved_state_is_the_true_force_v0_and_the_offset_from_the_fleet() -> None:

@@ -34,9 +34,9 @@ from agents.folder_files import MAX_JSON_BYTES, AgentFolderError
 from cpf_commands.bench.cli import bench_main
 from cpf_commands.run.cli import run_main
 
-AGENT = ROOT / "results/residual_rl/agents/residual_ppo_bench_lossy_links_5m_s0"
-MARL = ROOT / "results/marl/agents/mappo_bench_lossy_links_s0"
-MARL_ENCODER = ROOT / "results/marl/agents/mappo_encoder_bench_lossy_links_s0"
+AGENT = ROOT / "tests/fixtures/agents/residual_ppo_lossy_links"
+MARL = ROOT / "tests/fixtures/agents/mappo_lossy_links"
+MARL_ENCODER = ROOT / "tests/fixtures/agents/mappo_encoder_lossy_links"
 #: Seconds a load may take before the guard calls it a hang.
 DEADLINE = 20.0
 #: Memory a load may add to the process (bytes) before allocations fail.
@@ -446,7 +446,7 @@ def test_cpf_run_runs_the_marl_folders_cpf_bench_runs(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     for algorithm in ("mappo", "ippo"):
-        folder = ROOT / f"results/marl/agents/{algorithm}_bench_lossy_links_s0"
+        folder = ROOT / f"tests/fixtures/agents/{algorithm}_lossy_links"
         assert run_main(["--policy", str(folder), "--steps", "2", "--out",
                          str(tmp_path / algorithm), "--quiet", "--no-figures"]) == 0  # fmt: skip
         assert "bench_lossy_links with" in capsys.readouterr().out

@@ -199,7 +199,11 @@ def test_twin_labels_need_an_observer_base_that_hides_the_residual(tmp_path: Pat
 
 @pytest.mark.parametrize(
     "path",
-    sorted(p for p in (ROOT / "examples/student").rglob("*.toml") if "[distill]" in p.read_text()),
+    sorted(
+        p
+        for p in [*(ROOT / "examples").rglob("*.toml"), *(ROOT / "studies/student").rglob("*.toml")]
+        if "[distill]" in p.read_text()
+    ),
     ids=lambda p: p.stem,
 )
 def test_the_example_distillation_files_are_valid(path: Path) -> None:

@@ -16,9 +16,9 @@ from agents.run_folder import TrainingRun
 from agents.schedule import RunSchedule
 from cpf_commands.train import train_main
 
-STUDENTS = Path(__file__).parents[2] / "results" / "student" / "agents"
-MLP = STUDENTS / "student_mpc_k6_s0"
-DEEPSETS = STUDENTS / "student_mpc_deepsets_s0"
+STUDENTS = Path(__file__).parents[2] / "tests" / "fixtures" / "agents"
+MLP = STUDENTS / "student_mpc_k6"
+DEEPSETS = STUDENTS / "student_mpc_deepsets"
 #: The students' recipe on one scenario; 1 fleet x 5 vessels x 8 steps a PPO rollout.
 RECIPE = {"base": "mpc", "scale": 0.5, "neighbour_slots": 6, "net_arch": (64, 64)}
 TINY = {"fleets": 1, "n_steps": 8, "batch_size": 40, "n_epochs": 1, "torch_threads": 1}

@@ -246,8 +246,8 @@ def test_loading_an_agent_folder_imports_no_learning_algorithm(agent: Path) -> N
 
     from conftest import ROOT
 
-    mlp = ROOT / "results/residual_rl/agents/residual_ppo_bench_lossy_links_5m_s0"
-    marl = ROOT / "results/marl/agents/mappo_bench_lossy_links_s0"
+    mlp = ROOT / "tests/fixtures/agents/residual_ppo_lossy_links"
+    marl = ROOT / "tests/fixtures/agents/mappo_lossy_links"
     code = (
         "import sys\n"
         "from agents import load_policy\n"

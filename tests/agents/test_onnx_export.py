@@ -19,7 +19,7 @@ from cpf_commands.export import export_main  # noqa: E402
 from cpf_env import FleetSim  # noqa: E402
 from cpf_env.scenarios import make_scenario  # noqa: E402
 
-AGENT = ROOT / "results/residual_rl/agents/residual_ppo_bench_lossy_links_5m_s0"
+AGENT = ROOT / "tests/fixtures/agents/residual_ppo_lossy_links"
 
 
 @pytest.fixture(scope="module")

@@ -130,8 +130,8 @@ def test_cpf_train_command(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -
 
 def test_the_committed_agent_loads_and_corrects_the_base() -> None:
     """The agent in results/ (docs/results.md's benchmark row) loads with today's code and acts."""
-    folder = ROOT / "results/residual_rl/agents"
-    policy = load_policy(folder / "residual_ppo_bench_lossy_links_5m_s0")
+    folder = ROOT / "tests/fixtures/agents"
+    policy = load_policy(folder / "residual_ppo_lossy_links")
     assert policy.scenario.name == "bench_lossy_links"
     sim = FleetSim(policy.scenario, num_fleets=2)
     obs = sim.reset(seeds=[0, 1])
@@ -146,8 +146,8 @@ def test_a_trained_policy_acts_the_same_whatever_the_torch_threads() -> None:
     """Evaluations on Ray workers (one thread) equal local ones (all cores), bit for bit."""
     import torch
 
-    folder = ROOT / "results/residual_rl/agents"
-    policy = load_policy(folder / "residual_ppo_bench_lossy_links_5m_s0")
+    folder = ROOT / "tests/fixtures/agents"
+    policy = load_policy(folder / "residual_ppo_lossy_links")
     before = torch.get_num_threads()
     try:
         for fleets in (1, 2, 7):  # small batches take torch's thread-dependent paths

@@ -118,7 +118,7 @@ def test_the_timing_example_reports_solve_times_and_real_time_factors():
     import importlib.util
     from pathlib import Path
 
-    path = Path(__file__).resolve().parents[2] / "examples" / "mpc_timing.py"
+    path = Path(__file__).resolve().parents[2] / "benchmarks" / "mpc_timing.py"
     spec = importlib.util.spec_from_file_location("mpc_timing", path)
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)

@@ -13,7 +13,7 @@ from cpf_commands.export import export_main
 from cpf_commands.run.cli import run_main
 from cpf_env import scenarios
 
-AGENT = Path(__file__).resolve().parents[2] / "results/residual_rl/agents"
+AGENT = Path(__file__).resolve().parents[2] / "tests/fixtures/agents"
 
 
 def _error(main, argv: list[str], capsys: pytest.CaptureFixture[str]) -> str:
@@ -62,7 +62,7 @@ def test_a_non_positive_max_steps_says_so_not_something_about_dt():
         ),
         ("empty", "agent.onnx", "'{tmp}/empty' is not an agent folder (no manifest.json)"),
         (
-            str(AGENT / "residual_ppo_bench_lossy_links_5m_s0"),
+            str(AGENT / "residual_ppo_lossy_links"),
             "no/such/folder/agent.onnx",
             "the folder of the output, '{tmp}/no/such/folder', does not exist; create it first "
             "(mkdir -p {tmp}/no/such/folder).",

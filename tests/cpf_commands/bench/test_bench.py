@@ -469,7 +469,7 @@ def test_layering_no_import_runs_back_up(package):
 
 
 def test_the_terminal_says_when_cells_did_not_run(tmp_path, capsys):
-    agent = str(ROOT / "results/residual_rl/agents/residual_ppo_bench_lossy_links_5m_s0")
+    agent = str(ROOT / "tests/fixtures/agents/residual_ppo_lossy_links")
     argv = ["--policies", "nn_dsc", agent, "--scenarios", "bench_lossy_links", "bench_switching"]
     argv += ["--seeds", "2", "--steps", "5", "--out", str(tmp_path / "b"), "--quiet"]
     assert bench_main([*argv, "--no-figures"]) == 0

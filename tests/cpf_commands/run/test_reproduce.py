@@ -1,9 +1,6 @@
 from __future__ import annotations
 
-import importlib.util
 import json
-import runpy
-import sys
 
 import numpy as np
 import pytest
@@ -183,30 +180,6 @@ def test_progress_bar_starts_after_the_kernels_are_compiled(tmp_path, monkeypatc
     assert "compiles them on the first run" in capsys.readouterr().out
 
 
-def test_example_help_shows_its_own_name(monkeypatch, capsys):
-    monkeypatch.setattr(sys, "argv", ["reproduce_wang2014.py", "--help"])
-    with pytest.raises(SystemExit) as exit_info:
-        runpy.run_path(str(ROOT / "examples" / "reproduce_wang2014.py"), run_name="__main__")
-    assert exit_info.value.code == 0
-    assert capsys.readouterr().out.startswith("usage: reproduce_wang2014.py")
-
-
-def test_reproduction_tables_example(capsys):
-    spec = importlib.util.spec_from_file_location(
-        "reproduction_tables", ROOT / "examples" / "reproduction_tables.py"
-    )
-    tables = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(tables)
-    claims = tables.main(["claims", "--steps", "20"]).splitlines()
-    assert len(claims) == 2 + 5 and "formula:" in claims[3]
-    rows = tables.ablation_rows(steps=10)
-    assert [(r[0], r[2]) for r in rows] == [
-        (s, p) for s in tables.ABLATION_SCENARIOS for p in tables.ABLATION_POLICIES
-    ]
-    assert {r[1] for r in rows if r[0].endswith("_fine")} == {"plain"}
-    assert {r[1] for r in rows if not r[0].endswith("_fine")} == {"gamma_scaled"}
-
-
 def test_cli_rejects_unknown_scenario(capsys):
     with pytest.raises(SystemExit):
         run_main(["--scenario", "nope"])
@@ -304,9 +277,7 @@ def test_an_agent_of_several_scenarios_runs_its_first_and_says_so(tmp_path, caps
     from cpf_commands.run.cli import _default_scenario
 
     folder = tmp_path / "agent"
-    shutil.copytree(
-        ROOT / "results/residual_rl/agents/residual_ppo_bench_lossy_links_5m_s0", folder
-    )
+    shutil.copytree(ROOT / "tests/fixtures/agents/residual_ppo_lossy_links", folder)
 
     def train_on(scenario):  # config.json edited, the manifest forged to match
         record = json.loads((folder / "config.json").read_text())

@@ -14,7 +14,7 @@ from cpf_commands.run import cli
 from cpf_commands.run.cli import run_main
 from cpf_commands.run.video import frame_period
 
-AGENT = ROOT / "results/residual_rl/agents/residual_ppo_bench_lossy_links_5m_s0"
+AGENT = ROOT / "tests/fixtures/agents/residual_ppo_lossy_links"
 
 
 def test_an_agent_episode_becomes_a_gif_on_its_training_scenario(

@@ -30,7 +30,7 @@ pytestmark = pytest.mark.ray
 
 #: A tiny training run: 8 fleets, 2 rollouts.
 TINY = ["timesteps=2000", "fleets=8", "n_steps=16"]
-AGENT = ROOT / "results" / "residual_rl" / "agents" / "residual_ppo_bench_lossy_links_5m_s0"
+AGENT = ROOT / "tests" / "fixtures" / "agents" / "residual_ppo_lossy_links"
 
 
 def test_two_seeds_by_two_scenarios_then_a_resume(tmp_path, capsys) -> None:

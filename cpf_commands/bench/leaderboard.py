@@ -1,0 +1,233 @@
+"""Regenerate the leaderboard: ``python -m cpf_commands.bench.leaderboard``.
+
+Runs cpf-bench's default policies (every deployable baseline and the
+headroom bound ``oracle``) and the reference agents of ``results/agents/``
+(``AGENTS``: one per learning method, and the encoder student that runs
+on fleets of any degree) on the suite's ``test`` split (20
+seeds) and ``shift`` split (10 seeds) with ``run_bench``, and writes
+
+* both results folders (``results/bench_test/``, ``results/bench_shift/``);
+* ``results/leaderboard.json``: every episode of both splits in marl-eval's
+  JSON format (``cpf_commands.bench.marl_eval``; the shift split's tasks are
+  the ``*_shift`` scenarios);
+* the text between ``docs/results.md``'s ``<!-- bench:begin -->`` and
+  ``<!-- bench:end -->`` markers: tables built from those runs, the
+  machine's core count and load, and the wall time.
+
+Every file is written atomically.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import platform
+import shlex
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from statistics import NormalDist
+
+import numpy as np
+
+from cpf_commands.bench.marl_eval import write_marl_eval
+from cpf_commands.bench.report import CellResult, summarize
+from cpf_commands.bench.run import default_policies, run_bench
+from cpf_commands.bench.verdict import verdicts
+from cpf_commands.bench.views import display_name, gap_table, markdown_table
+from cpf_env.infra import atomic
+from cpf_env.scenarios.suite import list_suite
+
+__all__ = ["AGENTS", "LEADERBOARD_JSON", "PAGE", "main"]
+
+#: The reference agents (folder -> the label the tables give it), one per learning method;
+#: results/README.md has the command that trained each.
+AGENTS = {
+    "results/agents/residual_ppo_s0": "residual PPO, lossy links",
+    "results/agents/suite_residual_ppo_s0": "residual PPO, whole suite",
+    "results/agents/student_s0": "student distilled from the oracle",
+    "results/agents/student_deepsets_s0": "student with a neighbour encoder, any degree",
+    "results/agents/mappo_s0": "residual MAPPO, lossy links",
+}
+#: The marl-eval JSON of both splits, under the results folder.
+LEADERBOARD_JSON = "leaderboard.json"
+#: The page whose section between the markers this module rewrites.
+PAGE = "docs/results.md"
+BEGIN, END = "<!-- bench:begin -->", "<!-- bench:end -->"
+#: Physical columns of the lossy-links table: metric, heading, scale, unit.
+PHYSICAL = (
+    ("cost", "cost", 1.0, ""),
+    ("cross_track_error_rms_window", "cross-track", 1e3, "mm"),
+    ("along_track_error_rms_window", "along-track", 1e3, "mm"),
+    ("heading_error_rms_window", "heading", 1e3, "mrad"),
+    ("formation_error_rms_window", "formation", 1e3, "mm"),
+    ("formation_error_end", "formation at end", 1e3, "mm"),
+    ("speed_along_path_window", "speed along path", 1.0, "m/s"),
+    ("progress", "progress", 1.0, ""),
+)
+
+
+def _label(policy: str) -> str:
+    return AGENTS[policy] if policy in AGENTS else display_name(policy)
+
+
+def _physical_table(cells: Sequence[CellResult], scenario: str) -> list[str]:
+    judged = {v.policy: v.label for v in verdicts(cells, "nn_dsc") if v.scenario == scenario}
+    header = ["policy"] + [f"{h} ({u})" if u else h for _, h, _, u in PHYSICAL] + ["verdict"]
+    body = []
+    for cell in cells:
+        if cell.scenario != scenario:
+            continue
+        values = [f"{scale * float(np.mean(cell.metrics[m])):.3g}" for m, _, scale, _ in PHYSICAL]
+        body.append([_label(cell.policy), *values, judged.get(cell.policy, "reference")])
+    return markdown_table(header, body)
+
+
+def _suite_table(cells: Sequence[CellResult]) -> list[str]:
+    names = list(dict.fromkeys(cell.scenario for cell in cells))
+    policies = list(dict.fromkeys(cell.policy for cell in cells))
+    judged = {(v.policy, v.scenario): v for v in verdicts(cells, "nn_dsc")}
+    costs = {(c.policy, c.scenario): float(np.mean(c.metrics["cost"])) for c in cells}
+    body = []
+    for policy in policies:
+        row = [_label(policy)]
+        for name in names:
+            if (policy, name) not in costs:
+                row.append("not run (layout)")
+                continue
+            v = judged.get((policy, name))
+            row.append(f"{costs[(policy, name)]:.3g}" + (f" {v.label}" if v else ""))
+        body.append(row)
+    return markdown_table(["policy", *names], body)
+
+
+def _power_table(cells: Sequence[CellResult], policy: str = "backstepping") -> list[str]:
+    """Seeds a paired comparison needs to detect a cost difference (alpha 0.05, power 0.8).
+
+    n = ((z_0.975 + z_0.8) sd / delta)^2, sd the measured standard deviation of
+    the per-seed cost differences ``policy - nn_dsc`` and delta a fraction of
+    ``nn_dsc``'s mean cost.
+    """
+    z = NormalDist().inv_cdf(0.975) + NormalDist().inv_cdf(0.8)
+    by_key = {(c.policy, c.scenario): c for c in cells}
+    body = []
+    for name in dict.fromkeys(c.scenario for c in cells):
+        pair = by_key.get((policy, name)), by_key.get(("nn_dsc", name))
+        if pair[0] is None or pair[1] is None or len(pair[0].seeds) < 2:
+            continue
+        differences = pair[0].metrics["cost"] - pair[1].metrics["cost"]
+        sd = float(np.std(differences, ddof=1))
+        scale = float(np.mean(pair[1].metrics["cost"]))
+        needed = [max(2, math.ceil((z * sd / (f * scale)) ** 2)) for f in (0.01, 0.02, 0.05)]
+        body.append([name, f"{sd:.3g}", *(str(k) for k in needed)])
+    header = ["scenario", f"sd of {policy} - nn_dsc cost", "seeds for 1 %", "2 %", "5 %"]
+    return markdown_table(header, body)
+
+
+def _gap_lines(cells: Sequence[CellResult], metric: str) -> list[str]:
+    lines = gap_table(summarize(cells, "nn_dsc"), cells, metric, "nn_dsc")
+    for folder, label in AGENTS.items():
+        lines = [line.replace(f"| {folder} |", f"| {label} |") for line in lines]
+    return lines
+
+
+def _section(test: Sequence[CellResult], shift: Sequence[CellResult], note: str) -> str:
+    lines = [
+        BEGIN,
+        "",
+        note,
+        "",
+        "`bench_lossy_links`, `test` split (20 evaluation seeds), final-window means "
+        "(whole-episode cost and progress); verdict against `nn_dsc` "
+        "(`docs/benchmark.md`, section Verdict):",
+        "",
+        *_physical_table(test, "bench_lossy_links"),
+        "",
+        "Every suite scenario, `test` split: mean cost and verdict against `nn_dsc` "
+        "(`equivalent`: the cost difference's 95 % interval lies within 1 % of `nn_dsc`'s "
+        "mean cost):",
+        "",
+        *_suite_table(test),
+        "",
+        "Normalized score against the headroom bound `oracle` (receding-horizon control "
+        "told the true model, the future disturbances, ideal links and v0; not deployable), "
+        "`test` split: (nn_dsc - policy) / (nn_dsc - oracle) of the mean final-window cost, "
+        "with its paired 95 % bootstrap interval (0 = `nn_dsc`, 1 = the bound; above 1 "
+        "flagged):",
+        "",
+        *_gap_lines(test, "cost_window"),
+        "",
+        "The same for the whole-episode cost, which the start-up transient dominates; n/a "
+        "where `oracle` is not better than `nn_dsc`:",
+        "",
+        *_gap_lines(test, "cost"),
+        "",
+        "`shift` split (conditions outside the training ranges, 10 seeds): mean cost "
+        "and verdict against `nn_dsc`:",
+        "",
+        *_suite_table(shift),
+        "",
+        "How many paired seeds a cost difference needs (two-sided, 5 % level, 80 % power; "
+        "n = ((1.96 + 0.84) sd / delta)^2 from the measured spread of the per-seed "
+        "differences between two analytic controllers, `test` split; delta as a fraction "
+        "of `nn_dsc`'s mean cost):",
+        "",
+        *_power_table(test),
+        "",
+        END,
+    ]
+    return "\n".join(lines)
+
+
+def _load() -> str:
+    return " ".join(f"{x:.2f}" for x in os.getloadavg())
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run both splits, write their folders and the page's benchmark section."""
+    parser = argparse.ArgumentParser(prog="python -m cpf_commands.bench.leaderboard")
+    parser.add_argument("--page", default=PAGE, help=f"the page to rewrite (default: {PAGE})")
+    parser.add_argument("--results", default="results")
+    args = parser.parse_args(argv)
+    page = Path(args.page)
+    text = page.read_text()
+    if text.count(BEGIN) != 1 or text.count(END) != 1:
+        parser.error(f"{page} needs exactly one {BEGIN} and one {END} marker.")
+    policies = [*default_policies(), *AGENTS]
+    results = Path(args.results)
+    load_before, start = _load(), time.perf_counter()
+    runs = {}
+    for split, seeds in (("test", 20), ("shift", 10)):
+        command = shlex.join(
+            ["cpf-bench", "--policies", *policies, "--split", split, "--seeds", str(seeds)]
+        )
+        runs[split] = run_bench(
+            policies,
+            list_suite(),
+            seeds=seeds,
+            out=results / f"bench_{split}",
+            command=command,
+            split=split,
+        )
+    elapsed = time.perf_counter() - start
+    note = (
+        "Regenerated by `python -m cpf_commands.bench.leaderboard` (both splits, results in "
+        f"`{results}/bench_test/`, `{results}/bench_shift/` and `{results}/{LEADERBOARD_JSON}`) "
+        f"in {elapsed / 60:.1f} min on "
+        f"{os.cpu_count()} cores ({platform.machine()}, {platform.python_implementation()} "
+        f"{platform.python_version()}), load average (1, 5, 15 min) {load_before} before "
+        f"and {_load()} after: the machine was shared."
+    )
+    head, rest = text.split(BEGIN)
+    _, tail = rest.split(END)
+    write_marl_eval([*runs["test"], *runs["shift"]], results / LEADERBOARD_JSON)
+    atomic.write_text(page, head + _section(runs["test"], runs["shift"], note) + tail)
+    print(
+        f"wrote {page}, {results}/bench_test/, {results}/bench_shift/, {results}/{LEADERBOARD_JSON}"
+    )
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
