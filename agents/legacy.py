@@ -33,7 +33,7 @@ __all__ = ["PICKLE_WARNING", "convert_sb3_folder", "is_sb3_folder", "read_sb3_fo
 PICKLE_WARNING = (
     "{folder} is an SB3 agent folder: loading it unpickles model.zip and vecnormalize.pkl, "
     "which runs any code their author put in them. Do this only for folders you made or "
-    "trust, and convert them to the data-only format (examples/convert_sb3_agents.py)."
+    "trust, and convert them to the data-only format (agents.legacy.convert_sb3_folder)."
 )
 
 

@@ -119,7 +119,7 @@ def load_policy(
             f"{folder} is an old SB3 agent folder (model.zip, vecnormalize.pkl): loading "
             "it unpickles them, which runs any code their author put in them. If you "
             "trust it, pass --trust-pickle (load_policy(..., trust_pickle=True)), or "
-            "convert it once: python examples/convert_sb3_agents.py FOLDER."
+            "convert it once with agents.legacy.convert_sb3_folder(FOLDER, NEW_FOLDER)."
         )
     else:
         record, network, normalization = read_sb3_folder(folder)

@@ -5,7 +5,7 @@ lacks at once; each member here tells it exactly one of those things and
 leaves the rest as ``mpc`` has it (local observation as received, the
 disturbance observer on the nominal model, the distributed v0 estimator).
 Their costs split the gap between ``mpc`` and ``oracle`` into what each
-piece of information closes (docs/benchmark.md, "What a local controller
+piece of information closes (studies/headroom/README.md, "What a local controller
 can reach"). Privileged, not deployable (``baselines.PRIVILEGED``): they read
 the simulator they act in, as ``mpc_privileged`` does (build them with a
 ``FleetSim`` or an env, or call ``bind_simulator``).

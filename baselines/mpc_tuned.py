@@ -1,7 +1,7 @@
 """``mpc_tuned``: ``mpc`` with its v0 estimator tuned on the suite's training seeds.
 
 Most of the room ``mpc`` leaves to the ``oracle`` was the start-up transient
-of its distributed v0 estimator (docs/benchmark.md, "What a local
+of its distributed v0 estimator (studies/headroom/README.md, "What a local
 controller can reach"): every vessel starts its estimate at 0 and takes it
 up at gains k5 = k6 = 1 /s. ``mpc_tuned`` is ``mpc`` with two settings of
 that estimator changed (``baselines.mpc.RecedingHorizonGains``) and nothing
@@ -23,7 +23,7 @@ that never happens below a degree of 19). Everything used is on board (its
 neighbours' messages and link weights, what it hears of v0, its own force
 limits and nominal model): deployable (``baselines.POLICIES``). The values
 were chosen on the suite's training seeds (0-4), never on the evaluation
-seeds: ``studies/headroom/mpc_tuning.py`` prints the sweep (docs/benchmark.md has it).
+seeds: ``studies/headroom/mpc_tuning.py`` prints the sweep (studies/headroom/README.md has it).
 """
 
 from __future__ import annotations

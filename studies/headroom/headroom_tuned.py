@@ -22,7 +22,7 @@ and ``baselines.mpc.SPEED_RATE``), against ``mpc_tuned`` as the reference:
 
 The last three are told what other vessels hold; none is told the future
 disturbances nor plans centrally, which is what ``oracle`` adds. The table in
-docs/benchmark.md ("What a local controller can reach against ``mpc_tuned``")
+studies/headroom/README.md ("What a local controller can reach against ``mpc_tuned``")
 is read from the ``summary.csv`` this writes (``gap_closed`` on the ``cost``
 rows: the share of ``mpc_tuned``'s headroom each closes).
 """
