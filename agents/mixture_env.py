@@ -94,7 +94,7 @@ class MixtureVecEnv(VecEnv):
         self,
         scenarios: Sequence[str | Scenario],
         num_fleets: int = 64,
-        base_policy: str | Sequence[FleetPolicy] | None = "nn_dsc",
+        base_policy: str | Sequence[FleetPolicy] | None = None,
         residual: ResidualConfig | None = None,
         stagger: bool = True,
         info_level: str = DEFAULT_INFO_LEVEL,

@@ -15,8 +15,11 @@ its episodes through ``make_core``:
   rule of ``cpf_env.envs.residual.learner_config`` (forces and rate as
   fractions of their limits, ``mode="force_and_rate"``, ``scale=1``).
 
-The env layer (``cpf_env.envs``) imports no policy code and takes only
-objects; this is the layer that may import ``baselines``.
+One rule on every learning route, of either layer: the base policy defaults
+to None (the learner commands everything, a plain task as Gymnasium and
+PettingZoo users expect), and a policy object is accepted everywhere. Names
+are resolved here; the env layer (``cpf_env.envs``) imports no policy code,
+so it refuses a name with a message pointing to this layer.
 
 Example:
     >>> core = make_core("wang2014", 2, base_policy="none", max_steps=50)
@@ -69,7 +72,7 @@ def resolve_base_policy(
 def make_core(
     scenario: str | Scenario,
     num_fleets: int,
-    base_policy: str | FleetPolicy | None = "nn_dsc",
+    base_policy: str | FleetPolicy | None = None,
     residual: ResidualConfig | None = None,
     stagger: bool = True,
     policy_options: dict[str, Any] | None = None,

@@ -82,10 +82,10 @@ class FleetVecEnv(VecEnv):
     Args:
         scenario: A name of ``cpf_env.scenarios.list_scenarios()`` or a ``Scenario``.
         num_fleets: B, the number of fleets simulated together.
-        base_policy: A name of ``baselines.POLICIES`` (default ``"nn_dsc"``), a policy
-            object (``act_batch``, ``reset``, ``reset_fleets``), or None: the agent
-            outputs the whole command (forces and path-variable rate, as fractions
-            of their limits; messages are zero).
+        base_policy: A name of ``baselines.POLICIES`` (e.g. ``"nn_dsc"``), a policy
+            object (``act_batch``, ``reset``, ``reset_fleets``), or None (default,
+            as on every route): the agent outputs the whole command (forces and
+            path-variable rate, as fractions of their limits; messages are zero).
         residual: How the correction enters (``ResidualConfig``); default: forces,
             scale 0.2, no extras. With ``base_policy=None`` only its
             ``neighbour_slots`` is used.
@@ -108,7 +108,7 @@ class FleetVecEnv(VecEnv):
         self,
         scenario: str | Scenario = "wang2014",
         num_fleets: int = 64,
-        base_policy: str | FleetPolicy | None = "nn_dsc",
+        base_policy: str | FleetPolicy | None = None,
         residual: ResidualConfig | None = None,
         stagger: bool = True,
         info_level: str = DEFAULT_INFO_LEVEL,

@@ -145,7 +145,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     from agents import FleetVecEnv
 
     torch.set_num_threads(args.torch_threads)
-    fleet_env = FleetVecEnv("bench_saturation", num_fleets=args.fleets)
+    fleet_env = FleetVecEnv("bench_saturation", num_fleets=args.fleets, base_policy="nn_dsc")
     obs_size = fleet_env.observation_space.shape[0]
     routes: dict[str, tuple[Callable[[], VecEnv], int, int | None]] = {
         "FleetVecEnv (residual on nn_dsc)": (lambda: fleet_env, args.fleets, 0),

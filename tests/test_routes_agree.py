@@ -1,11 +1,11 @@
-"""Every route, with its default arguments, plays the same episodes of the same scenario and seeds.
+"""Every route plays the same episodes of the same scenario, seeds and base policy.
 
 The routes stand on one episode core (``cpf_env.envs.core``): seeding (fleet k
 gets seed + k), horizons and stagger, per-fleet resets, the residual. Here
 each route is stepped for 300 control steps (about eight episodes of 40 steps
-per fleet) with its own defaults: the learning routes (``FleetVecEnv``,
-``MixtureVecEnv``'s groups, the TorchRL env by name) in the residual form on
-``nn_dsc`` with a zero correction, the env routes (ParallelEnv, the Gymnasium
+per fleet) with its own defaults but for the base policy: the learning routes
+(``FleetVecEnv``, ``MixtureVecEnv``'s groups, the TorchRL env by name) in the
+residual form on ``nn_dsc`` with a zero correction, the env routes (ParallelEnv, the Gymnasium
 vector view) in the raw form driven by ``nn_dsc`` itself. A zero correction
 reproduces the base policy bit for bit, so every route must show the same
 episodes: the same reset observations, the same (staggered) lengths, the same
@@ -49,7 +49,7 @@ class Recorder:
 
 
 def fleet_vec_env() -> list[list[Episode]]:
-    env = FleetVecEnv(SCENARIO, FLEETS, max_steps=MAX_STEPS)
+    env = FleetVecEnv(SCENARIO, FLEETS, base_policy="nn_dsc", max_steps=MAX_STEPS)
     env.seed(SEED)
     n = env.n
     record = Recorder(env.reset().reshape(FLEETS, n, -1))
@@ -72,6 +72,7 @@ def mixture_group() -> list[list[Episode]]:
     env = MixtureVecEnv(
         [SCENARIO, "bench_mild"],
         2 * FLEETS,
+        base_policy="nn_dsc",
         scenario_overrides=[{"max_steps": MAX_STEPS}] * 2,
     )
     env.seed(SEED)
@@ -116,13 +117,14 @@ def gym_vector_env() -> list[list[Episode]]:
 
 
 def torchrl_env(env: Any = None) -> list[list[Episode]]:
-    """``agents.marl.make_env`` with its defaults (or the given TorchRL env of the same)."""
+    """``agents.marl.make_env`` on ``nn_dsc`` (or the given TorchRL env of the same)."""
     import torch
 
     from agents.marl.envs import make_env
     from cpf_env.envs.torchrl_env import GROUP
 
-    env = make_env(SCENARIO, FLEETS, seed=SEED, max_steps=MAX_STEPS) if env is None else env
+    if env is None:
+        env = make_env(SCENARIO, FLEETS, "nn_dsc", seed=SEED, max_steps=MAX_STEPS)
     td = env.reset()
     record = Recorder(td[GROUP, "observation"].numpy())
     zero = torch.zeros(env.full_action_spec[GROUP, "action"].shape)
@@ -284,3 +286,33 @@ def test_the_rllib_glue_plays_each_fleets_episodes(reference: list[list[Episode]
         return module.make_rllib_env({"scenario": SCENARIO, "max_steps": MAX_STEPS})
 
     assert_prefixes(reference, lambda k, count: parallel_env_fleet(k, count, make))
+
+
+def test_every_route_has_one_base_policy_default_and_one_rule_for_names() -> None:
+    """The base policy defaults to None everywhere; the env layer refuses a name alike."""
+    import inspect
+
+    from agents.resolve import make_core
+    from cpf_env.envs.gym_envs import CentralizedFleetEnv
+    from cpf_env.envs.parallel import CooperativePathFollowingEnv
+
+    routes = [FleetVecEnv, MixtureVecEnv, make_core, CooperativePathFollowingEnv]
+    routes += [CentralizedFleetEnv, CentralizedFleetVectorEnv]
+    if importlib.util.find_spec("torchrl") is not None:
+        from agents.marl.envs import make_env
+        from cpf_env.envs.torchrl_env import TorchRLFleetEnv
+
+        routes += [make_env, TorchRLFleetEnv]
+    for route in routes:
+        assert inspect.signature(route).parameters["base_policy"].default is None, route
+    env_layer = [
+        lambda: cpf_env.parallel_env(SCENARIO, base_policy="nn_dsc"),
+        lambda: CentralizedFleetEnv(SCENARIO, base_policy="nn_dsc"),
+        lambda: CentralizedFleetVectorEnv(SCENARIO, 2, base_policy="nn_dsc"),
+    ]
+    for build in env_layer:
+        with pytest.raises(TypeError, match=r"'nn_dsc' is a name.*baselines.make_policy"):
+            build()
+    from baselines.nn_dsc import NNDSCPolicy
+
+    assert isinstance(FleetVecEnv(SCENARIO, 2, base_policy="nn_dsc").controller.base, NNDSCPolicy)

@@ -31,7 +31,7 @@ __all__ = ["make_env"]
 def make_env(
     scenario: str | Scenario = "wang2014",
     num_fleets: int = 64,
-    base_policy: str | FleetPolicy | None = "nn_dsc",
+    base_policy: str | FleetPolicy | None = None,
     residual: ResidualConfig | None = None,
     stagger: bool = True,
     info_level: str = DEFAULT_INFO_LEVEL,

@@ -193,6 +193,13 @@ class EpisodeCore:
         self.num_fleets = B = check_num_fleets(num_fleets)
         self.n = scenario.n
         self.stagger = check_flag(stagger, "stagger")
+        if isinstance(base_policy, str):
+            raise TypeError(
+                f"base_policy={base_policy!r} is a name, and the environment layer takes "
+                "policy objects: build one with baselines.make_policy(name, scenario), or "
+                "use a learning route of the agents package (agents.vec_env.FleetVecEnv, "
+                "agents.marl.envs.make_env), which resolves names."
+            )
         if base_policy is not None and not isinstance(base_policy, FleetPolicy):
             raise TypeError(
                 "base_policy must be a policy object (act_batch, reset, reset_fleets, "

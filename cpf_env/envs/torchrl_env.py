@@ -190,11 +190,6 @@ class TorchRLFleetEnv(EnvBase):
                 )
         self.extra_state = extra_state
         self.scenario = make_scenario(scenario, **overrides)
-        if isinstance(base_policy, str):
-            raise TypeError(
-                f"base_policy must be a policy object, got the name {base_policy!r}; to give "
-                "a name, build the env with agents.marl.make_env."
-            )
         self.core = EpisodeCore(self.scenario, num_fleets, base_policy, residual, stagger)
         self.sim, self.num_fleets, self.n = self.core.sim, self.core.num_fleets, self.core.n
         self.group_map = {GROUP: [f"vessel_{i}" for i in range(self.n)]}

@@ -50,7 +50,12 @@ def test_the_unobserved_state_is_the_true_force_v0_and_the_offset_from_the_fleet
 
 def test_the_critic_state_is_appended_and_the_local_input_is_unchanged() -> None:
     """Hundreds of steps with staggered episode ends: the local part, bit for bit."""
-    settings = {"num_fleets": 3, "residual": ResidualConfig(), "max_steps": 120}
+    settings = {
+        "num_fleets": 3,
+        "base_policy": "nn_dsc",
+        "residual": ResidualConfig(),
+        "max_steps": 120,
+    }
     plain = FleetVecEnv("bench_current_waves", **settings)  # type: ignore[arg-type]
     told = FleetVecEnv("bench_current_waves", critic_state=True, **settings)  # type: ignore[arg-type]
     size = plain.observation_space.shape[0]
@@ -113,7 +118,9 @@ def test_the_actor_ignores_the_unobserved_state_and_the_critic_reads_it(
     assert isinstance(policy, AsymmetricActorCriticPolicy)
     assert isinstance(policy.pi_features_extractor, LocalInputs)
     columns = unobserved_columns(run.model)
-    local_size = FleetVecEnv("bench_mild", num_fleets=1).observation_space.shape[0]
+    local_size = FleetVecEnv(
+        "bench_mild", base_policy="nn_dsc", num_fleets=1
+    ).observation_space.shape[0]
     assert columns == range(local_size, local_size + UNOBSERVED_SIZE)
     with torch.no_grad():  # a critic that reads the hidden columns, an actor that does not
         for layer in policy.mlp_extractor.policy_net:
@@ -142,7 +149,9 @@ def test_an_asymmetric_run_writes_a_local_agent_that_acts_as_its_actor(tmp_path:
     record = json.loads((folder / "config.json").read_text())
     assert TrainConfig.from_json(record["config"]) == config
     statistics = json.loads((folder / "normalization.json").read_text())
-    local_size = FleetVecEnv("bench_mild", num_fleets=1).observation_space.shape[0]
+    local_size = FleetVecEnv(
+        "bench_mild", base_policy="nn_dsc", num_fleets=1
+    ).observation_space.shape[0]
     assert len(statistics["mean"]) == local_size  # the actor's inputs only
     policy = load_policy(folder)
     sim = FleetSim(policy.scenario, num_fleets=2)

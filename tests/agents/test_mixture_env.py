@@ -66,14 +66,16 @@ def test_a_graph_of_higher_degree_than_the_slots_is_refused_with_the_limit_named
 
 def test_every_group_is_the_fleet_vec_env_of_its_scenario_bit_for_bit() -> None:
     """300 steps through auto-resets: group g equals a FleetVecEnv on its seeds."""
-    mixture = MixtureVecEnv(MIX, num_fleets=5)
+    mixture = MixtureVecEnv(MIX, base_policy="nn_dsc", num_fleets=5)
     seeds = mixture.seed(7)
     assert seeds == list(range(7, 12))  # distinct seeds across groups
     sizes = split_fleets(5, 3)
     alone = []
     offset = 0
     for name, fleets in zip(MIX, sizes, strict=True):
-        env = FleetVecEnv(name, fleets, residual=ResidualConfig(neighbour_slots=4))
+        env = FleetVecEnv(
+            name, fleets, base_policy="nn_dsc", residual=ResidualConfig(neighbour_slots=4)
+        )
         env.seed(7 + offset)
         offset += fleets
         alone.append(env)
@@ -95,7 +97,7 @@ def test_every_group_is_the_fleet_vec_env_of_its_scenario_bit_for_bit() -> None:
 
 
 def test_ending_slots_name_their_scenario() -> None:
-    env = MixtureVecEnv(MIX, num_fleets=3)
+    env = MixtureVecEnv(MIX, base_policy="nn_dsc", num_fleets=3)
     env.seed(0)
     env.reset()
     names: set[str] = set()
@@ -107,13 +109,17 @@ def test_ending_slots_name_their_scenario() -> None:
 
 def test_mixture_refuses_what_it_cannot_mix() -> None:
     with pytest.raises(ValueError, match="two or more distinct scenarios"):
-        MixtureVecEnv(["bench_mild"], 2)
+        MixtureVecEnv(["bench_mild"], 2, base_policy="nn_dsc")
     with pytest.raises(ValueError, match="two or more distinct"):
-        MixtureVecEnv(["bench_mild", "bench_mild"], 2)
+        MixtureVecEnv(["bench_mild", "bench_mild"], 2, base_policy="nn_dsc")
     with pytest.raises(ValueError, match="at least 3 fleets"):
-        MixtureVecEnv(MIX, 2)
+        MixtureVecEnv(MIX, 2, base_policy="nn_dsc")
     with pytest.raises(ValueError, match="share a message size"):
-        MixtureVecEnv(["bench_mild", scenarios.get("bench_switching").replace(message_size=2)], 2)
+        MixtureVecEnv(
+            ["bench_mild", scenarios.get("bench_switching").replace(message_size=2)],
+            2,
+            base_policy="nn_dsc",
+        )
 
 
 def test_train_config_mixture_fields() -> None:
@@ -177,7 +183,7 @@ def test_balanced_rewards_divide_each_scenario_by_its_running_mean_cost() -> Non
 
     from agents.mixture_env import BalancedRewards
 
-    mixture = MixtureVecEnv(["bench_mild", "bench_lossy_links"], num_fleets=2)
+    mixture = MixtureVecEnv(["bench_mild", "bench_lossy_links"], base_policy="nn_dsc", num_fleets=2)
     env = BalancedRewards(VecMonitor(mixture), mixture)
     env.seed(0)
     env.reset()
@@ -205,7 +211,11 @@ def test_each_scenarios_episode_cost_is_logged(tmp_path: Path) -> None:
 
     short = [{"max_steps": 8}, {"max_steps": 12}]
     mixture = MixtureVecEnv(
-        ["bench_mild", "bench_large_fleet"], 2, stagger=False, scenario_overrides=short
+        ["bench_mild", "bench_large_fleet"],
+        2,
+        base_policy="nn_dsc",
+        stagger=False,
+        scenario_overrides=short,
     )
     monitor = VecMonitor(mixture)
     model = PPO("MlpPolicy", monitor, n_steps=24, batch_size=60, n_epochs=1, seed=0)
@@ -245,7 +255,11 @@ def test_pooled_slot_statistics_match_all_slots_taken_together() -> None:
     np.testing.assert_array_equal(pooled_mean[:18], mean[:18])  # own components untouched
     np.testing.assert_array_equal(pooled_var[-2:], var[-2:])  # extras untouched
     env = SlotSharedVecNormalize(
-        FleetVecEnv("bench_switching", 2, residual=ResidualConfig(neighbour_slots=6)), 6, 4
+        FleetVecEnv(
+            "bench_switching", 2, base_policy="nn_dsc", residual=ResidualConfig(neighbour_slots=6)
+        ),
+        6,
+        4,
     )
     env.seed(0)
     env.reset()

@@ -39,7 +39,7 @@ def test_values_round_trip_exactly() -> None:
 
 
 def test_an_env_restores_in_place_and_steps_as_the_original() -> None:
-    env = FleetVecEnv("bench_lossy_links", num_fleets=2, max_steps=20)
+    env = FleetVecEnv("bench_lossy_links", base_policy="nn_dsc", num_fleets=2, max_steps=20)
     env.seed(5)
     env.reset()
     rng = np.random.default_rng(0)
@@ -47,7 +47,7 @@ def test_an_env_restores_in_place_and_steps_as_the_original() -> None:
         env.step(rng.uniform(-1, 1, (env.num_envs, 3)))
     arrays: dict[str, object] = {}
     tree = capture(env, "env", arrays)
-    fresh = FleetVecEnv("bench_lossy_links", num_fleets=2, max_steps=20)
+    fresh = FleetVecEnv("bench_lossy_links", base_policy="nn_dsc", num_fleets=2, max_steps=20)
     fresh.reset()
     restore(fresh, tree, "env", arrays)
     actions = rng.uniform(-1, 1, (env.num_envs, 3))
@@ -72,7 +72,7 @@ def test_an_object_of_an_unknown_library_is_refused_with_its_path() -> None:
 def test_a_read_only_constant_restores_as_it_is() -> None:
     """``mpc``'s parameters are read-only arrays: kept when equal (run fleet by fleet here)."""
     scenario = scenarios.get("bench_saturation")
-    env = FleetVecEnv(scenario, num_fleets=2)
+    env = FleetVecEnv(scenario, base_policy="nn_dsc", num_fleets=2)
     env.reset()
     saved, fresh = FleetwiseBase("mpc", scenario, 2), FleetwiseBase("mpc", scenario, 2)
     for policy in (saved, fresh):

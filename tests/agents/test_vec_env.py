@@ -55,7 +55,7 @@ def test_zero_actions_reproduce_the_base_policy_fleet_for_fleet(name: str, overr
     """300 steps through auto-resets: every fleet equals its own single-fleet run bit for bit
     (observations, rewards of ending fleets, dones, terminal observations, truncation flags)."""
     B, seed, steps = 4, 11, 300
-    env = FleetVecEnv(name, num_fleets=B, **overrides)
+    env = FleetVecEnv(name, num_fleets=B, base_policy="nn_dsc", **overrides)
     env.seed(seed)
     obs = env.reset()
     n, max_steps = env.n, env.scenario.max_steps
@@ -89,7 +89,7 @@ def test_zero_actions_reproduce_the_base_policy_fleet_for_fleet(name: str, overr
 
 
 def test_a_fleet_reset_leaves_the_other_fleets_base_states_alone() -> None:
-    env = FleetVecEnv("bench_mild", num_fleets=3, max_steps=30, stagger=False)
+    env = FleetVecEnv("bench_mild", base_policy="nn_dsc", num_fleets=3, max_steps=30, stagger=False)
     env.seed(0)
     env.reset()
     base = env.controller.base
@@ -103,7 +103,7 @@ def test_a_fleet_reset_leaves_the_other_fleets_base_states_alone() -> None:
 
 
 def test_seed_gives_fleet_k_seed_s_plus_k_on_the_next_reset_only() -> None:
-    env = FleetVecEnv("bench_mild", num_fleets=3, max_steps=20)
+    env = FleetVecEnv("bench_mild", base_policy="nn_dsc", num_fleets=3, max_steps=20)
     assert env.seed(5) == [5, 6, 7]
     obs = env.reset()
     for k in range(3):
@@ -117,7 +117,11 @@ def test_seed_gives_fleet_k_seed_s_plus_k_on_the_next_reset_only() -> None:
 
 def test_vec_env_contract_and_sb3_wrappers() -> None:
     env = FleetVecEnv(
-        "bench_mild", num_fleets=2, max_steps=15, residual=ResidualConfig(extras=ALL_EXTRAS)
+        "bench_mild",
+        base_policy="nn_dsc",
+        num_fleets=2,
+        max_steps=15,
+        residual=ResidualConfig(extras=ALL_EXTRAS),
     )
     assert env.observation_space.dtype == np.float32
     assert np.all(np.isfinite(env.observation_space.low))
@@ -140,7 +144,9 @@ def test_vec_env_contract_and_sb3_wrappers() -> None:
         def predict(self, observation, state=None, episode_start=None, deterministic=True):
             return np.zeros((len(observation), 3), np.float32), None
 
-    mean, std = evaluate_policy(Zero(), VecMonitor(FleetVecEnv("bench_mild", 2, max_steps=15)), 4)
+    mean, std = evaluate_policy(
+        Zero(), VecMonitor(FleetVecEnv("bench_mild", 2, base_policy="nn_dsc", max_steps=15)), 4
+    )
     assert np.isfinite(mean) and mean < 0.0 and std > 0.0  # random starts: episodes differ
 
 
@@ -148,10 +154,10 @@ def test_bad_arguments_and_actions() -> None:
     with pytest.raises(ValueError, match="unknown base policy"):
         FleetVecEnv("wang2014", 2, base_policy="pid")
     with pytest.raises(ValueError, match="num_fleets"):
-        FleetVecEnv("wang2014", 0)
+        FleetVecEnv("wang2014", 0, base_policy="nn_dsc")
     with pytest.raises(ValueError, match="unknown Scenario field"):
-        FleetVecEnv("wang2014", 2, max_cycles=3)
-    env = FleetVecEnv("wang2014", 2, max_steps=10)
+        FleetVecEnv("wang2014", 2, base_policy="nn_dsc", max_cycles=3)
+    env = FleetVecEnv("wang2014", 2, base_policy="nn_dsc", max_steps=10)
     env.reset()
     with pytest.raises(ValueError, match="shape"):
         env.step(np.zeros((10, 4), np.float32))
@@ -175,7 +181,10 @@ def test_locality_a_non_neighbour_does_not_reach_a_vessels_input() -> None:
     """In wang2014's chain 0-1-2-3-4, moving vessel 3 changes nothing vessel 0 sees
     (observation and every extra) at the next step; it does change vessel 3's own input."""
     config = ResidualConfig(extras=ALL_EXTRAS)
-    envs = [FleetVecEnv("wang2014", 1, residual=config, max_steps=50) for _ in range(2)]
+    envs = [
+        FleetVecEnv("wang2014", 1, base_policy="nn_dsc", residual=config, max_steps=50)
+        for _ in range(2)
+    ]
     for env in envs:
         env.seed(0)
         env.reset()
@@ -220,7 +229,7 @@ def test_observations_are_not_aliased_through_steps_and_auto_resets() -> None:
     ],
 )
 def test_step_async_refuses_what_it_would_misread(actions: np.ndarray, message: str) -> None:
-    env = FleetVecEnv("wang2014", num_fleets=4, max_steps=5)
+    env = FleetVecEnv("wang2014", base_policy="nn_dsc", num_fleets=4, max_steps=5)
     env.reset()
     stored = env._actions.copy()
     with pytest.raises(ValueError, match=message):
@@ -229,7 +238,7 @@ def test_step_async_refuses_what_it_would_misread(actions: np.ndarray, message: 
 
 
 def test_seed_refuses_what_is_not_a_seed_and_keeps_the_last_one() -> None:
-    env = FleetVecEnv("bench_mild", num_fleets=2, max_steps=5)
+    env = FleetVecEnv("bench_mild", base_policy="nn_dsc", num_fleets=2, max_steps=5)
     assert env.seed(7) == [7, 8]
     for bad in (-1, 1.7, True, "3"):
         with pytest.raises(ValueError, match="seed must be an integer"):
@@ -241,4 +250,4 @@ def test_seed_refuses_what_is_not_a_seed_and_keeps_the_last_one() -> None:
 
 def test_stagger_must_be_a_bool() -> None:
     with pytest.raises(ValueError, match="stagger must be True or False"):
-        FleetVecEnv("wang2014", num_fleets=2, stagger="no")  # type: ignore[arg-type]
+        FleetVecEnv("wang2014", base_policy="nn_dsc", num_fleets=2, stagger="no")  # type: ignore[arg-type]
