@@ -52,7 +52,6 @@ from agents.folder_files import (
     read_manifest,
 )
 from agents.history import OwnHistory
-from agents.legacy import is_sb3_folder, read_sb3_folder
 from agents.marl.policy_folder import (
     MARL_FORMAT,
     MARL_FORMAT_VERSION,
@@ -79,17 +78,14 @@ __all__ = [
 Array = NDArray[np.float64]
 
 
-def load_policy(
-    path: str | Path, scenario: str | Scenario | None = None, trust_pickle: bool = False
-) -> TrainedPolicy:
+def load_policy(path: str | Path, scenario: str | Scenario | None = None) -> TrainedPolicy:
     """Load a trained agent from the folder ``cpf-train --out`` (or ``save_marl_policy``) wrote.
 
     Reads the data-only formats (``agents.agent_folder``, and a BenchMARL actor's
     ``agents.marl.policy_folder``: safetensors and JSON, every file checked
     against the manifest, read with ``agents.folder_files``' limits); nothing in
-    the folder can run code. An old SB3 folder (``model.zip`` and
-    ``vecnormalize.pkl``, both pickles) is read only with ``trust_pickle=True``,
-    with a warning.
+    the folder can run code. Pickles are never read: a plain SB3 save
+    (``model.zip``, ``vecnormalize.pkl``) is refused.
 
     Args:
         path: The folder.
@@ -97,13 +93,11 @@ def load_policy(
             scenario with the training run's overrides (a MARL task's ``overrides``;
             not its training ``max_steps``: the scenario's own episode). Its observation layout
             must match the training one (the network's input size).
-        trust_pickle: Allow unpickling an old SB3 folder. Unpickling runs any code
-            its author put in the files: only for folders you made or trust.
 
     Raises:
         AgentFolderError: (a ValueError) ``path`` is not an agent folder, a file is
-            missing, altered or inconsistent with the others (named), or an SB3
-            folder without ``trust_pickle``.
+            missing, altered or inconsistent with the others (named), or a plain
+            SB3 save.
         ValueError: The scenario's observations do not fit the network.
     """
     folder = Path(path)
@@ -111,18 +105,8 @@ def load_policy(
     overrides: dict[str, Any] = {}  # a MARL task's Scenario field overrides
     if kind == MARL_FORMAT:  # a BenchMARL actor (agents.marl.policy_folder)
         config, network, normalization, overrides = read_marl_agent(folder)
-    elif kind == FORMAT:
-        record, network, normalization = read_agent(folder)
-        config = training_config(record["config"], folder / CONFIG)
-    elif not trust_pickle:
-        raise AgentFolderError(
-            f"{folder} is an old SB3 agent folder (model.zip, vecnormalize.pkl): loading "
-            "it unpickles them, which runs any code their author put in them. If you "
-            "trust it, pass --trust-pickle (load_policy(..., trust_pickle=True)), or "
-            "convert it once with agents.legacy.convert_sb3_folder(FOLDER, NEW_FOLDER)."
-        )
     else:
-        record, network, normalization = read_sb3_folder(folder)
+        record, network, normalization = read_agent(folder)
         config = training_config(record["config"], folder / CONFIG)
     if scenario is None:
         resolved = make_scenario(config.home_scenario, **config.scenario_overrides(), **overrides)
@@ -134,8 +118,6 @@ def load_policy(
 def read_config(path: str | Path) -> TrainConfig:
     """The training configuration of an agent folder ``load_policy`` reads, without its weights.
 
-    An old SB3 folder's ``config.json`` is JSON (read without unpickling anything).
-
     Raises:
         AgentFolderError: Not an agent folder, or an unreadable or invalid configuration.
     """
@@ -143,11 +125,8 @@ def read_config(path: str | Path) -> TrainConfig:
     kind = _format(folder)
     if kind == MARL_FORMAT:
         return _marl_record(folder)[0]
-    if kind == FORMAT:
-        manifest = read_manifest(folder / MANIFEST, FORMAT, FORMAT_VERSIONS)
-        record = read_json(folder, CONFIG, manifest)
-    else:
-        record = parse_json(read_file(folder / CONFIG, MAX_JSON_BYTES, folder), folder / CONFIG)
+    manifest = read_manifest(folder / MANIFEST, FORMAT, FORMAT_VERSIONS)
+    record = read_json(folder, CONFIG, manifest)
     return training_config(field(record, "config", folder / CONFIG), folder / CONFIG)
 
 
@@ -170,12 +149,12 @@ def _marl_record(folder: Path) -> tuple[TrainConfig, list[int], dict[str, Any]]:
     return marl_config(read_json(folder, CONFIG, manifest), folder / CONFIG)
 
 
-def _format(folder: Path) -> str | None:
-    """The format a folder's manifest names (None: an old SB3 folder, without manifest).
+def _format(folder: Path) -> str:
+    """The format a folder's manifest names.
 
     Raises:
-        AgentFolderError: ``folder`` is missing, a file, holds neither a manifest nor an
-            SB3 agent, or its manifest is unreadable or names another format.
+        AgentFolderError: ``folder`` is missing, a file, holds no manifest (a plain SB3
+            save among them), or its manifest is unreadable or names another format.
     """
     if not folder.is_dir():
         what = "is a file" if folder.exists() else "does not exist"
@@ -184,8 +163,13 @@ def _format(folder: Path) -> str | None:
         )
     path = folder / MANIFEST
     if not (path.exists() or path.is_symlink()):
-        if is_sb3_folder(folder):
-            return None
+        if (folder / "model.zip").is_file():
+            raise AgentFolderError(
+                f"{folder} holds a plain SB3 save (model.zip) and no {MANIFEST}: its files "
+                "are pickles, which run any code their author put in them, so they are not "
+                "read. Train the agent with cpf-train --out DIR, which writes its weights "
+                "and statistics as data (safetensors and JSON)."
+            )
         raise AgentFolderError(
             f"{folder} is not a cpf-train output folder: no {MANIFEST}. Train one with "
             "`cpf-train --out DIR`, or give a baseline name."

@@ -68,7 +68,7 @@ def _check_paths(folder: Path, out: Path) -> None:
     if not folder.is_dir() or not (folder / MANIFEST).is_file():
         raise ValueError(
             f"{str(folder)!r} is not an agent folder (no {MANIFEST}); give a cpf-train --out "
-            "folder (an old SB3 folder: convert it with agents.legacy.convert_sb3_folder)."
+            "folder."
         )
     if not out.parent.is_dir():
         raise ValueError(

@@ -33,7 +33,7 @@ from cpf_commands.bench.stats import REPLICATES
 from cpf_commands.bench.verdict import COST_MARGIN, check_margin
 from cpf_commands.common.arguments import add_scenarios_argument, non_negative_int
 from cpf_commands.common.outputs import claim_output_folder
-from cpf_commands.common.policies import policy_argument, trusting_pickles
+from cpf_commands.common.policies import policy_argument
 from cpf_commands.common.ray_runtime import add_address_argument
 from cpf_env.infra import atomic
 from cpf_env.scenarios import make_scenario
@@ -102,12 +102,6 @@ def _parser() -> argparse.ArgumentParser:
         "--out", default="outputs/bench", help="output folder (default: outputs/bench)"
     )
     parser.add_argument("--force", action="store_true", help="replace the results already in --out")
-    parser.add_argument(
-        "--trust-pickle",
-        action="store_true",
-        help="allow old SB3 agent folders (model.zip, vecnormalize.pkl): unpickling them runs "
-        "any code their author put in them; only for folders you trust",
-    )
     parser.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
     parser.add_argument(
         "--ray",
@@ -251,7 +245,7 @@ def bench_main(argv: Sequence[str] | None = None) -> int:
         parser.error(str(error))
     try:
         cells = run_bench(
-            trusting_pickles(args.policies) if args.trust_pickle else args.policies,
+            args.policies,
             args.scenarios,
             seeds=args.seeds,
             base_seed=args.base_seed,

@@ -39,7 +39,6 @@ from cpf_commands.bench.verdict import COST_MARGIN, check_margin
 from cpf_commands.common.outputs import foreign_files
 from cpf_commands.common.policies import (
     PolicySpec,
-    TrustedAgentFolder,
     policy_label,
     refers_to_file,
     resolve_policy,
@@ -259,8 +258,6 @@ def _run_here(
 
 def _absolute(spec: PolicySpec) -> PolicySpec:
     """An agent folder given by a relative path made absolute (Ray workers run elsewhere)."""
-    if isinstance(spec, TrustedAgentFolder):
-        return spec  # already absolute; keeps the user's trust
     if refers_to_file(spec):
         return Path(spec).resolve()  # type: ignore[arg-type]
     return spec

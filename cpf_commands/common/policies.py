@@ -7,8 +7,7 @@ labelled and evaluated the same way. A policy specification is one of:
 * a name of ``baselines.POLICIES`` (``"nn_dsc"``, ``"dsc"``, ...);
 * a path to a ``cpf-train --out`` folder, loaded by ``agents.load_policy``
   (imported only then, so the analytic side never needs the learning stack);
-  the folder holds data only; an old SB3 folder (pickles) is refused unless
-  wrapped in ``TrustedAgentFolder`` (the commands' ``--trust-pickle``);
+  the folder holds data only (a plain SB3 save, a pickle, is refused);
 * a path to a ``.onnx`` file written by ``cpf-export``, run by onnxruntime
   (``agents.onnx_policy``; the ``onnx`` extra);
 * ``package.module:NAME``, a policy class or factory of the user's own
@@ -36,7 +35,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import re
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from importlib import metadata
 from pathlib import Path
 from typing import Any
@@ -48,14 +47,12 @@ __all__ = [
     "ENTRY_POINT_GROUP",
     "FleetPolicy",
     "PolicySpec",
-    "TrustedAgentFolder",
     "baseline_names",
     "policy_argument",
     "policy_label",
     "refers_to_file",
     "registered_policies",
     "resolve_policy",
-    "trusting_pickles",
     "user_policy",
 ]
 
@@ -66,28 +63,6 @@ PolicySpec = str | Path | FleetPolicy | Callable[[Scenario], FleetPolicy]
 ENTRY_POINT_GROUP = "cpf_env.policies"
 #: A user's policy: ``package.module:NAME``.
 _MODULE_SPEC = re.compile(r"[A-Za-z_]\w*(\.[A-Za-z_]\w*)*:[A-Za-z_]\w*")
-
-
-class TrustedAgentFolder(str):
-    """An agent folder whose pickles the user vouches for (``--trust-pickle``).
-
-    A string (the folder's absolute path, so that Ray workers find it and the
-    commands treat it as any folder argument) that ``resolve_policy`` loads
-    with ``load_policy(..., trust_pickle=True)``: an old SB3 folder is then
-    unpickled (with a warning), which runs any code its author put in it. A
-    data-only folder loads as without the flag.
-
-    Args:
-        path: The folder.
-        label: Its name in tables (default: ``path`` as given).
-    """
-
-    label: str
-
-    def __new__(cls, path: str | Path, label: str | None = None) -> TrustedAgentFolder:  # noqa: D102
-        folder = super().__new__(cls, str(Path(path).resolve()))
-        folder.label = label if label is not None else policy_label(str(path))
-        return folder
 
 
 def baseline_names() -> list[str]:
@@ -124,14 +99,6 @@ def refers_to_file(spec: PolicySpec) -> bool:
     if not isinstance(spec, str):
         return False
     return not (spec in baseline_names() or _is_module_spec(spec) or spec in registered_policies())
-
-
-def trusting_pickles(specs: Sequence[str]) -> list[str]:
-    """A command's policy arguments with every agent folder wrapped in ``TrustedAgentFolder``."""
-    return [
-        TrustedAgentFolder(spec) if refers_to_file(spec) and Path(spec).is_dir() else spec
-        for spec in specs
-    ]
 
 
 def user_policy(spec: str) -> Callable[..., Any]:
@@ -200,8 +167,6 @@ def policy_label(spec: PolicySpec) -> str:
     A baseline's name, a trained agent's path as given (without a trailing
     slash), or an object's ``name`` attribute (else its class name).
     """
-    if isinstance(spec, TrustedAgentFolder):
-        return spec.label
     if isinstance(spec, Path):
         return str(spec)
     if isinstance(spec, str):
@@ -282,7 +247,7 @@ def resolve_policy(spec: PolicySpec, scenario: str | Scenario, **options: Any) -
                 f"{str(spec)!r} is a folder, but loading trained agents needs "
                 "agents.load_policy (the learning extra: pip install 'cpf_env[rl]')."
             ) from error
-        return load_policy(Path(spec), resolved, trust_pickle=isinstance(spec, TrustedAgentFolder))
+        return load_policy(Path(spec), resolved)
     if isinstance(spec, FleetPolicy):
         return spec
     if callable(spec):

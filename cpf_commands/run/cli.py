@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from cpf_commands.common.arguments import non_negative_int, positive_int
-from cpf_commands.common.policies import policy_argument, trusting_pickles
+from cpf_commands.common.policies import policy_argument
 from cpf_env import scenarios
 
 if TYPE_CHECKING:
@@ -57,12 +57,6 @@ def _run_parser(prog: str = "cpf-run") -> argparse.ArgumentParser:
         f"({', '.join(sorted(PRIVILEGED))}, not deployable), a policy an installed package "
         "registers, package.module:NAME of your own policy class or factory "
         "(docs/extending.md), a cpf-train --out folder or a cpf-export .onnx file",
-    )
-    parser.add_argument(
-        "--trust-pickle",
-        action="store_true",
-        help="allow an old SB3 agent folder (model.zip, vecnormalize.pkl): unpickling it runs "
-        "any code its author put in it; only for folders you trust",
     )
     parser.add_argument(
         "--leakage",
@@ -196,7 +190,7 @@ def run_main(argv: Sequence[str] | None = None, prog: str = "cpf-run") -> int:
     try:
         metrics, claims = reproduce(
             args.scenario,
-            trusting_pickles([args.policy])[0] if args.trust_pickle else args.policy,
+            args.policy,
             seed=args.seed,
             steps=args.steps,
             out=args.out,

@@ -1,4 +1,4 @@
-"""The data-only agent folder: no code runs on load, every file checked, old folders need trust."""
+"""The data-only agent folder: no code runs on load, every file checked, no pickle is read."""
 
 from __future__ import annotations
 
@@ -18,10 +18,8 @@ from conftest import ROOT
 from agents import TrainConfig, load_policy
 from agents.agent_folder import Normalization, PolicyNetwork, build_actor, read_agent, write_agent
 from agents.folder_files import AgentFolderError
-from agents.legacy import convert_sb3_folder
 from cpf_commands.bench.cli import bench_main
 from cpf_commands.run.cli import run_main
-from cpf_env import FleetSim
 
 AGENT = ROOT / "tests/fixtures/agents/residual_ppo_lossy_links"
 
@@ -52,26 +50,25 @@ def _malicious_folder(root: Path, marker: Path, which: str) -> Path:
 
 
 @pytest.mark.parametrize("which", ["pkl", "zip"])
-def test_a_malicious_old_folder_runs_no_code_without_the_trust_flag(
+def test_a_malicious_sb3_save_runs_no_code_on_any_route(
     tmp_path: Path, which: str, capsys: pytest.CaptureFixture[str]
 ) -> None:
     marker = tmp_path / "payload_ran"
     folder = _malicious_folder(tmp_path, marker, which)
-    with pytest.raises(AgentFolderError, match="trust-pickle"):
+    with pytest.raises(AgentFolderError, match=r"plain SB3 save.*pickles.*cpf-train --out"):
         load_policy(folder)
     with pytest.raises(SystemExit):
         bench_main(["--policies", "nn_dsc", str(folder), "--scenarios", "bench_lossy_links",
                     "--seeds", "1", "--steps", "2", "--out", str(tmp_path / "b")])  # fmt: skip
-    assert "trust-pickle" in capsys.readouterr().err
+    assert "plain SB3 save" in capsys.readouterr().err
     with pytest.raises(SystemExit):
         run_main(["--scenario", "bench_lossy_links", "--policy", str(folder), "--steps", "2",
                   "--out", str(tmp_path / "r"), "--quiet", "--no-figures"])  # fmt: skip
-    assert "trust-pickle" in capsys.readouterr().err
+    assert "plain SB3 save" in capsys.readouterr().err
     assert not marker.exists()
-    # the payload is real: with the flag the pickle runs (then the folder is refused)
-    with pytest.warns(UserWarning, match="runs any code"), pytest.raises(AgentFolderError):
-        load_policy(folder, trust_pickle=True)
-    assert marker.exists()
+    if which == "pkl":  # the payload is real: unpickling it makes the marker
+        pickle.loads((folder / "vecnormalize.pkl").read_bytes())
+        assert marker.exists()
 
 
 def _copy(tmp_path: Path) -> Path:
@@ -124,8 +121,8 @@ def test_a_consistent_forgery_of_the_statistics_is_caught(tmp_path: Path) -> Non
         load_policy(folder)
 
 
-def test_the_converted_agent_acts_as_sb3_did(tmp_path: Path) -> None:
-    """The committed agent, rewritten from its SB3 zip: SB3's predict gives the same bits.
+def test_the_loaded_agent_acts_as_sb3_predicts(tmp_path: Path) -> None:
+    """The fixture agent's weights in an SB3 model: SB3's predict gives the same bits.
 
     The SB3 model is rebuilt from the converted weights (no pickle is read), run through
     SB3's own ``predict`` on inputs normalized by VecNormalize's formula written out here.
@@ -155,76 +152,6 @@ def test_the_converted_agent_acts_as_sb3_did(tmp_path: Path) -> None:
     normalized = (rows - np.array(statistics["mean"])) / np.sqrt(np.array(statistics["var"]) + 1e-8)
     expected, _ = model.predict(np.clip(normalized, -10, 10).astype(np.float32), deterministic=True)
     np.testing.assert_array_equal(policy.actor(rows), expected)  # type: ignore[attr-defined]
-
-
-def test_an_old_folder_loads_with_trust_and_converts_to_the_same_actions(tmp_path: Path) -> None:
-    """A tiny SB3 folder written the old way (model.zip + vecnormalize.pkl) by this test."""
-    from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
-
-    from agents.algorithms import build_model, make_env
-    from agents.train_config import TrainConfig
-
-    config = TrainConfig(scenario="bench_mild", fleets=2, n_steps=16, batch_size=160, net_arch=(8,))
-    env = VecNormalize(VecMonitor(make_env(config)), norm_reward=False)
-    env.reset()
-    for _ in range(5):  # some statistics
-        env.step(np.zeros((env.num_envs, 3), dtype=np.float32))
-    model = build_model(config, env)
-    with torch.no_grad():
-        model.policy.action_net.bias.fill_(0.3)  # a non-zero residual
-    old = tmp_path / "old"
-    old.mkdir()
-    model.save(old / "model.zip")
-    env.save(str(old / "vecnormalize.pkl"))  # SB3's pickle, written and trusted by this test
-    (old / "config.json").write_text(json.dumps({"config": config.to_json()}))
-    with pytest.warns(UserWarning, match="unpickles"):
-        trusted = load_policy(old, trust_pickle=True)
-    with pytest.warns(UserWarning, match="unpickles"):
-        new = convert_sb3_folder(old, tmp_path / "new")
-    assert not (new / "model.zip").exists() and not (new / "vecnormalize.pkl").exists()
-    converted = load_policy(new)
-    obs = FleetSim(converted.scenario, num_fleets=2).reset(seeds=[1, 2])
-    actions = trusted.act_batch(obs)
-    np.testing.assert_array_equal(converted.act_batch(obs), actions)
-    env.training = False  # SB3's own route: VecNormalize.normalize_obs and Model.predict
-    rows = trusted._controller.observe(obs).reshape(10, -1).astype(np.float32)  # type: ignore[union-attr]
-    expected, _ = model.predict(env.normalize_obs(rows), deterministic=True)
-    assert np.all(expected > 0.2)
-    np.testing.assert_array_equal(trusted.actor(rows), expected)  # type: ignore[attr-defined]
-
-
-def test_an_old_folder_without_its_statistics_is_refused(tmp_path: Path) -> None:
-    from stable_baselines3.common.vec_env import VecMonitor
-
-    from agents.algorithms import build_model, make_env
-    from agents.train_config import TrainConfig
-
-    config = TrainConfig(scenario="bench_mild", fleets=2, n_steps=16, batch_size=160, net_arch=(8,))
-    model = build_model(config, VecMonitor(make_env(config)))
-    model.save(tmp_path / "model.zip")
-    (tmp_path / "config.json").write_text(json.dumps({"config": config.to_json()}))
-    with pytest.warns(UserWarning), pytest.raises(AgentFolderError, match="unnormalized"):
-        load_policy(tmp_path, trust_pickle=True)
-
-
-def test_an_old_folder_whose_network_is_not_its_configurations_is_refused(
-    tmp_path: Path,
-) -> None:
-    """model.zip of 26 inputs, config.json with an extra (30): refused naming config.json."""
-    from stable_baselines3.common.vec_env import VecMonitor
-
-    from agents.algorithms import build_model, make_env
-
-    config = TrainConfig(scenario="bench_mild", fleets=2, n_steps=16, batch_size=160,
-                         net_arch=(8,), normalize_observations=False)  # fmt: skip
-    build_model(config, VecMonitor(make_env(config))).save(tmp_path / "model.zip")
-    edited = dataclasses.replace(config, extras=("base_action",))
-    (tmp_path / "config.json").write_text(json.dumps({"config": edited.to_json()}))
-    with pytest.warns(UserWarning), pytest.raises(AgentFolderError) as caught:
-        load_policy(tmp_path, trust_pickle=True)
-    message = str(caught.value)
-    assert "reads 26 inputs" in message and "learner 30" in message
-    assert str(tmp_path / "config.json") in message
 
 
 # ---- format version 2: the neighbour encoder and the own history -------------------------------

@@ -321,7 +321,7 @@ def trained_agent(tmp_path, monkeypatch):
     """A cpf-train folder loaded by a stand-in agents.load_policy that returns nn_dsc."""
     calls = []
 
-    def load_policy(path, scenario=None, trust_pickle=False):
+    def load_policy(path, scenario=None):
         calls.append((Path(path), scenario.name))
         return make_policy("nn_dsc", scenario)
 
