@@ -25,7 +25,7 @@ from stable_baselines3.common.torch_layers import (
 )
 from stable_baselines3.common.vec_env import VecEnv
 
-from agents.agent_folder import ENCODER_HIDDEN, ENCODER_POOLING
+from agents.actor import ENCODER_HIDDEN, ENCODER_POOLING
 from agents.device import torch_device
 from agents.encoder import NeighbourSetEncoder
 from agents.mixture_env import MixtureVecEnv
@@ -125,7 +125,7 @@ class AsymmetricActorCriticPolicy(ActorCriticPolicy):
     MLP from its own feature width (``share_features_extractor`` is always
     False). Everything else is SB3's ``ActorCriticPolicy``: the actor's modules
     (``pi_features_extractor``, ``mlp_extractor.policy_net``, ``action_net``) are
-    where ``agents.agent_folder.sb3_actor_layers`` reads them, so the agent
+    where ``agents.actor.sb3_actor_layers`` reads them, so the agent
     folder holds an ordinary local actor.
 
     Args:

@@ -6,7 +6,7 @@ or a privileged reference of ``baselines.PRIVILEGED`` (e.g. ``oracle``,
 centralized, told the true model and the coming disturbances; default
 ``nn_dsc_privileged``). It acts on the fleet's true observations (a
 privileged one is bound to the simulator it reads). The student is the
-deployable actor of the agent-folder format (``agents.agent_folder.PolicyNetwork``,
+deployable actor of the agent-folder format (``agents.actor.PolicyNetwork``,
 built by ``student_actor`` with ``build_actor``, the actor ``cpf-train`` builds
 for the same ``TrainConfig``: an MLP with tanh hidden layers and a clipped
 output, behind a DeepSets neighbour encoder with ``encoder="deepsets"``, so
@@ -24,25 +24,8 @@ base it runs on; where the teacher's correction is beyond the residual's
 reach the label is clipped (``DistillReport.clipped`` says how often; raise
 ``TrainConfig.scale`` if it is large).
 
-Which base the label is taken on (``DistillConfig.label_base``). By default
-(``"env"``) it is the env's base, which is shown the applied force minus the
-residual (``hide_residual_from_base``): a base with a residual-force observer
-(``mpc``, ``mpc_tuned``) takes the student's residual for a disturbance and
-cancels it, so tau_base already holds minus the observer's copy of the
-residual and the label a* holds it back plus the teacher's correction. A steady residual
-of the student then labels itself: nothing in the data pulls it to zero, and
-what the student holds there is arbitrary (seen as a jump of its output
-wherever its inputs jump, e.g. when the graph switches). With ``"twin"`` the
-label is taken on a twin of the env's base: a copy of it, seeded and reset
-as the env seeds and resets it, that acts on the same observations with the
-whole applied force shown (the base as ``hide_residual_from_base = false``
-runs it). With no residual the twin commands what the env's base does, bit
-for bit; with one, the label is the teacher's correction alone, and a
-residual the teacher does not ask for is labelled zero. The rollouts, the
-plant and the applied bounds stay the env's base's: the student is deployed
-on it unchanged. Only the observer bases (``agents.fleetwise.WHOLE_BATCH_BASES``)
-take it: ``nn_dsc``'s auxiliary system, shown the whole force, would take
-the residual for saturation.
+Which base the label is taken on: ``DistillConfig.label_base``
+(``agents.distill_config``).
 
 The loss. By default it is the mean squared error between the student's
 pre-clip output u and the clipped label. With ``DistillConfig.fit_applied``
@@ -118,8 +101,7 @@ import copy
 import dataclasses
 import functools
 import time
-from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -127,9 +109,10 @@ import numpy as np
 import torch
 from numpy.typing import NDArray
 
-from agents.agent_folder import PolicyNetwork, build_actor, write_agent
+from agents.actor import PolicyNetwork, build_actor
+from agents.agent_folder import write_agent
 from agents.device import torch_device
-from agents.fleetwise import WHOLE_BATCH_BASES
+from agents.distill_config import DistillConfig, DistillReport, check_distillation, draw_seeds
 from agents.history_env import HistoryVecEnv
 from agents.loading import one_torch_thread
 from agents.mixture_env import split_fleets
@@ -137,7 +120,7 @@ from agents.schedule import EvaluationLog, Evaluator
 from agents.slot_statistics import shared_slot_statistics
 from agents.train_config import TrainConfig
 from agents.vec_env import FleetVecEnv
-from baselines import ALL_POLICIES, make_policy
+from baselines import make_policy
 from cpf_env import scenarios
 from cpf_env.envs.input_statistics import InputStatistics
 from cpf_env.envs.policy import FleetPolicy
@@ -145,159 +128,8 @@ from cpf_env.envs.residual import ResidualConfig
 from cpf_env.infra import atomic
 from cpf_env.scenarios import Scenario
 from cpf_env.scenarios.sampler import ScenarioDistribution
-from cpf_env.scenarios.splits import EVALUATION_SEED, check_training
 
-__all__ = [
-    "LABEL_BASES",
-    "TEACHERS",
-    "DistillConfig",
-    "DistillReport",
-    "check_distillation",
-    "distill",
-    "draw_seeds",
-    "input_statistics",
-    "student_actions",
-    "student_actor",
-]
-
-#: Residual modes a student can be distilled in (the teacher's command maps onto them).
-LABEL_MODES = ("force", "force_and_rate")
-
-
-#: Names a teacher may have: ``baselines.POLICIES`` and ``baselines.PRIVILEGED``.
-TEACHERS = tuple(sorted(ALL_POLICIES))
-#: The base a label is taken on (``DistillConfig.label_base``).
-LABEL_BASES = ("env", "twin")
-
-
-@dataclass(frozen=True)
-class DistillConfig:
-    """The teacher, the data and the DAgger budget.
-
-    Attributes:
-        teacher: A policy name of ``TEACHERS`` (deployable or privileged).
-        rounds: DAgger rounds (round 0 is behaviour cloning on the teacher's rollouts).
-        steps: Vector-env steps per round (samples: steps x fleets x n per round).
-        epochs: Passes over the aggregated data after each round.
-        batch_size: Samples per gradient step.
-        learning_rate: Adam step size.
-        procedural: Procedural training fleets added to the scenarios, draws
-            0 .. procedural - 1 of ``ScenarioDistribution(max_degree=K)`` (K: the
-            student's neighbour slots); 0 for none. Each takes one group of fleets.
-        redraw: Draw fresh procedural fleets every round (``draw_seeds``: round r
-            takes draws r x procedural .. (r + 1) x procedural - 1, all below
-            ``splits.EVALUATION_SEED``); their episodes start at the round's start.
-            False: the same draws throughout, their episodes continuing.
-        fit_applied: Fit the force the plant applies (one-sided where the label sits
-            at an actuator limit; see the module's docstring). False: the squared
-            error on the clipped residual everywhere.
-        distribution: ``ScenarioDistribution`` fields the procedural fleets are drawn
-            with, over its defaults (a ``[distill.distribution]`` table, ranges as
-            two-element lists), e.g. ``{"v0": (0.05, 0.6), "force_scale": (0.4, 1.0)}``
-            for leaders up to 0.6 m/s and force limits down to 0.4 of nominal.
-            ``max_degree`` (the student's slots) and ``name`` are not settable.
-            Empty: the defaults.
-        label_base: The base the teacher's command is turned into a residual on
-            (``LABEL_BASES``): ``"env"``, the env's base; ``"twin"``, a copy of it
-            shown the whole applied force (see the module's docstring; needs an
-            observer base, ``mpc`` or ``mpc_tuned``, that hides the residual).
-    """
-
-    teacher: str = "nn_dsc_privileged"
-    rounds: int = 3
-    steps: int = 500
-    epochs: int = 10
-    batch_size: int = 4096
-    learning_rate: float = 1e-3
-    procedural: int = 0
-    redraw: bool = False
-    fit_applied: bool = False
-    distribution: Mapping[str, Any] = field(default_factory=dict)
-    label_base: str = "env"
-
-    def __post_init__(self) -> None:
-        if self.teacher not in TEACHERS:
-            raise ValueError(
-                f"teacher must be a policy of baselines.POLICIES or baselines.PRIVILEGED, one of "
-                f"{list(TEACHERS)}; got {self.teacher!r}."
-            )
-        for name in ("rounds", "steps", "epochs", "batch_size"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-                raise ValueError(f"DistillConfig.{name} must be an integer >= 1, got {value!r}.")
-        if (
-            isinstance(self.procedural, bool)
-            or not isinstance(self.procedural, int)
-            or self.procedural < 0
-        ):
-            raise ValueError(
-                f"DistillConfig.procedural must be an integer >= 0 (procedural training fleets), "
-                f"got {self.procedural!r}."
-            )
-        for name in ("redraw", "fit_applied"):
-            if not isinstance(getattr(self, name), bool):
-                raise ValueError(
-                    f"DistillConfig.{name} must be true or false, got {getattr(self, name)!r}."
-                )
-        if self.label_base not in LABEL_BASES:
-            raise ValueError(
-                f"DistillConfig.label_base must be one of {list(LABEL_BASES)}, "
-                f"got {self.label_base!r}."
-            )
-        if self.redraw and self.procedural == 0:
-            raise ValueError(
-                "DistillConfig.redraw draws fresh procedural fleets each round; set "
-                "procedural >= 1 (fleets per round) or leave redraw out."
-            )
-        object.__setattr__(self, "distribution", _distribution_fields(self.distribution))
-        if self.distribution and self.procedural == 0:
-            raise ValueError(
-                "DistillConfig.distribution shapes the procedural fleets; set procedural >= 1 "
-                "(fleets per round) or leave distribution out."
-            )
-        if not (
-            isinstance(self.learning_rate, int | float)
-            and not isinstance(self.learning_rate, bool)
-            and self.learning_rate > 0.0
-        ):
-            raise ValueError(f"learning_rate must be a number > 0, got {self.learning_rate!r}.")
-
-
-@dataclass(frozen=True)
-class DistillReport:
-    """What a distillation did.
-
-    Attributes:
-        folder: The agent folder written.
-        samples: Labelled vessel-steps in the final data set.
-        losses: The student's loss on all data after each round: the mean squared
-            error, or with ``fit_applied`` the applied-force loss (``_loss``).
-        zero_loss: The same loss of the base alone (a = 0) on the final data.
-        clipped: Fraction of the labels' components clipped to [-1, 1].
-        at_limit: Fraction of the force labels' components at a bound of the applied
-            residual (an actuator limit or the residual's reach), on the final data.
-        seconds: Wall time (s).
-        rounds: Per round: ``round``, ``samples`` (data so far), ``loss``,
-            ``zero_loss``, ``clipped`` and ``at_limit`` (on the data so far), ``seconds``
-            (since start, evaluations included).
-        draws: Per round, the procedural draw seeds its rollouts ran (``draw_seeds``).
-        device: The torch device the student was fitted on.
-        evaluations: The rows of ``evaluations.csv`` (``agents.schedule.EvaluationLog``):
-            the student before round 0 (its output is zero: the base policy) and after
-            each round, at the labelled vessel-steps so far; empty without an evaluator.
-    """
-
-    folder: Path
-    samples: int
-    losses: tuple[float, ...]
-    zero_loss: float
-    clipped: float
-    at_limit: float
-    seconds: float
-    rounds: tuple[dict[str, float], ...]
-    draws: tuple[tuple[int, ...], ...]
-    device: str
-    evaluations: tuple[dict[str, float], ...]
+__all__ = ["distill", "input_statistics", "student_actions", "student_actor"]
 
 
 def student_actor(config: TrainConfig, input_size: int, action_size: int) -> PolicyNetwork:
@@ -499,89 +331,12 @@ def _fit(
         return float(_loss(network(rows), targets, bounds))
 
 
-def check_distillation(config: TrainConfig, settings: DistillConfig) -> None:
-    """Refuse what ``distill`` cannot do, before anything runs (see ``distill``)."""
-    for name in config.scenarios:
-        check_training(name, range(config.seed, config.seed + config.fleets))
-    if config.mode not in LABEL_MODES or config.algo != "ppo" or not config.normalize_observations:
-        raise ValueError(
-            "distill needs a force or force_and_rate residual (or base='none') with the PPO "
-            f"actor format and normalized inputs (mode in {list(LABEL_MODES)}, algo='ppo', "
-            f"normalize_observations); got mode={config.mode!r}, algo={config.algo!r}, "
-            f"normalize_observations={config.normalize_observations}."
-        )
-    groups = len(config.scenarios) + settings.procedural
-    if config.fleets < groups:
-        raise ValueError(
-            f"distill over {groups} scenarios (training scenarios and procedural draws) needs "
-            f"at least one fleet each; got fleets={config.fleets}. Raise fleets."
-        )
-    if settings.label_base == "twin" and (
-        config.base not in WHOLE_BATCH_BASES or not config.hide_residual_from_base
-    ):
-        raise ValueError(
-            'label_base = "twin" takes the labels on a copy of the base shown the whole '
-            "applied force: it is for a base with a residual-force observer "
-            f"({', '.join(WHOLE_BATCH_BASES)}) that hides the residual (hide_residual_from_base "
-            f'= true, the default); this run has base = "{config.base}", '
-            f"hide_residual_from_base = {str(config.hide_residual_from_base).lower()}. "
-            'Leave label_base out (it defaults to "env") or change those settings.'
-        )
-    draws = settings.procedural * (settings.rounds if settings.redraw else 1)
-    if draws > EVALUATION_SEED:
-        raise ValueError(
-            f"redraw with procedural={settings.procedural} over {settings.rounds} rounds draws "
-            f"seeds 0 .. {draws - 1}, but training draws must stay below {EVALUATION_SEED} "
-            "(held-out fleets are drawn above it); lower rounds or procedural."
-        )
-
-
-def draw_seeds(settings: DistillConfig, round_: int) -> list[int]:
-    """The procedural draw seeds of DAgger round ``round_``.
-
-    ``0 .. P - 1`` (P = ``procedural``) in every round, or with ``redraw`` the
-    round's own: ``round_ x P .. round_ x P + P - 1``.
-    """
-    first = round_ * settings.procedural if settings.redraw else 0
-    return list(range(first, first + settings.procedural))
-
-
 def _learner_residual(config: TrainConfig) -> ResidualConfig:
     """The run's residual with its neighbour slots fixed (all groups' inputs share K)."""
     residual = config.residual_config()
     if residual.neighbour_slots is None:  # one named scenario: its own degree
         residual = dataclasses.replace(residual, neighbour_slots=config.learner_slots()[0])
     return residual
-
-
-def _distribution_fields(fields: Mapping[str, Any]) -> dict[str, Any]:
-    """``DistillConfig.distribution`` checked, with its lists as tuples.
-
-    Raises:
-        ValueError: Not a table, a key that is not a settable ``ScenarioDistribution``
-            field (the settable ones are listed), or values it refuses.
-    """
-    if not isinstance(fields, Mapping):
-        raise ValueError(
-            f"DistillConfig.distribution must be a table of ScenarioDistribution fields, "
-            f"got {fields!r}."
-        )
-    settable = sorted(
-        {f.name for f in dataclasses.fields(ScenarioDistribution)} - {"max_degree", "name"}
-    )
-    unknown = sorted(set(fields) - set(settable))
-    if unknown:
-        raise ValueError(
-            f"DistillConfig.distribution has unknown keys {unknown}; settable "
-            f"ScenarioDistribution fields: {settable} (max_degree follows the student's "
-            "neighbour slots)."
-        )
-    values: dict[str, Any] = {k: tuple(v) if isinstance(v, list) else v for k, v in fields.items()}
-    try:
-        ScenarioDistribution(**values)
-    except (TypeError, ValueError) as error:
-        raise ValueError(f"DistillConfig.distribution: {error}") from None
-    return values
 
 
 def _training_fleets(config: TrainConfig, settings: DistillConfig) -> ScenarioDistribution:

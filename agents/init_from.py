@@ -46,14 +46,8 @@ from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.running_mean_std import RunningMeanStd
 from stable_baselines3.common.vec_env import VecEnv, VecNormalize
 
-from agents.agent_folder import (
-    MANIFEST,
-    Normalization,
-    PolicyNetwork,
-    read_agent,
-    sb3_actor_layers,
-    training_config,
-)
+from agents.actor import PolicyNetwork, sb3_actor_layers
+from agents.agent_folder import MANIFEST, Normalization, read_agent, training_config
 from agents.algorithms import unobserved_columns
 from agents.train_config import TrainConfig
 

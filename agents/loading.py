@@ -31,13 +31,13 @@ import numpy as np
 import torch
 from numpy.typing import ArrayLike, NDArray
 
+from agents.actor import PolicyNetwork
 from agents.agent_folder import (
     CONFIG,
     FORMAT,
     FORMAT_VERSIONS,
     MANIFEST,
     Normalization,
-    PolicyNetwork,
     read_agent,
     read_json,
     training_config,

@@ -8,7 +8,7 @@ learner's raw inputs and its correction:
   scenario it is exported for (``scenario=``, default the training
   scenario's; the residual range is per vessel);
 - the saved normalization (``(x - mean) / sqrt(var + eps)``, clipped);
-- the actor (``agents.agent_folder.PolicyNetwork``);
+- the actor (``agents.actor.PolicyNetwork``);
 - output ``action`` (B, n, a) float32 in [-1, 1] (clipped or tanh-squashed);
 - output ``residual`` (B, n, a) float32: the correction in physical units, the
   action times the residual range (``residual_range``: ``scale`` x each
@@ -64,7 +64,8 @@ import numpy as np
 import torch
 from numpy.typing import NDArray
 
-from agents.agent_folder import Normalization, PolicyNetwork, read_agent, training_config
+from agents.actor import PolicyNetwork
+from agents.agent_folder import Normalization, read_agent, training_config
 from agents.encoder import statistics_for_slots
 from agents.folder_files import (
     MAX_WEIGHT_BYTES,

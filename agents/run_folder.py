@@ -49,15 +49,8 @@ from stable_baselines3.common.logger import CSVOutputFormat, KVWriter, Logger, m
 from stable_baselines3.common.running_mean_std import RunningMeanStd
 from stable_baselines3.common.vec_env import VecEnv, VecMonitor, VecNormalize
 
-from agents.agent_folder import (
-    Normalization,
-    actor_tensors,
-    encoder_layout,
-    network_from_tensors,
-    read_agent,
-    sb3_actor_layers,
-    write_agent,
-)
+from agents.actor import actor_tensors, encoder_layout, sb3_actor_layers
+from agents.agent_folder import Normalization, network_from_tensors, read_agent, write_agent
 from agents.algorithms import (
     build_model,
     make_env,

@@ -3,7 +3,7 @@
 The run is one TOML file: its top-level keys are ``agents.TrainConfig`` fields
 (the student: ``scenario``, a name, a list of names or ``"suite"``; ``base``,
 ``mode``, ``scale``, ``fleets``, ``net_arch``, ...) and its ``[distill]`` table
-holds ``agents.distill.DistillConfig`` fields (``teacher``, ``rounds``,
+holds ``agents.distill_config.DistillConfig`` fields (``teacher``, ``rounds``,
 ``steps``, ``epochs``, ``batch_size``, ``learning_rate``, ``procedural``,
 ``redraw``, ``fit_applied``, ``label_base``), with the procedural fleets' ``ScenarioDistribution``
 ranges in a ``[distill.distribution]`` table (e.g. ``v0 = [0.05, 0.5]``,
@@ -63,7 +63,7 @@ from cpf_env.infra import atomic
 from cpf_env.scenarios.suite import SUITE
 
 if TYPE_CHECKING:
-    from agents.distill import DistillConfig
+    from agents.distill_config import DistillConfig
     from agents.train_config import TrainConfig
 
 __all__ = ["distill_main", "read_distill_config"]
@@ -87,7 +87,7 @@ def read_distill_config(path: str | Path, seed: int) -> tuple[TrainConfig, Disti
     """
     import tomllib
 
-    from agents.distill import DistillConfig
+    from agents.distill_config import DistillConfig
     from agents.train_config import TrainConfig
 
     file = Path(path)
@@ -211,7 +211,7 @@ def distill_main(argv: Sequence[str] | None = None) -> int:
     try:
         config, settings = read_distill_config(args.config, args.seed)
         from agents.device import torch_device
-        from agents.distill import check_distillation
+        from agents.distill_config import check_distillation
 
         check_distillation(config, settings)
         torch_device(args.device)

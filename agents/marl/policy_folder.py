@@ -5,7 +5,7 @@ BenchMARL's PPO family (MAPPO, IPPO: ``share_policy_params=True``, an MLP over
 each vessel's local input, or ``agents.marl.models.NeighbourSetMlp``: the
 neighbour encoder, then an MLP):
 
-- ``policy.safetensors``: the actor MLP as ``agents.agent_folder.PolicyNetwork``
+- ``policy.safetensors``: the actor MLP as ``agents.actor.PolicyNetwork``
   tensors (``hidden.<i>.weight`` (out, in), ``hidden.<i>.bias``, ``output.weight``,
   ``output.bias``), float32. The output layer keeps only the rows of the
   Gaussian's location: the deterministic action BenchMARL evaluates with is
@@ -42,16 +42,15 @@ from typing import Any
 
 import torch
 
+from agents.actor import PolicyNetwork, encoder_layout
 from agents.agent_folder import (
     CONFIG,
     MANIFEST,
     NORMALIZATION,
     WEIGHTS,
-    PolicyNetwork,
     actor_from_record,
     agent_files,
     check_empty_weight,
-    encoder_layout,
     network_from_layers,
     normalization_from_json,
     read_json,

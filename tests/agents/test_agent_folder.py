@@ -16,7 +16,8 @@ import torch
 from conftest import ROOT
 
 from agents import TrainConfig, load_policy
-from agents.agent_folder import Normalization, PolicyNetwork, build_actor, read_agent, write_agent
+from agents.actor import PolicyNetwork, build_actor
+from agents.agent_folder import Normalization, read_agent, write_agent
 from agents.folder_files import AgentFolderError
 from cpf_commands.bench.cli import bench_main
 from cpf_commands.run.cli import run_main
@@ -222,7 +223,7 @@ def test_build_actor_has_the_layers_sb3_trains(encoder: str | None) -> None:
     """The untrained actor (for other learners) has the tensors ``cpf-train`` writes."""
     from stable_baselines3.common.vec_env import VecMonitor
 
-    from agents.agent_folder import actor_tensors
+    from agents.actor import actor_tensors
     from agents.algorithms import build_model, make_env
     from agents.history_env import HistoryVecEnv
 

@@ -15,21 +15,20 @@ from conftest import ROOT, STUDENT_TOML
 from safetensors.torch import load_file
 
 from agents import load_policy
-from agents.agent_folder import build_actor, read_agent
+from agents.actor import build_actor
+from agents.agent_folder import read_agent
 from agents.distill import (
-    DistillConfig,
     _applied_bounds,
     _group,
     _groups,
     _labels,
     _loss,
     _rollout,
-    check_distillation,
     distill,
-    draw_seeds,
     student_actions,
     student_actor,
 )
+from agents.distill_config import DistillConfig, check_distillation, draw_seeds
 from agents.train_config import TrainConfig
 from agents.vec_env import FleetVecEnv
 from baselines import make_policy
