@@ -18,7 +18,8 @@ Wrap below ``VecNormalize`` (the history is normalized with the rest), as
 
 Example:
     >>> from agents import FleetVecEnv
-    >>> env = HistoryVecEnv(FleetVecEnv("wang2014", num_fleets=1, max_steps=20), length=4)
+    >>> base = FleetVecEnv("wang2014", num_fleets=1, base_policy="nn_dsc", max_steps=20)
+    >>> env = HistoryVecEnv(base, length=4)
     >>> env.reset().shape, env.history.size
     ((5, 114), 88)
 """

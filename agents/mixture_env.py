@@ -22,7 +22,7 @@ group's scenario name), from which ``agents.training`` logs per-scenario
 episode costs.
 
 Example:
-    >>> env = MixtureVecEnv(["bench_mild", "bench_switching", "bench_large_fleet"], 6)
+    >>> env = MixtureVecEnv(["bench_mild", "bench_switching", "bench_large_fleet"], 6, "nn_dsc")
     >>> env.seed(0)
     [0, 1, 2, 3, 4, 5]
     >>> env.reset().shape  # 2 x 5 + 2 x 5 + 2 x 10 slots, K = 4 slots of 4 floats

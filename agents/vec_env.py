@@ -44,7 +44,7 @@ each slot's ``EpisodeCore.vessel_infos``), plus SB3's entries of ending
 slots. The arrays are always in ``env.core`` (``core.info_arrays("full")``).
 
 Example:
-    >>> env = FleetVecEnv("wang2014", num_fleets=4, max_steps=50)
+    >>> env = FleetVecEnv("wang2014", num_fleets=4, base_policy="nn_dsc", max_steps=50)
     >>> env.seed(0)
     [0, 1, 2, 3]
     >>> obs = env.reset()

@@ -15,7 +15,7 @@ the threads' wake-up at every one of them. Each fleet runs all its steps on
 one thread; a call spreads the S fleets of its policy over numba's threads
 once S x steps reaches ``PARALLEL_MIN_FLEETS`` (S > 1).
 
-For evaluation (``cpf-bench``, ``cpf_commands.common.rollout``) a run can
+For evaluation (``cpf-bench``, ``cpf_bench.rollout``) a run can
 also
 
 * hold a fleet that has left its path (``terminated``) at zero actions from

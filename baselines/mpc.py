@@ -274,7 +274,7 @@ class _ReadsSimulator(RecedingHorizon):
 
     Build it with a ``FleetSim`` (or an env that has one) or call
     ``bind_simulator(sim, fleets)`` before acting, as for the privileged
-    references of ``baselines.privileged`` (``cpf_commands.common.rollout``
+    references of ``baselines.privileged`` (``cpf_bench.rollout``
     does, with the fleets the policy acts for).
     """
 

@@ -23,7 +23,7 @@ on are the true ones bit for bit.
 
 A privileged policy reads a simulator: build it with a ``FleetSim`` or an
 env that has one (``env.sim``), or call ``bind_simulator(sim, fleets)``
-before acting (``cpf_commands.common.rollout`` does, with the fleets the
+before acting (``cpf_bench.rollout`` does, with the fleets the
 policy acts for). These names are in ``baselines.PRIVILEGED``, not in
 ``baselines.POLICIES`` (nor a base for training).
 

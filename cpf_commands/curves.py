@@ -11,7 +11,7 @@ writes to ``--out``:
 - ``curves.csv``: one row per point of either axis: ``axis`` (``vessel_steps``
   or ``wall_clock_seconds``), ``x``, ``iqm`` (interquartile mean over the runs
   of the mean evaluation cost), ``ci_low``, ``ci_high`` (95 % percentile
-  bootstrap over the runs, ``cpf_commands.bench.stats``), ``runs`` and
+  bootstrap over the runs, ``cpf_bench.stats``), ``runs`` and
   ``base_cost``;
 - ``curves.png``: both curves with their intervals, each run faint, the base
   policy's cost as a dashed line;
@@ -52,8 +52,8 @@ from matplotlib.figure import Figure
 from matplotlib.ticker import FuncFormatter
 from numpy.typing import NDArray
 
+from cpf_bench.stats import bootstrap_interval, iqm
 from cpf_commands.bench.run import run_bench
-from cpf_commands.bench.stats import bootstrap_interval, iqm
 from cpf_env.infra import atomic
 
 __all__ = [
@@ -243,7 +243,7 @@ def _base_cost(folders: Sequence[Path], runs: Sequence[RunCurve], base: str | No
         cells = run_bench(
             [base],
             evaluation.get("scenarios") or [records[0]["config"]["scenario"]],
-            seeds=int(evaluation.get("seeds", 10)),
+            num_seeds=int(evaluation.get("seeds", 10)),
             steps=evaluation.get("steps"),
             split="test",
         )

@@ -26,7 +26,7 @@ seeds and the data order). ``--out`` receives an ordinary agent folder
   at an actuator limit or the residual's reach) and ``seconds`` (since the start);
 - with ``--eval-seeds N`` (N > 0; default 0, none), ``evaluations.csv`` in
   ``cpf-train``'s columns (``agents.schedule.EvaluationLog``, the evaluator
-  ``cpf_commands.train_eval.TestSplitEvaluator`` on the training scenarios'
+  ``agents.evaluation.TestSplitEvaluator`` on the training scenarios'
   ``test`` split, N seeds each): the student before round 0 (exactly the
   base) and after each round, at the labelled vessel-steps so far, and
   ``run.json``'s ``evaluation`` (the settings, as ``cpf-train`` records
@@ -57,8 +57,8 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from agents.evaluation import TestSplitEvaluator
 from cpf_commands.common.arguments import non_negative_int
-from cpf_commands.train_eval import TestSplitEvaluator
 from cpf_env.infra import atomic
 from cpf_env.scenarios.suite import SUITE
 

@@ -110,7 +110,7 @@ def _bench_seconds(seeds: int) -> tuple[float, int]:
     from cpf_env.scenarios.suite import list_suite
 
     start = time.perf_counter()
-    cells = run_bench(default_policies(), list_suite(), seeds=seeds, out=None, figures=False)
+    cells = run_bench(default_policies(), list_suite(), num_seeds=seeds, out=None, figures=False)
     return time.perf_counter() - start, sum(len(cell.seeds) for cell in cells)
 
 

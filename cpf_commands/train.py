@@ -9,7 +9,7 @@ with ``agents.load_policy(DIR)`` and is accepted wherever a policy name is
 
 RL Zoo conventions too (``docs/residual_rl.md``, "A training run"): held-out
 evaluation on the benchmark's ``test`` split with the best agent kept
-(``--eval-every``, ``--eval-seeds``; ``cpf_commands.train_eval``),
+(``--eval-every``, ``--eval-seeds``; ``agents.evaluation``),
 checkpoints and ``--resume`` (``--checkpoint-every``), a checkpoint and agent
 on Ctrl-C, ``--tensorboard-log DIR``, and ``--config FILE.toml``
 (``cpf_commands.hyperparameters``; flags given override it).
@@ -31,9 +31,9 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from agents.evaluation import DEFAULT_EVAL_SEEDS, TestSplitEvaluator
 from cpf_commands.common.arguments import non_negative_int, positive_int
 from cpf_commands.hyperparameters import SCHEDULE_KEYS, hyperparameters_toml, read_hyperparameters
-from cpf_commands.train_eval import DEFAULT_EVAL_SEEDS, TestSplitEvaluator
 from cpf_env import scenarios
 from cpf_env.scenarios.splits import SHIFT_SUFFIX, check_training
 from cpf_env.scenarios.suite import SUITE

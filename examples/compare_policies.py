@@ -21,7 +21,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from baselines import NNDSCGains, make_policy
-from cpf_commands.bench.report import CellResult
+from cpf_bench.report import CellResult
 from cpf_commands.bench.run import run_bench
 from cpf_env import scenarios
 from cpf_env.envs.policy import FleetPolicy
@@ -52,7 +52,7 @@ def main(argv: Sequence[str] | None = None) -> list[CellResult]:
     cells = run_bench(
         policies,
         args.scenarios,
-        seeds=args.seeds,
+        num_seeds=args.seeds,
         steps=args.steps,
         out=args.out,
         command=shlex.join(

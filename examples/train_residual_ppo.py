@@ -103,7 +103,7 @@ def evaluate(runs: Path, results: Path, seeds: int, scenarios: Sequence[str]) ->
         for variant, label in ((task, "training_reward"), (quadratic, "quadratic_reward")):
             out = results / f"{scenario}_{label}"
             command = _evaluate_command(runs, results, seeds)
-            run_bench(policies, [variant], seeds=seeds, out=out, command=command)  # type: ignore[arg-type]
+            run_bench(policies, [variant], num_seeds=seeds, out=out, command=command)  # type: ignore[arg-type]
             print(f"wrote {out}/summary.md", flush=True)
     (results / "summary.md").write_text(report(results, scenarios, seeds, runs))
     meta = {

@@ -65,9 +65,9 @@ def test_speed_times_the_default_bench(monkeypatch):
 
     calls = []
 
-    def fake_run_bench(policies, scenarios, seeds, out, figures):
-        calls.append((tuple(policies), tuple(scenarios), seeds, out, figures))
-        return [types.SimpleNamespace(seeds=(0,) * seeds) for _ in range(3)]
+    def fake_run_bench(policies, scenarios, num_seeds, out, figures):
+        calls.append((tuple(policies), tuple(scenarios), num_seeds, out, figures))
+        return [types.SimpleNamespace(seeds=(0,) * num_seeds) for _ in range(3)]
 
     monkeypatch.setattr(bench_run, "run_bench", fake_run_bench)
     rows = measure("wang2014", fleets=(), min_seconds=0.01, episode_steps=5, bench_seeds=4)

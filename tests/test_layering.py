@@ -17,7 +17,7 @@ from pathlib import Path
 import pytest
 from conftest import ROOT
 
-PACKAGES = ("cpf_env", "baselines", "agents", "cpf_commands")
+PACKAGES = ("cpf_env", "baselines", "cpf_bench", "agents", "cpf_commands")
 
 #: Layer of a module: the longest prefix listed here wins.
 #: Value: the prefixes (of the project's modules) that layer may import.
@@ -42,11 +42,13 @@ ALLOWED: dict[str, tuple[str, ...]] = {
     ),
     "cpf_env": ("cpf_env",),
     "baselines": ("cpf_env", "baselines"),
-    "agents": ("cpf_env", "baselines", "agents"),
-    "cpf_commands.common": ("cpf_env", "baselines", "agents", "cpf_commands.common"),
+    "cpf_bench": ("cpf_env", "baselines", "cpf_bench"),
+    "agents": ("cpf_env", "baselines", "cpf_bench", "agents"),
+    "cpf_commands.common": ("cpf_env", "baselines", "cpf_bench", "agents", "cpf_commands.common"),
     "cpf_commands.run": (
         "cpf_env",
         "baselines",
+        "cpf_bench",
         "agents",
         "cpf_commands.common",
         "cpf_commands.run",
@@ -54,6 +56,7 @@ ALLOWED: dict[str, tuple[str, ...]] = {
     "cpf_commands.bench": (
         "cpf_env",
         "baselines",
+        "cpf_bench",
         "agents",
         "cpf_commands.common",
         "cpf_commands.bench",
@@ -61,12 +64,13 @@ ALLOWED: dict[str, tuple[str, ...]] = {
     "cpf_commands.sweep": (
         "cpf_env",
         "baselines",
+        "cpf_bench",
         "agents",
         "cpf_commands.common",
         "cpf_commands.bench",
         "cpf_commands.sweep",
     ),
-    "cpf_commands": ("cpf_env", "baselines", "agents", "cpf_commands"),
+    "cpf_commands": ("cpf_env", "baselines", "cpf_bench", "agents", "cpf_commands"),
 }
 
 #: Third-party learning libraries each layer must not import (``cpf_env`` and

@@ -70,8 +70,8 @@ BREAKS: tuple[Break, ...] = (
     Break("bench-spread-halved", "cpf_env/evaluation/fleet_metrics.py", 'put("spread", r["theta"].max(axis=2) - r["theta"].min(axis=2))', 'put("spread", 0.5 * (r["theta"].max(axis=2) - r["theta"].min(axis=2)))', ("tests/cpf_env/evaluation/test_fleet_metrics.py",)),  # noqa: E501
     Break("privileged-f-sign", "baselines/kernels.py", "hydrodynamic = known.lumped[r, i, row]", "hydrodynamic = -known.lumped[r, i, row]", ("tests/baselines/test_privileged.py",)),  # noqa: E501
     Break("privileged-stale-links", "cpf_env/evaluation/privileged.py", "out[i, base + SLOT_AGE] = 0.0", "pass", ("tests/baselines/test_privileged.py",)),  # noqa: E501
-    Break("equivalence-margin-either-end", "cpf_commands/bench/verdict.py", "if -band < cost[1] and cost[2] < band:", "if -band < cost[1] or cost[2] < band:", ("tests/cpf_commands/bench/test_verdict.py",)),  # noqa: E501
-    Break("gap-closed-inverted", "cpf_commands/bench/stats.py", "return float((y.mean() - x.mean()) / gap), float(low), float(high)", "return float(gap / (y.mean() - x.mean())), float(low), float(high)", ("tests/cpf_commands/bench/test_stats.py",)),  # noqa: E501
+    Break("equivalence-margin-either-end", "cpf_bench/verdict.py", "if -band < cost[1] and cost[2] < band:", "if -band < cost[1] or cost[2] < band:", ("tests/cpf_bench/test_verdict.py",)),  # noqa: E501
+    Break("gap-closed-inverted", "cpf_bench/stats.py", "return float((y.mean() - x.mean()) / gap), float(low), float(high)", "return float(gap / (y.mean() - x.mean())), float(low), float(high)", ("tests/cpf_bench/test_stats.py",)),  # noqa: E501
     Break("residual-sign", "cpf_env/envs/residual.py", "shown[..., self.layout.z1] -= offset[index]", "shown[..., self.layout.z1] += offset[index]", ("tests/cpf_env/envs/test_residual.py",)),  # noqa: E501
     Break("observation-views", "cpf_env/envs/parallel.py", "dict(zip(self.possible_agents, inputs[0].copy(),", "dict(zip(self.possible_agents, inputs[0],", ("tests/cpf_env/envs/test_no_aliasing.py",)),  # noqa: E501
     Break("info-views", "cpf_env/envs/core.py", '"eta": a.eta[rows].copy(),', '"eta": a.eta[rows],', ("tests/cpf_env/envs/test_no_aliasing.py", "tests/cpf_env/envs/test_env.py")),  # noqa: E501
@@ -87,12 +87,12 @@ BREAKS: tuple[Break, ...] = (
     Break("aux-off", "baselines/nn_dsc.py", "use_aux: ClassVar[bool] = True", "use_aux: ClassVar[bool] = False", ("tests/baselines/test_nn_dsc.py",)),  # noqa: E501
     Break("reward-scale-not-squared", "cpf_env/sim/reward.py", "error_squared / (scale * scale)", "error_squared / scale", ("tests/cpf_env/sim/test_reward.py", "tests/cpf_env/envs/test_env.py"), warm_cache=True),  # noqa: E501
     Break("cache-stamp-per-file", "cpf_env/infra/kernel_cache.py", 'return ("cpf_env kernel sources", self._stamp)', "return self._inner.get_source_stamp()", ("tests/cpf_env/infra/test_kernel_cache.py",)),  # noqa: E501
-    Break("bench-cache-keeps-comments", "cpf_commands/bench/sources.py", "if token.type == tokenize.COMMENT:", "if False:", ("tests/cpf_commands/bench/test_sources.py",)),  # noqa: E501
-    Break("bench-cache-misses-local-imports", "cpf_commands/bench/sources.py", "for node in ast.walk(tree):", "for node in tree.body:", ("tests/cpf_commands/bench/test_sources.py",)),  # noqa: E501
+    Break("bench-cache-keeps-comments", "cpf_bench/sources.py", "if token.type == tokenize.COMMENT:", "if False:", ("tests/cpf_bench/test_sources.py",)),  # noqa: E501
+    Break("bench-cache-misses-local-imports", "cpf_bench/sources.py", "for node in ast.walk(tree):", "for node in tree.body:", ("tests/cpf_bench/test_sources.py",)),  # noqa: E501
     Break("resume-forgets-numpy-random", "agents/checkpoint.py", 'np.random.set_state(decode_value(state["numpy_random"], arrays))  # noqa: NPY002', "pass", ("tests/agents/test_resume.py",)),  # noqa: E501
     Break("snapshot-skips-generators", "agents/snapshot.py", 'current.bit_generator.state = decode_value(node["generator"], self.arrays)', "pass", ("tests/agents/test_snapshot.py", "tests/agents/test_resume.py")),  # noqa: E501
-    Break("closed-loop-never-holds", "baselines/closed_loop.py", "held = hold_ended and ended[b] >= 0", "held = False", ("tests/baselines/test_closed_loop.py", "tests/cpf_commands/common/test_rollout.py")),  # noqa: E501
-    Break("closed-loop-records-gamma", "baselines/closed_loop.py", "record_fleet(a, record, k, b, out.speed_estimate[r])", "record_fleet(a, record, k, b, out.gamma[r])", ("tests/baselines/test_closed_loop.py", "tests/cpf_commands/common/test_rollout.py")),  # noqa: E501
+    Break("closed-loop-never-holds", "baselines/closed_loop.py", "held = hold_ended and ended[b] >= 0", "held = False", ("tests/baselines/test_closed_loop.py", "tests/cpf_bench/test_rollout.py")),  # noqa: E501
+    Break("closed-loop-records-gamma", "baselines/closed_loop.py", "record_fleet(a, record, k, b, out.speed_estimate[r])", "record_fleet(a, record, k, b, out.gamma[r])", ("tests/baselines/test_closed_loop.py", "tests/cpf_bench/test_rollout.py")),  # noqa: E501
     Break("distill-applied-loss-two-sided", "agents/distill.py", "torch.minimum(output, high)", "output", ("tests/agents/test_distill.py",)),  # noqa: E501
     Break("distill-bounds-ignore-base", "agents/distill.py", "np.clip((np.asarray(tau_max) - base) / reach, -1.0, 1.0)", "np.clip(np.asarray(tau_max) / reach, -1.0, 1.0)", ("tests/agents/test_distill.py",)),  # noqa: E501
     Break("residual-yield-drops-push", "cpf_env/envs/residual.py", "force[(at_max & (force < 0.0)) | (at_min & (force > 0.0))] = 0.0", "force[at_max | at_min] = 0.0", ("tests/cpf_env/envs/test_residual.py",)),  # noqa: E501
@@ -100,7 +100,7 @@ BREAKS: tuple[Break, ...] = (
     Break("distill-twin-labels-on-env-base", "agents/distill.py", "base = np.asarray(twin.act_batch(obs), dtype=np.float64)", "base = controller.base_actions", ("tests/agents/test_distill.py",)),  # noqa: E501
     Break("distill-twin-unseeded", "agents/distill.py", "twin.reset(seed=seeds[0])", "twin.reset()", ("tests/agents/test_distill.py",)),  # noqa: E501
     Break("distill-twin-not-restarted", "agents/distill.py", "group.twin.reset_fleets(ended)", "pass", ("tests/agents/test_distill.py",)),  # noqa: E501
-    Break("worst-episode-ignores-direction", "cpf_commands/bench/verdict.py", "excess = reference - own if higher_better else own - reference", "excess = own - reference", ("tests/cpf_commands/bench/test_verdict.py",)),  # noqa: E501
+    Break("worst-episode-ignores-direction", "cpf_bench/verdict.py", "excess = reference - own if higher_better else own - reference", "excess = own - reference", ("tests/cpf_bench/test_verdict.py",)),  # noqa: E501
     Break("curves-mean-not-iqm", "cpf_commands/curves.py", "iqm(values, axis=1)", "values.mean(axis=1)", ("tests/cpf_commands/test_curves.py",)),  # noqa: E501
 )
 # fmt: on

@@ -17,10 +17,12 @@ import sys
 import time
 from collections.abc import Sequence
 
+from cpf_bench.episodes import METRICS
+from cpf_bench.report import summarize
+from cpf_bench.stats import REPLICATES
+from cpf_bench.verdict import COST_MARGIN, check_margin
 from cpf_commands.bench import ranking
-from cpf_commands.bench.episodes import METRICS
 from cpf_commands.bench.marl_eval import write_marl_eval
-from cpf_commands.bench.report import summarize
 from cpf_commands.bench.run import (
     BASE_SEED,
     OUTPUT_FILES,
@@ -29,8 +31,6 @@ from cpf_commands.bench.run import (
     reference_label,
     run_bench,
 )
-from cpf_commands.bench.stats import REPLICATES
-from cpf_commands.bench.verdict import COST_MARGIN, check_margin
 from cpf_commands.common.arguments import add_scenarios_argument, non_negative_int
 from cpf_commands.common.outputs import claim_output_folder
 from cpf_commands.common.policies import policy_argument
@@ -247,8 +247,8 @@ def bench_main(argv: Sequence[str] | None = None) -> int:
         cells = run_bench(
             args.policies,
             args.scenarios,
-            seeds=args.seeds,
-            base_seed=args.base_seed,
+            num_seeds=args.seeds,
+            seed=args.base_seed,
             steps=args.steps,
             out=args.out,
             command=_command(args),

@@ -31,10 +31,10 @@ from statistics import NormalDist
 
 import numpy as np
 
+from cpf_bench.report import CellResult, summarize
+from cpf_bench.verdict import verdicts
 from cpf_commands.bench.marl_eval import write_marl_eval
-from cpf_commands.bench.report import CellResult, summarize
 from cpf_commands.bench.run import default_policies, run_bench
-from cpf_commands.bench.verdict import verdicts
 from cpf_commands.bench.views import display_name, gap_table, markdown_table
 from cpf_env.infra import atomic
 from cpf_env.scenarios.suite import list_suite
@@ -205,7 +205,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         runs[split] = run_bench(
             policies,
             list_suite(),
-            seeds=seeds,
+            num_seeds=seeds,
             out=results / f"bench_{split}",
             command=command,
             split=split,

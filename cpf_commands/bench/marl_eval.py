@@ -19,7 +19,7 @@ import math
 from collections.abc import Sequence
 from pathlib import Path
 
-from cpf_commands.bench.report import CellResult
+from cpf_bench.report import CellResult
 from cpf_env.infra import atomic
 
 __all__ = ["ENV_NAME", "marl_eval_dict", "write_marl_eval"]

@@ -34,8 +34,8 @@ from matplotlib.figure import Figure
 from matplotlib.ticker import FuncFormatter
 from numpy.typing import ArrayLike, NDArray
 
-from cpf_commands.bench.report import CellResult
-from cpf_commands.bench.stats import BOOTSTRAP_SEED, REPLICATES
+from cpf_bench.report import CellResult
+from cpf_bench.stats import BOOTSTRAP_SEED, REPLICATES
 from cpf_commands.bench.views import figure_label
 
 __all__ = [

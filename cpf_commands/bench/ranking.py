@@ -30,8 +30,8 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 from baselines import HEADROOM_REFERENCE, PRIVILEGED
-from cpf_commands.bench.report import CellResult, normalized_score
-from cpf_commands.bench.verdict import COST_MARGIN, Verdict, verdicts
+from cpf_bench.report import CellResult, normalized_score
+from cpf_bench.verdict import COST_MARGIN, Verdict, verdicts
 from cpf_commands.bench.views import regression_lines
 
 __all__ = ["RankedTable", "legend", "ranked_tables", "terminal_report", "text"]

@@ -1,24 +1,17 @@
-"""Running the benchmark: policies x scenarios x paired seeds, and writing its outputs.
+"""``run_bench``: the benchmark as the commands run it, and its output folder.
 
-Every policy (a baseline name, a ``cpf-train --out`` folder, an ``.onnx`` file
-or a policy object, all through ``cpf_commands.common.policies.resolve_policy``)
-runs every scenario on the same evaluation seeds ``base_seed + k`` (paired
-episodes). A local run puts every policy's seeds of a scenario in one
-batched simulator (``cpf_commands.common.rollout.rollout_group``: one large
-batch per scenario, the same numbers as a batch per cell); a Ray run sends
-one (policy, scenario) cell per task (``cpf_commands.bench.episodes``). A
-scenario in which nothing is random (``cpf_env.scenarios.suite.is_deterministic``)
-runs one episode: its seeds would all give the same one. The cells of the
-receding-horizon policies (``oracle``, ``mpc``) are read from the content-keyed
-cache of ``cpf_commands.bench.cache`` when it holds them, and written to it
-when they ran whole episodes (a quick look with ``--steps`` is not kept). ``write_outputs``
-fills the output folder with ``episodes.csv``, ``summary.csv``, ``summary.md``,
-the figures and ``report.html`` (the ranked tables and the figures in one
-page); ``cpf_commands.bench.cli`` is the command around it.
+``run_bench`` resolves every policy the commands accept (a baseline name, a
+``cpf-train --out`` folder, an ``.onnx`` file, ``package.module:NAME``, a
+registered name or an object: ``cpf_commands.common.policies.resolve_policy``),
+runs them with ``cpf_bench.evaluate`` (here, or one (policy, scenario) cell per
+Ray task: the same numbers), and ``write_outputs`` fills the output folder with
+``episodes.csv``, ``summary.csv``, ``summary.md``, the figures and
+``report.html`` (the ranked tables and the figures in one page);
+``cpf_commands.bench.cli`` is the command around it.
 
 Example:
     >>> from cpf_commands.bench.run import run_bench
-    >>> cells = run_bench(["nn_dsc"], ["bench_mild"], seeds=2, steps=20, out=None)
+    >>> cells = run_bench(["nn_dsc"], ["bench_mild"], num_seeds=2, steps=20, out=None)
     >>> cells[0].seeds, cells[0].metrics["cost"].shape
     ((10000, 10001), (2,))
 """
@@ -31,35 +24,25 @@ from pathlib import Path
 
 from tqdm.auto import tqdm
 
-from cpf_commands.bench import cache, profiles, ranking, views
-from cpf_commands.bench.episodes import run_episodes
+from cpf_bench.evaluate import Job, evaluate, labelled_policies, run_cell
+from cpf_bench.report import HEADLINE, CellResult, episodes_csv, summarize, summary_csv
+from cpf_bench.verdict import COST_MARGIN, check_margin
+from cpf_commands.bench import profiles, ranking, views
 from cpf_commands.bench.html_report import html_report
-from cpf_commands.bench.report import HEADLINE, CellResult, episodes_csv, summarize, summary_csv
-from cpf_commands.bench.verdict import COST_MARGIN, check_margin
 from cpf_commands.common.outputs import foreign_files
-from cpf_commands.common.policies import (
-    PolicySpec,
-    policy_label,
-    refers_to_file,
-    resolve_policy,
-)
+from cpf_commands.common.policies import PolicySpec, policy_label, refers_to_file, resolve_policy
 from cpf_commands.common.ray_runtime import start_ray
-from cpf_commands.common.rollout import rollout_group
-from cpf_env.envs.policy import FleetPolicy
 from cpf_env.infra import atomic
-from cpf_env.scenarios import Scenario, make_scenario
-from cpf_env.scenarios.splits import EVALUATION_SEED, SPLITS, split_scenario
-from cpf_env.scenarios.suite import is_deterministic
+from cpf_env.scenarios import Scenario
+from cpf_env.scenarios.splits import EVALUATION_SEED
 
 __all__ = [
     "BASE_SEED",
     "DEFAULT_REFERENCE",
     "OUTPUT_FILES",
     "default_policies",
-    "labelled_policies",
     "reference_label",
     "run_bench",
-    "run_cell",
     "write_outputs",
 ]
 
@@ -91,29 +74,6 @@ def default_policies() -> list[str]:
     from baselines import HEADROOM_REFERENCE, POLICIES
 
     return [*POLICIES, HEADROOM_REFERENCE]
-
-
-def labelled_policies(
-    policies: Sequence[PolicySpec] | Mapping[str, PolicySpec],
-) -> dict[str, PolicySpec]:
-    """Label -> specification, refusing a policy listed twice or two with the same label."""
-    if isinstance(policies, Mapping):
-        return dict(policies)
-    labelled: dict[str, PolicySpec] = {}
-    for spec in policies:
-        label = policy_label(spec)
-        if label in labelled and isinstance(spec, str | Path):
-            raise ValueError(
-                f"policy {label!r} is listed twice; duplicates are not allowed (every policy "
-                "runs on the same seeds, so a second run would repeat the first)."
-            )
-        if label in labelled:
-            raise ValueError(
-                f"two policies are labelled {label!r}; give them distinct name attributes "
-                "or pass a mapping label -> policy."
-            )
-        labelled[label] = spec
-    return labelled
 
 
 def write_outputs(
@@ -188,74 +148,6 @@ def _figures(
     return pictures
 
 
-def _build(
-    labelled: dict[str, PolicySpec], tasks: Sequence[Scenario]
-) -> tuple[dict[tuple[str, str], FleetPolicy], dict[tuple[str, str], str]]:
-    """Each policy built for each scenario, and the (label, scenario) pairs that did not fit.
-
-    Raises:
-        ValueError: A policy that fits none of the scenarios (the first reason).
-    """
-    built: dict[tuple[str, str], FleetPolicy] = {}
-    skipped: dict[tuple[str, str], str] = {}
-    for label, spec in labelled.items():
-        reasons = []
-        for task in tasks:
-            try:
-                built[(label, task.name)] = resolve_policy(spec, task)
-            except ValueError as error:
-                skipped[(label, task.name)] = str(error)
-                reasons.append(str(error))
-        if len(reasons) == len(tasks):
-            raise ValueError(reasons[0])
-    return built, skipped
-
-
-def _episode_seeds(task: Scenario, seeds: int, base_seed: int) -> tuple[int, ...]:
-    """Evaluation seeds of a scenario: one episode if nothing in it is random."""
-    return tuple(base_seed + k for k in range(1 if is_deterministic(task) else seeds))
-
-
-#: One cell to run: policy label, its specification, the scenario, the seeds.
-_Job = tuple[str, PolicySpec, Scenario, tuple[int, ...]]
-
-
-def run_cell(
-    label: str, spec: PolicySpec, task: Scenario, seeds: tuple[int, ...], steps: int | None
-) -> CellResult:
-    """One (policy, scenario) cell: build the policy, run its episodes, measure them."""
-    metrics = run_episodes(resolve_policy(spec, task), task, seeds, steps=steps)
-    return CellResult(label, task.name, seeds, is_deterministic(task), metrics)
-
-
-def _run_here(
-    jobs: Sequence[_Job],
-    built: dict[tuple[str, str], FleetPolicy],
-    steps: int | None,
-    progress: bool,
-) -> list[CellResult]:
-    """The cells in this process, one batch per scenario, with a progress bar over steps.
-
-    Returns the cells in the order of ``jobs``.
-    """
-    groups: dict[str, list[_Job]] = {}
-    for job in jobs:
-        groups.setdefault(job[2].name, []).append(job)
-    total = sum(group[0][2].max_steps if steps is None else int(steps) for group in groups.values())
-    results: dict[tuple[str, str], CellResult] = {}
-    with tqdm(total=total, disable=not progress, unit="step", desc="cpf-bench") as bar:
-        for name, group in groups.items():
-            bar.set_postfix_str(f"{len(group)} policies on {name}")
-            task, seeds = group[0][2], group[0][3]
-            policies = [built[(label, name)] for label, *_ in group]
-            measured = rollout_group(policies, task, seeds, steps=steps, progress=bar)
-            for (label, *_), metrics in zip(group, measured, strict=True):
-                results[(label, name)] = CellResult(
-                    label, name, seeds, is_deterministic(task), metrics
-                )
-    return [results[(label, task.name)] for label, _, task, _ in jobs]
-
-
 def _absolute(spec: PolicySpec) -> PolicySpec:
     """An agent folder given by a relative path made absolute (Ray workers run elsewhere)."""
     if refers_to_file(spec):
@@ -264,7 +156,7 @@ def _absolute(spec: PolicySpec) -> PolicySpec:
 
 
 def _run_on_ray(
-    jobs: Sequence[_Job], steps: int | None, address: str | None, progress: bool
+    jobs: Sequence[Job], steps: int | None, address: str | None, progress: bool
 ) -> list[CellResult]:
     """The cells as Ray tasks (one CPU each), on local Ray or the cluster at ``address``.
 
@@ -277,7 +169,7 @@ def _run_on_ray(
     try:
         remote = ray.remote(num_cpus=1)(run_cell)
         futures = [
-            remote.remote(label, _absolute(spec), task, seeds, steps)
+            remote.remote(label, _absolute(spec), task, seeds, steps, resolve_policy)
             for label, spec, task, seeds in jobs
         ]
         pending = list(futures)
@@ -297,9 +189,9 @@ def _run_on_ray(
 
 def run_bench(
     policies: Sequence[PolicySpec] | Mapping[str, PolicySpec],
-    scenario_names: Sequence[str | Scenario],
-    seeds: int = 10,
-    base_seed: int = BASE_SEED,
+    scenarios: Sequence[str | Scenario],
+    num_seeds: int = 10,
+    seed: int = BASE_SEED,
     steps: int | None = None,
     out: str | Path | None = None,
     command: str = "",
@@ -311,14 +203,14 @@ def run_bench(
     split: str = "test",
     cost_margin: float = COST_MARGIN,
 ) -> list[CellResult]:
-    """Run every policy on every scenario for ``seeds`` paired seeds, and write the outputs.
+    """Run every policy on every scenario for ``num_seeds`` paired seeds, and write the outputs.
 
     Args:
         policies: Policy specifications (see ``resolve_policy``), or a mapping
             label -> specification.
-        scenario_names: Registered scenario names or ``Scenario`` objects.
-        seeds: Episodes per (policy, scenario) (one on a deterministic scenario).
-        base_seed: Episode k is reset with seed ``base_seed + k``.
+        scenarios: Registered scenario names or ``Scenario`` objects.
+        num_seeds: Episodes per (policy, scenario) (one on a deterministic scenario).
+        seed: Episode k is reset with seed ``seed + k``.
         steps: Horizon override (default: each scenario's ``max_steps``).
         out: Output folder; None writes nothing.
         command: The command line recorded in summary.md.
@@ -345,45 +237,30 @@ def run_bench(
         ValueError: Unknown scenario or policy, a policy that fits none of the
             scenarios, fewer than one seed, a bad horizon, or ``out`` is a file.
     """
-    if int(seeds) < 1:
-        raise ValueError(f"seeds must be >= 1, got {seeds}.")
-    if steps is not None and int(steps) < 1:
-        raise ValueError(f"steps must be >= 1, got {steps}.")
     if out is not None and Path(out).exists() and not Path(out).is_dir():
         raise ValueError(f"--out {out} is a file; give a folder (it is created if needed).")
-    if split not in SPLITS:
-        raise ValueError(f"unknown split {split!r}; choose one of {list(SPLITS)}.")
     check_margin(cost_margin)
-    if split == "shift":
-        scenario_names = [_shifted(name) for name in scenario_names]
-    tasks = [make_scenario(name) for name in scenario_names]
     labelled = labelled_policies(policies)
-    reference = reference_label(reference, labelled)
-    if reference not in labelled:
+    reference = reference_label(reference, labelled) if labelled else ""
+    if labelled and reference not in labelled:
         raise ValueError(
             f"--reference {reference} is not among the policies {sorted(labelled)}; add it to "
             "--policies or choose one of them."
         )
-    built, skipped = _build(labelled, tasks)
-    jobs = [
-        (label, labelled[label], task, _episode_seeds(task, seeds, base_seed))
-        for label in labelled
-        for task in tasks
-        if (label, task.name) in built
-    ]
-    found = _cached(jobs, steps)
-    missing = [job for job in jobs if (job[0], job[2].name) not in found]
-    if not missing:
-        ran = []
-    elif distribute:
-        ran = _run_on_ray(missing, steps, address, progress)
-    else:
-        ran = _run_here(missing, built, steps, progress)
-    for job, cell in zip(missing, ran, strict=True):
-        if _cacheable(job) and steps in (None, job[2].max_steps):  # whole episodes only
-            cache.store_cell(job[0], job[2], job[3], steps, cell.metrics)
-        found[(job[0], job[2].name)] = cell
-    cells = [found[(label, task.name)] for label, _, task, _ in jobs]
+    evaluation = evaluate(
+        labelled,
+        scenarios,
+        num_seeds=num_seeds,
+        seed=seed,
+        steps=steps,
+        split=split,
+        progress=progress,
+        resolve=resolve_policy,
+        run_cells=(lambda jobs, steps: _run_on_ray(jobs, steps, address, progress))
+        if distribute
+        else None,
+    )
+    cells, skipped = evaluation.cells, evaluation.skipped
     if out is not None:
         write_outputs(
             cells,
@@ -397,34 +274,8 @@ def run_bench(
     return cells
 
 
-def _cacheable(job: _Job) -> bool:
-    """A cell of a receding-horizon policy given by name (``cpf_commands.bench.cache``)."""
-    return isinstance(job[1], str) and job[1] in cache.CACHED_POLICIES and job[0] == job[1]
-
-
-def _cached(jobs: Sequence[_Job], steps: int | None) -> dict[tuple[str, str], CellResult]:
-    """The cells found in the content-keyed cache, by (label, scenario name)."""
-    found = {}
-    for label, spec, task, seeds in jobs:
-        if not _cacheable((label, spec, task, seeds)):
-            continue
-        metrics = cache.load_cell(label, task, seeds, steps)
-        if metrics is not None:
-            found[(label, task.name)] = CellResult(
-                label, task.name, seeds, is_deterministic(task), metrics
-            )
-    return found
-
-
 def reference_label(reference: str | None, labelled: Mapping[str, PolicySpec]) -> str:
     """The reference's label: as given, else nn_dsc if it runs, else the first policy."""
     if reference is not None:
         return policy_label(reference)
     return DEFAULT_REFERENCE if DEFAULT_REFERENCE in labelled else next(iter(labelled))
-
-
-def _shifted(name: str | Scenario) -> Scenario:
-    """The shift split of a suite scenario given by name."""
-    if not isinstance(name, str):
-        raise ValueError("--split shift needs suite scenario names, not Scenario objects.")
-    return split_scenario(name, "shift")

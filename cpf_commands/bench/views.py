@@ -14,9 +14,9 @@ from matplotlib.figure import Figure
 from matplotlib.ticker import FuncFormatter
 
 from baselines import HEADROOM_REFERENCE, PRIVILEGED
-from cpf_commands.bench.headroom import headroom_table
-from cpf_commands.bench.report import GAP_METRICS, HEADLINE, CellResult
-from cpf_commands.bench.verdict import (
+from cpf_bench.headroom import headroom_table
+from cpf_bench.report import GAP_METRICS, HEADLINE, CellResult
+from cpf_bench.verdict import (
     COST_MARGIN,
     GUARDED,
     RELATIVE_TOLERANCE,

@@ -40,6 +40,7 @@ from importlib import metadata
 from pathlib import Path
 from typing import Any
 
+from cpf_bench.evaluate import policy_label
 from cpf_env.envs.policy import FleetPolicy
 from cpf_env.scenarios import Scenario, make_scenario
 
@@ -159,19 +160,6 @@ def _build_user_policy(spec: str, scenario: Scenario, options: dict[str, Any]) -
 def _is_onnx(spec: str | Path) -> bool:
     """Whether ``spec`` names an existing ``.onnx`` file."""
     return str(spec).endswith(".onnx") and Path(spec).is_file()
-
-
-def policy_label(spec: PolicySpec) -> str:
-    """The name a policy goes by in tables and file names.
-
-    A baseline's name, a trained agent's path as given (without a trailing
-    slash), or an object's ``name`` attribute (else its class name).
-    """
-    if isinstance(spec, Path):
-        return str(spec)
-    if isinstance(spec, str):
-        return spec.rstrip("/") or spec
-    return str(getattr(spec, "name", getattr(spec, "__name__", type(spec).__name__)))
 
 
 def _check_name(spec: str | Path) -> None:

@@ -29,8 +29,8 @@ from typing import Any
 import numpy as np
 from tqdm.auto import tqdm
 
+from cpf_bench.rollout import StepObserver, rollout
 from cpf_commands.common.policies import resolve_policy
-from cpf_commands.common.rollout import StepObserver, rollout
 from cpf_env.envs.policy import FleetPolicy
 from cpf_env.evaluation.metrics import Trajectory
 from cpf_env.evaluation.privileged import lumped_uncertainty

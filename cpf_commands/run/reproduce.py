@@ -26,8 +26,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from baselines import ALL_POLICIES, NNDSCGains
+from cpf_bench.rollout import StepObserver
 from cpf_commands.common.outputs import claim_output_folder
-from cpf_commands.common.rollout import StepObserver
 from cpf_commands.run.experiment import run_episode
 from cpf_commands.run.figures import write_figures
 from cpf_env.evaluation.metrics import Trajectory, episode_metrics, final_window

@@ -1,6 +1,6 @@
 """``cpf-run --video FILE``: an episode rendered to an MP4 or a GIF (the "enjoy" path).
 
-``VideoRecorder`` is a rollout observer (``cpf_commands.common.rollout``): it
+``VideoRecorder`` is a rollout observer (``cpf_bench.rollout``): it
 draws fleet 0 with the environments' own renderer
 (``cpf_env.envs.render.FleetRenderer``: paths, hulls, trails, targets, links)
 at the first step and every ``every`` steps after, then ``write`` encodes the

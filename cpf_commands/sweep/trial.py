@@ -22,7 +22,7 @@ from stable_baselines3.common.callbacks import BaseCallback
 
 from agents.train_config import TrainConfig
 from agents.training import train
-from cpf_commands.bench.report import summarize
+from cpf_bench.report import summarize
 from cpf_commands.bench.run import run_bench
 from cpf_commands.sweep.report import trial_state, write_evaluation
 from cpf_commands.sweep.spec import SweepSpec, trial_name
@@ -76,9 +76,8 @@ def evaluate_agent(
         RMS path error over the final quarter of the horizon, m).
     """
     reference = "nn_dsc" if config.base == "none" else config.base
-    cells = run_bench(
-        {"agent": folder, reference: reference}, list(config.scenarios), seeds=seeds, steps=steps
-    )
+    policies: dict[str, str | Path] = {"agent": folder, reference: reference}
+    cells = run_bench(policies, list(config.scenarios), num_seeds=seeds, steps=steps)
     rows = summarize(cells, reference)
     by_metric = {row["metric"]: row for row in rows if row["policy"] == "agent"}
     base = {row["metric"]: row for row in rows if row["policy"] == reference}

@@ -4,7 +4,7 @@
 the step's action led to, and the reward that action earned) and reduces
 the recorded series to one value per episode and metric (``METRICS``). It
 is the one implementation behind ``cpf-bench`` and ``cpf-run`` (both step
-through ``cpf_commands.common.rollout``); ``docs/benchmark.md`` gives every
+through ``cpf_bench.rollout``); ``docs/benchmark.md`` gives every
 formula.
 
 Conventions (chosen once, for every metric):

@@ -36,7 +36,7 @@ from functools import partial
 
 import baselines
 from baselines.mpc_tuned import MPCTuned
-from cpf_commands.bench.report import CellResult
+from cpf_bench.report import CellResult
 from cpf_commands.bench.run import run_bench
 from cpf_env.scenarios.suite import list_suite
 
@@ -64,8 +64,8 @@ def main(argv: list[str] | None = None) -> list[CellResult]:
         policies[label] = partial(baselines.make_policy, name, **MPCTuned.DEFAULTS)
     given = sys.argv[1:] if argv is None else argv
     command = shlex.join(["python", "studies/headroom/headroom_tuned.py", *given])
-    cells = run_bench(policies, args.scenarios, seeds=args.seeds, steps=args.steps, out=args.out,
-                      command=command, figures=False, reference="mpc_tuned",
+    cells = run_bench(policies, args.scenarios, num_seeds=args.seeds, steps=args.steps,
+                      out=args.out, command=command, figures=False, reference="mpc_tuned",
                       split=args.split)  # fmt: skip
     print("| policy | scenario | mean cost |")
     print("|---|---|---|")

@@ -28,7 +28,7 @@ import numpy as np
 
 from baselines.mpc import OraclePolicy
 from baselines.mpc_tuned import MPCTuned
-from cpf_commands.common.rollout import rollout
+from cpf_bench.rollout import rollout
 from cpf_env import scenarios
 from cpf_env.scenarios import splits
 from cpf_env.scenarios.suite import list_suite

@@ -66,7 +66,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(distribution.describe(fleet))
     given = sys.argv[1:] if argv is None else list(argv)
     command = "python studies/student/bench_procedural.py " + " ".join(given)
-    run_bench(args.policies, fleets, seeds=args.seeds, out=args.out, command=command, figures=False)
+    run_bench(
+        args.policies, fleets, num_seeds=args.seeds, out=args.out, command=command, figures=False
+    )
     return 0
 
 

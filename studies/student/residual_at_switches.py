@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 
 from agents import load_policy
-from cpf_commands.common.rollout import rollout
+from cpf_bench.rollout import rollout
 from cpf_env.evaluation.fleet_metrics import WINDOW_FRACTION
 from cpf_env.model.graph import SwitchingTopology
 from cpf_env.scenarios import make_scenario

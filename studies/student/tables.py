@@ -14,7 +14,7 @@ that exist),
 one row per scenario: the mean episode cost of ``nn_dsc``,
 ``mpc`` and ``oracle`` (where it ran) and of each student (one per training
 seed), each student's paired cost difference to ``mpc`` (mean over seeds
-with its 95 % bootstrap interval, ``cpf_commands.bench.stats``) and its
+with its 95 % bootstrap interval, ``cpf_bench.stats``) and its
 verdict against ``mpc`` (``beats``: the whole interval below 0; ``loses``:
 above 0; else ``no difference``), and its verdict against ``nn_dsc`` as
 ``cpf-bench`` wrote it in ``summary.md``. Then per student: the scenarios on
@@ -26,7 +26,7 @@ scenarios it ran on (``cpf-bench`` does not run a student on a graph of more
 neighbours than its input has slots).
 
 Then, per bench folder, every student's guarded verdict (``cpf-bench``'s rule,
-``cpf_commands.bench.verdict``: the cost and the final-window physical
+``cpf_bench.verdict``: the cost and the final-window physical
 metrics) against ``mpc`` and against each policy of ``--against`` (default
 ``mpc_tuned``, the strongest deployable design) whose episodes on the same
 scenarios and seeds are in a ``--deployable`` episodes table, e.g. the
@@ -50,9 +50,9 @@ from pathlib import Path
 
 import numpy as np
 
-from cpf_commands.bench.report import CellResult, read_episodes_csv
-from cpf_commands.bench.stats import iqm, paired_difference
-from cpf_commands.bench.verdict import verdicts
+from cpf_bench.report import CellResult, read_episodes_csv
+from cpf_bench.stats import iqm, paired_difference
+from cpf_bench.verdict import verdicts
 
 #: The bench folders, each with the deployable policy its students are a residual on (the
 #: reference of its cost table).

@@ -10,7 +10,7 @@ import pytest
 from conftest import ROOT
 
 from agents import load_policy
-from cpf_commands.common.rollout import rollout
+from cpf_bench.rollout import rollout
 from cpf_env.scenarios import make_scenario
 
 STUDENT = ROOT / "results/agents/student_s0"

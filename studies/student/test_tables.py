@@ -61,8 +61,8 @@ def test_guarded_verdicts_flag_a_physical_regression_and_read_the_deployable_tab
     """
     import numpy as np
 
-    from cpf_commands.bench.episodes import METRICS
-    from cpf_commands.bench.report import CellResult, episodes_csv
+    from cpf_bench.episodes import METRICS
+    from cpf_bench.report import CellResult, episodes_csv
 
     seeds = tuple(range(10000, 10008))
     rng = np.random.default_rng(1)
@@ -88,8 +88,8 @@ def test_guarded_verdicts_flag_a_physical_regression_and_read_the_deployable_tab
 def test_an_oracle_in_the_deployable_table_replaces_the_folders(tmp_path: Path) -> None:
     import numpy as np
 
-    from cpf_commands.bench.episodes import METRICS
-    from cpf_commands.bench.report import CellResult
+    from cpf_bench.episodes import METRICS
+    from cpf_bench.report import CellResult
 
     costs = {name: list(values) for name, values in COSTS.items()}
     _bench(tmp_path / "bench_test", costs)

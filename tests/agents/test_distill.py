@@ -29,12 +29,12 @@ from agents.distill import (
     student_actor,
 )
 from agents.distill_config import DistillConfig, check_distillation, draw_seeds
+from agents.evaluation import TestSplitEvaluator
 from agents.train_config import TrainConfig
 from agents.vec_env import FleetVecEnv
 from baselines import make_policy
 from cpf_commands.bench.run import run_bench
 from cpf_commands.distill import distill_main, read_distill_config
-from cpf_commands.train_eval import TestSplitEvaluator
 from cpf_env import scenarios
 from cpf_env.envs.input_statistics import InputStatistics
 from cpf_env.envs.residual import ResidualConfig
@@ -594,10 +594,10 @@ def test_evaluation_rows_are_cpf_trains_and_leave_the_student_unchanged(tmp_path
     seconds = [row["wall_clock_seconds"] for row in rows]
     assert seconds == sorted(seconds) and seconds[-1] <= evaluated.seconds + 5e-4  # rounded
     # Row 0 is the base itself; the last row is the student written to the folder.
-    base = run_bench(["nn_dsc"], ["bench_current_waves"], seeds=1, steps=20, split="test")
+    base = run_bench(["nn_dsc"], ["bench_current_waves"], num_seeds=1, steps=20, split="test")
     assert rows[0]["mean_cost"] == float(np.mean(base[0].metrics["cost"]))
     final = run_bench(
-        {"s": tmp_path / "a"}, ["bench_current_waves"], seeds=1, steps=20, reference="s",
+        {"s": tmp_path / "a"}, ["bench_current_waves"], num_seeds=1, steps=20, reference="s",
         split="test",
     )  # fmt: skip
     assert rows[-1]["mean_cost"] == float(np.mean(final[0].metrics["cost"]))

@@ -70,7 +70,7 @@ def test_bench_runs_the_onnx_policy_within_the_torch_policys_interval(exported: 
     cells = run_bench(
         {"torch": AGENT, "onnx": exported, "nn_dsc": "nn_dsc"},
         ["bench_lossy_links"],
-        seeds=4,
+        num_seeds=4,
         steps=200,
     )
     torch_cost = cells[0].metrics["cost"]

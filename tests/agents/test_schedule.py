@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 
 from agents import TrainConfig, load_policy, train
+from agents.evaluation import TestSplitEvaluator
 from agents.schedule import RunSchedule
 from cpf_commands.bench.cli import bench_main
 from cpf_commands.train import train_main
-from cpf_commands.train_eval import TestSplitEvaluator
 
 TINY = {"fleets": 2, "n_steps": 16, "batch_size": 80, "n_epochs": 1, "net_arch": (16, 16)}
 #: cpf-train flags of a tiny run (160 vessel-steps per rollout).

@@ -9,7 +9,7 @@ import pytest
 
 import baselines
 from baselines.mpc import SPEED_RATE, MPCPolicy, MPCPrivileged, OraclePolicy
-from cpf_commands.common.rollout import rollout
+from cpf_bench.rollout import rollout
 from cpf_env import FleetSim, scenarios
 from cpf_env.sim.arrays import KernelConstants
 
@@ -139,7 +139,7 @@ def test_the_oracle_costs_least_over_the_whole_episode(scenario):
     tenths of a percent, e.g. on seed 10000 ``mpc_tuned`` costs 60.20 against the oracle's
     60.38 on ``bench_mild`` and 69.16 against 69.31 on ``bench_heterogeneous`` (over the
     20 ``test`` seeds 62.57 against 61.09 and 63.65 against 62.70; docs/benchmark.md)."""
-    from cpf_commands.common.rollout import rollout_group
+    from cpf_bench.rollout import rollout_group
 
     task = scenarios.get(scenario)
     names = [*baselines.POLICIES, *baselines.PRIVILEGED]

@@ -8,7 +8,7 @@ import pytest
 import baselines
 from baselines.mpc import MPCPolicy, MPCPrivileged
 from baselines.mpc_told import MPCToldDynamics, MPCToldLinks, MPCToldV0
-from cpf_commands.common.rollout import rollout
+from cpf_bench.rollout import rollout
 from cpf_env import FleetSim, scenarios
 from cpf_env.evaluation.privileged import ideal_link_observations
 

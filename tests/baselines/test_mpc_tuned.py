@@ -10,7 +10,7 @@ import pytest
 import baselines
 from baselines.mpc import MPCPolicy
 from baselines.mpc_tuned import K5, K6, MPCTuned
-from cpf_commands.common.rollout import rollout
+from cpf_bench.rollout import rollout
 from cpf_env import FleetSim, scenarios
 from cpf_env.model.graph import Graph
 from cpf_env.model.paths import Sinusoid

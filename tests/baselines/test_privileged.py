@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import baselines
-from cpf_commands.common.rollout import rollout, rollout_group
+from cpf_bench.rollout import rollout, rollout_group
 from cpf_env import FleetSim, scenarios
 from cpf_env.evaluation.privileged import ideal_link_observations, lumped_uncertainty, true_dynamics
 from cpf_env.model.vessel import coriolis_matrix, damping_matrix

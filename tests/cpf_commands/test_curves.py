@@ -11,11 +11,11 @@ import numpy as np
 import pytest
 from conftest import STUDENT_TOML
 
+from agents.evaluation import TestSplitEvaluator
 from cpf_commands import distill as distill_command
 from cpf_commands.bench.run import run_bench
 from cpf_commands.curves import curves_main
 from cpf_commands.distill import distill_main
-from cpf_commands.train_eval import TestSplitEvaluator
 
 #: Four runs (training seeds): (vessel_steps, wall_clock_seconds, mean_cost) per evaluation.
 RUNS = {
@@ -80,7 +80,7 @@ def test_the_base_line_of_an_analytic_policy_is_the_benchmark_number(tmp_path: P
     with pytest.raises(SystemExit):  # from scratch: no base at 0 steps to compare with
         curves_main([*folders, "--out", str(tmp_path / "c")])
     assert curves_main([*folders, "--out", str(tmp_path / "c"), "--base", "dsc"]) == 0
-    cells = run_bench(["dsc"], ["bench_mild"], seeds=2, steps=20, split="test")
+    cells = run_bench(["dsc"], ["bench_mild"], num_seeds=2, steps=20, split="test")
     expected = float(np.mean(cells[0].metrics["cost"]))
     assert _curves(tmp_path / "c")["vessel_steps"][0]["base_cost"] == expected
 

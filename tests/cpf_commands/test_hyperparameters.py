@@ -9,9 +9,9 @@ import pytest
 from conftest import ROOT
 
 from agents import TrainConfig
+from agents.evaluation import DEFAULT_EVAL_SEEDS
 from cpf_commands.hyperparameters import hyperparameters_toml, read_hyperparameters
 from cpf_commands.train import DEFAULT_CHECKPOINT_EVERY, DEFAULT_EVAL_EVERY, train_main
-from cpf_commands.train_eval import DEFAULT_EVAL_SEEDS
 
 EXAMPLES = ROOT / "examples" / "hyperparameters"
 TINY = """

@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 from baselines import HEADROOM_REFERENCE
+from cpf_bench.report import CellResult, normalized_score, summarize
 from cpf_commands.bench.cli import bench_main
 from cpf_commands.bench.ranking import ranked_tables, terminal_report
-from cpf_commands.bench.report import CellResult, normalized_score, summarize
 from cpf_env.evaluation.fleet_metrics import METRICS
 
 SEEDS = tuple(range(10))

@@ -10,10 +10,10 @@ from conftest import ROOT
 
 import agents
 from baselines import POLICIES, make_policy
-from cpf_commands.bench import report as bench_report
+from cpf_bench import report as bench_report
+from cpf_bench.episodes import METRICS, run_episodes
 from cpf_commands.bench import run as bench_run
 from cpf_commands.bench.cli import bench_main
-from cpf_commands.bench.episodes import METRICS, run_episodes
 from cpf_commands.bench.run import BASE_SEED, run_bench
 from cpf_commands.common.policies import policy_label, resolve_policy
 from cpf_commands.run.cli import run_main
@@ -170,14 +170,14 @@ def test_seeds_are_paired_across_policies():
         label: Recorder(make_policy(name, "bench_mild"), label)
         for label, name in (("a", "nn_dsc"), ("b", "backstepping"))
     }
-    cells = run_bench(recorders, ["bench_mild"], seeds=3, steps=5)
+    cells = run_bench(recorders, ["bench_mild"], num_seeds=3, steps=5)
     assert cells[0].seeds == cells[1].seeds == (BASE_SEED, BASE_SEED + 1, BASE_SEED + 2)
     np.testing.assert_array_equal(recorders["a"].first, recorders["b"].first)
     assert not np.array_equal(recorders["a"].first[0], recorders["a"].first[1])
 
 
 def test_a_deterministic_scenario_runs_one_episode():
-    (cell,) = run_bench(["nn_dsc"], ["wang2014"], seeds=5, steps=5)
+    (cell,) = run_bench(["nn_dsc"], ["wang2014"], num_seeds=5, steps=5)
     assert cell.deterministic and cell.seeds == (BASE_SEED,)
     assert cell.metrics["cost"].shape == (1,)
 
@@ -205,7 +205,7 @@ def test_identical_arguments_give_identical_files(tmp_path):
 
 def test_failures_are_counted_not_dropped(tmp_path):
     policies = {"nn_dsc": "nn_dsc", "off_path": OffPath}
-    cells = run_bench(policies, [_tight()], seeds=2, steps=250, out=tmp_path, figures=False)
+    cells = run_bench(policies, [_tight()], num_seeds=2, steps=250, out=tmp_path, figures=False)
     assert cells[1].metrics["terminated"].tolist() == [1.0]  # deterministic: one episode
     with open(tmp_path / "summary.csv") as file:
         rows = {(r["policy"], r["metric"]): r for r in csv.DictReader(file)}
@@ -225,7 +225,7 @@ def test_failures_are_counted_not_dropped(tmp_path):
 
 
 def test_summary_has_the_required_columns_and_reference_scores():
-    cells = run_bench(["nn_dsc", "dsc"], ["bench_mild", "bench_switching"], seeds=4, steps=30)
+    cells = run_bench(["nn_dsc", "dsc"], ["bench_mild", "bench_switching"], num_seeds=4, steps=30)
     rows = bench_report.summarize(cells)
     assert set(bench_report.SUMMARY_COLUMNS) >= {
         "policy", "scenario", "metric", "mean", "iqm", "ci_low", "ci_high",
@@ -253,7 +253,7 @@ def test_summary_has_the_required_columns_and_reference_scores():
 
 def test_switching_is_scored_while_the_fleet_re_synchronizes():
     """bench_switching's final window is not bench_mild's (as it was in suite version 1)."""
-    cells = run_bench(["nn_dsc"], ["bench_mild", "bench_switching"], seeds=2)
+    cells = run_bench(["nn_dsc"], ["bench_mild", "bench_switching"], num_seeds=2)
     mild, switching = (cell.metrics["cost_window"] for cell in cells)
     assert np.all(switching > 10 * mild)
 
@@ -268,7 +268,7 @@ def _picky(scenario):
 def test_a_policy_that_does_not_fit_a_scenario_skips_it_and_says_so(tmp_path):
     policies = {"nn_dsc": "nn_dsc", "picky": _picky}
     names = ["bench_mild", "bench_switching"]
-    cells = run_bench(policies, names, seeds=2, steps=5, out=tmp_path, figures=False)
+    cells = run_bench(policies, names, num_seeds=2, steps=5, out=tmp_path, figures=False)
     assert [(c.policy, c.scenario) for c in cells] == [
         ("nn_dsc", "bench_mild"),
         ("nn_dsc", "bench_switching"),
@@ -280,15 +280,15 @@ def test_a_policy_that_does_not_fit_a_scenario_skips_it_and_says_so(tmp_path):
         rows = list(csv.DictReader(file))
     assert {r["policy"] for r in rows if r["scenario"] == "all"} == {"nn_dsc"}
     with pytest.raises(ValueError, match="do not fit"):
-        run_bench({"picky": _picky}, ["bench_switching"], seeds=1, steps=2)
+        run_bench({"picky": _picky}, ["bench_switching"], num_seeds=1, steps=2)
 
 
 def test_two_policies_with_one_label_are_refused():
     with pytest.raises(ValueError, match="'nn_dsc' is listed twice; duplicates are not allowed"):
-        run_bench(["nn_dsc", "nn_dsc"], ["bench_mild"], seeds=1, steps=2)
+        run_bench(["nn_dsc", "nn_dsc"], ["bench_mild"], num_seeds=1, steps=2)
     scenario = scenarios.get("bench_mild")
     with pytest.raises(ValueError, match="two policies are labelled 'off_path'"):
-        run_bench([OffPath(scenario), OffPath(scenario)], [scenario], seeds=1, steps=2)
+        run_bench([OffPath(scenario), OffPath(scenario)], [scenario], num_seeds=1, steps=2)
 
 
 # --- one resolver for every command ---------------------------------------------------------
@@ -333,7 +333,7 @@ def trained_agent(tmp_path, monkeypatch):
 
 def test_a_trained_agent_goes_through_the_bench_like_a_baseline(trained_agent):
     folder, calls = trained_agent
-    cells = run_bench(["nn_dsc", str(folder)], ["bench_mild"], seeds=2, steps=20)
+    cells = run_bench(["nn_dsc", str(folder)], ["bench_mild"], num_seeds=2, steps=20)
     assert calls == [(folder, "bench_mild")]
     assert cells[1].policy == str(folder)
     for name in METRICS:  # the stand-in is nn_dsc: same seeds, same code, same numbers

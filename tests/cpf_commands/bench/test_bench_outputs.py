@@ -130,8 +130,8 @@ def test_episodes_csv_reads_back_bit_for_bit() -> None:
     """``read_episodes_csv`` inverts ``episodes_csv``: every cell, seed and metric (NaN too)."""
     import numpy as np
 
-    from cpf_commands.bench.episodes import METRICS
-    from cpf_commands.bench.report import CellResult, episodes_csv, read_episodes_csv
+    from cpf_bench.episodes import METRICS
+    from cpf_bench.report import CellResult, episodes_csv, read_episodes_csv
 
     rng = np.random.default_rng(0)
     cells = [

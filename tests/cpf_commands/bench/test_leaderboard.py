@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 from conftest import ROOT
 
+from cpf_bench.report import CellResult
 from cpf_commands.bench import leaderboard
-from cpf_commands.bench.report import CellResult
 from cpf_env.evaluation.fleet_metrics import METRICS
 
 SEEDS = tuple(range(4))

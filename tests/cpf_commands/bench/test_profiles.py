@@ -6,12 +6,12 @@ import numpy as np
 import pytest
 from scipy import stats as scipy_stats
 
+from cpf_bench.report import CellResult
 from cpf_commands.bench.profiles import (
     normalized_scores,
     performance_profile,
     probability_of_improvement,
 )
-from cpf_commands.bench.report import CellResult
 
 
 def _scores(seed: int, tasks: int = 3, runs: int = 8, shift: float = 0.0) -> list[np.ndarray]:

@@ -69,7 +69,8 @@ def _same_costs(cells, first: int, second: int) -> None:
 
 
 def test_a_factory_of_your_own_benches_exactly_like_the_baseline_it_wraps(user_module):
-    cells = run_bench(["backstepping", f"{user_module}:mine"], ["bench_mild"], seeds=2, steps=20)
+    policies = ["backstepping", f"{user_module}:mine"]
+    cells = run_bench(policies, ["bench_mild"], num_seeds=2, steps=20)
     assert [c.policy for c in cells] == ["backstepping", "my_factories:mine"]
     _same_costs(cells, 0, 1)
 
@@ -77,7 +78,7 @@ def test_a_factory_of_your_own_benches_exactly_like_the_baseline_it_wraps(user_m
 def test_an_installed_policy_benches_by_name_and_only_named_code_is_imported(installed):
     assert policy_argument("mine_installed") == "mine_installed"  # checked without importing
     assert "my_factories" not in sys.modules
-    cells = run_bench(["backstepping", "mine_installed"], ["bench_mild"], seeds=2, steps=20)
+    cells = run_bench(["backstepping", "mine_installed"], ["bench_mild"], num_seeds=2, steps=20)
     assert cells[1].policy == "mine_installed"
     _same_costs(cells, 0, 1)
     assert "never_imported" not in sys.modules

@@ -111,9 +111,9 @@ def test_auto_without_a_cluster_is_a_clear_error(tmp_path, monkeypatch, capsys) 
 def test_the_benchmark_on_ray_equals_the_local_run(tmp_path) -> None:
     policies = ["nn_dsc", "backstepping", AGENT]
     names = ["bench_lossy_links", "bench_mild"]
-    local = run_bench(policies, names, seeds=2, steps=60, out=tmp_path / "local", figures=False)
+    local = run_bench(policies, names, num_seeds=2, steps=60, out=tmp_path / "local", figures=False)
     remote = run_bench(
-        policies, names, seeds=2, steps=60, out=tmp_path / "ray", figures=False, distribute=True
+        policies, names, num_seeds=2, steps=60, out=tmp_path / "ray", figures=False, distribute=True
     )
     assert [(c.policy, c.scenario, c.seeds) for c in remote] == [
         (c.policy, c.scenario, c.seeds) for c in local

@@ -1,0 +1,117 @@
+"""How much room each scenario leaves: the headroom table of a benchmark run.
+
+Per scenario and for the cost over the whole episode (``cost``) and over
+the final window (``cost_window``):
+
+* J_ref, the reference's mean cost (``nn_dsc`` by default);
+* J_best, the lowest mean cost of a deployable analytic policy that ran
+  (``baselines.POLICIES``: ``mpc`` included, trained agents and privileged
+  references not), and its name;
+* J_oracle, the mean cost of the headroom bound (``baselines.HEADROOM_REFERENCE``);
+* headroom = 1 - J_oracle / J_best: the share of the best deployable
+  analytic design's cost that a controller told everything removes, i.e.
+  the room left to learning. It is negative where the bound is not below
+  the best deployable design (``oracle_not_lowest`` lists every policy that
+  beats the bound on a scenario).
+
+Example:
+    >>> from cpf_bench.report import CellResult
+    >>> import numpy as np
+    >>> cells = [
+    ...     CellResult(p, "s", (0,), False, {"cost": np.array([j]), "cost_window": np.array([j])})
+    ...     for p, j in (("nn_dsc", 10.0), ("mpc", 8.0), ("oracle", 6.0))
+    ... ]
+    >>> row = headroom_rows(cells)[0]
+    >>> row["best"], round(row["headroom"], 3)
+    ('mpc', 0.25)
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from baselines import HEADROOM_REFERENCE, POLICIES
+from cpf_bench.report import CellResult
+
+__all__ = ["headroom_rows", "headroom_table", "oracle_not_lowest"]
+
+#: The costs the table reads: (metric, label).
+COSTS = (("cost", "whole episode"), ("cost_window", "final window"))
+
+
+def _means(cells: Sequence[CellResult], metric: str) -> dict[tuple[str, str], float]:
+    return {(c.policy, c.scenario): float(np.mean(c.metrics[metric])) for c in cells}
+
+
+def headroom_rows(
+    cells: Sequence[CellResult], reference: str = "nn_dsc", metric: str = "cost"
+) -> list[dict[str, object]]:
+    """One row per scenario where the bound and a deployable analytic policy ran.
+
+    Keys: scenario, reference (J_ref or None), best (name), best_cost, oracle,
+    headroom (1 - J_oracle / J_best).
+    """
+    means = _means(cells, metric)
+    rows: list[dict[str, object]] = []
+    for name in dict.fromkeys(cell.scenario for cell in cells):
+        bound = means.get((HEADROOM_REFERENCE, name))
+        deployable = {p: j for (p, s), j in means.items() if s == name and p in POLICIES}
+        if bound is None or not deployable:
+            continue
+        best = min(deployable, key=lambda p: deployable[p])
+        rows.append(
+            {
+                "scenario": name,
+                "reference": means.get((reference, name)),
+                "best": best,
+                "best_cost": deployable[best],
+                "oracle": bound,
+                "headroom": 1.0 - bound / deployable[best] if deployable[best] else float("nan"),
+            }
+        )
+    return rows
+
+
+def oracle_not_lowest(
+    cells: Sequence[CellResult], metric: str = "cost"
+) -> list[tuple[str, str, float, float]]:
+    """(scenario, policy, its mean, the bound's mean) for every policy with a lower mean."""
+    means = _means(cells, metric)
+    return [
+        (s, p, j, means[(HEADROOM_REFERENCE, s)])
+        for (p, s), j in means.items()
+        if p != HEADROOM_REFERENCE
+        and (HEADROOM_REFERENCE, s) in means
+        and j < means[(HEADROOM_REFERENCE, s)]
+    ]
+
+
+def headroom_table(cells: Sequence[CellResult], reference: str = "nn_dsc") -> list[str]:
+    """Markdown lines of the headroom table (whole episode and final window), or none."""
+    whole, window = (headroom_rows(cells, reference, metric) for metric, _ in COSTS)
+    if not whole:
+        return []
+    lines = [
+        f"| scenario | J {reference} | best deployable analytic | J best | J {HEADROOM_REFERENCE} "
+        "| headroom | J best, final window | J oracle, final window | headroom, final window |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    by_name = {row["scenario"]: row for row in window}
+    for row in whole:
+        last = by_name[row["scenario"]]
+        ref = "" if row["reference"] is None else f"{row['reference']:.4g}"
+        lines.append(
+            f"| {row['scenario']} | {ref} | {row['best']} | {row['best_cost']:.4g} | "
+            f"{row['oracle']:.4g} | {row['headroom']:.1%} | {last['best_cost']:.3g} "
+            f"({last['best']}) | {last['oracle']:.3g} | {last['headroom']:.1%} |"
+        )
+    exceptions = [
+        f"{policy} on {scenario} ({label}: {j:.4g} < {bound:.4g})"
+        for metric, label in COSTS
+        for scenario, policy, j, bound in oracle_not_lowest(cells, metric)
+    ]
+    if exceptions:
+        lines += ["", f"Lower mean cost than {HEADROOM_REFERENCE}: " + "; ".join(exceptions) + "."]
+    return lines
