@@ -13,7 +13,7 @@ a mean over the 20 episodes:
 
 Usage::
 
-    python studies/residual_rl/tables.py [--results results]
+    python studies/residual_rl/residual_rl_tables.py [--results results]
 """
 
 from __future__ import annotations

@@ -14,8 +14,8 @@ change: path error over the last quarter, settling time, saturated steps.
 
 Usage::
 
-    python studies/reproduction/tables.py claims
-    python studies/reproduction/tables.py ablation [--steps N]
+    python studies/reproduction/reproduction_tables.py claims
+    python studies/reproduction/reproduction_tables.py ablation [--steps N]
 """
 
 from __future__ import annotations

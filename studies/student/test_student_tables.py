@@ -1,4 +1,4 @@
-"""``studies/student/tables.py``: verdicts against mpc and the normalized score."""
+"""``studies/student/student_tables.py``: verdicts against mpc and the normalized score."""
 
 from __future__ import annotations
 
@@ -10,7 +10,8 @@ from conftest import ROOT
 
 
 def _tables() -> ModuleType:
-    spec = importlib.util.spec_from_file_location("tables", ROOT / "studies/student/tables.py")
+    path = ROOT / "studies/student/student_tables.py"
+    spec = importlib.util.spec_from_file_location("student_tables", path)
     assert spec is not None and spec.loader is not None
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)

@@ -1,7 +1,7 @@
 """Print docs/results.md's suite-agent tables from the committed benchmark summaries.
 
-    python studies/suite_agent/tables.py        # runs/suite_agent
-    python studies/suite_agent/tables.py --best nn_dsc_delay_comp --root \
+    python studies/suite_agent/suite_agent_tables.py        # runs/suite_agent
+    python studies/suite_agent/suite_agent_tables.py --best nn_dsc_delay_comp --root \
         runs/suite_agent/ablations/per_position_statistics
 
 For each split, one row per scenario: the mean episode cost of ``nn_dsc``, of

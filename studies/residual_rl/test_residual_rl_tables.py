@@ -1,4 +1,4 @@
-"""studies/residual_rl/tables.py: hand-computed cells, and docs/results.md shows its output."""
+"""studies/residual_rl/residual_rl_tables.py: hand-computed cells, as docs/results.md shows."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ import pytest
 from conftest import ROOT
 
 _SPEC = importlib.util.spec_from_file_location(
-    "residual_rl_tables", ROOT / "studies" / "residual_rl" / "tables.py"
+    "residual_rl_tables", ROOT / "studies" / "residual_rl" / "residual_rl_tables.py"
 )
 assert _SPEC is not None and _SPEC.loader is not None
 tables = importlib.util.module_from_spec(_SPEC)

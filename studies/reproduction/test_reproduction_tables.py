@@ -1,4 +1,4 @@
-"""``studies/reproduction/tables.py``: the claims table and the ablation rows."""
+"""``studies/reproduction/reproduction_tables.py``: the claims table and the ablation rows."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ from conftest import ROOT, load_script
 
 
 def test_reproduction_tables() -> None:
-    tables = load_script(ROOT / "studies" / "reproduction" / "tables.py")
+    tables = load_script(ROOT / "studies" / "reproduction" / "reproduction_tables.py")
     claims = tables.main(["claims", "--steps", "20"]).splitlines()
     assert len(claims) == 2 + 5 and "formula:" in claims[3]
     rows = tables.ablation_rows(steps=10)

@@ -1,7 +1,7 @@
 r"""Print runs/student/README.md's tables from the committed benchmark episodes.
 
-    python studies/student/tables.py                       # runs/student
-    python studies/student/tables.py --root runs/student
+    python studies/student/student_tables.py                       # runs/student
+    python studies/student/student_tables.py --root runs/student
 
 For each of ``bench_test``, ``bench_shift`` and ``bench_procedural``, and
 their ``_k6`` (6-slot students), ``_deepsets`` (encoder and history
@@ -32,7 +32,7 @@ metrics) against ``mpc`` and against each policy of ``--against`` (default
 scenarios and seeds are in a ``--deployable`` episodes table, e.g. the
 results page's::
 
-    python studies/student/tables.py --deployable results/bench_test/episodes.csv \
+    python studies/student/student_tables.py --deployable results/bench_test/episodes.csv \
         results/bench_shift/episodes.csv
 
 An ``oracle`` in those tables also replaces each folder's own ``oracle`` in the
