@@ -221,7 +221,7 @@ def build_model(config: TrainConfig, env: VecEnv, device: str = "cpu") -> BaseAl
             warnings.warn(
                 f"batch_size {config.batch_size} is larger than one rollout (n_steps x vessel "
                 f"slots = {config.n_steps} x {env.num_envs} = {rollout}); PPO uses minibatches "
-                f"of {rollout}. Lower --batch-size or raise --n-steps or --fleets.",
+                f"of {rollout}. Lower batch_size or raise n_steps (--set) or --fleets.",
                 stacklevel=2,
             )
         model: BaseAlgorithm = PPO(

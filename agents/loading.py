@@ -305,8 +305,8 @@ class TrainedPolicy(FleetPolicy):
                 f"scenario {scenario.name!r} gives inputs of size {size} but the "
                 f"network of {name!r} takes {actor.input_size}: evaluate it on a scenario with "
                 f"the training scenarios' neighbour slots and message size "
-                f"({config.home_scenario!r}), or train with --neighbour-slots to run on graphs "
-                "of higher degree."
+                f"({config.home_scenario!r}), or train with --set neighbour_slots=K to run on "
+                "graphs of higher degree."
             )
         if actor.action_size != self._residual.action_size:
             raise AgentFolderError(

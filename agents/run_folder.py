@@ -185,7 +185,7 @@ def prepare_resume(folder: Path, config: TrainConfig) -> Path:
     if not (checkpoint / "state.json").is_file():
         raise ValueError(
             f"{folder} has no checkpoint to resume from (the run was killed before its "
-            "first one, or ran with --checkpoint-every 0); start it again with --force."
+            "first one, or ran with checkpoint_every = 0); start it again with --force."
         )
     done = checkpoint_timesteps(checkpoint)
     if config.timesteps <= done and _holds_agent(folder, done):

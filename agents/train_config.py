@@ -253,7 +253,7 @@ class TrainConfig:
             raise ValueError(
                 f"encoder={self.encoder!r} runs one set of weights on every slot, so the slots "
                 "need one set of statistics: set shared_slot_statistics=true "
-                "(--shared-slot-statistics), or normalize_observations=false."
+                "(--set shared_slot_statistics=true), or normalize_observations=false."
             )
 
     @property

@@ -59,6 +59,7 @@ from typing import TYPE_CHECKING, Any
 
 from agents.evaluation import TestSplitEvaluator
 from cpf_commands.common.arguments import non_negative_int
+from cpf_commands.hyperparameters import toml_chain
 from cpf_env.infra import atomic
 from cpf_env.scenarios.suite import SUITE
 
@@ -85,19 +86,19 @@ def read_distill_config(path: str | Path, seed: int) -> tuple[TrainConfig, Disti
         ValueError: Unreadable or invalid TOML, a missing ``[distill]`` table, an unknown
             key (the valid ones are listed), or a value the configurations refuse.
     """
-    import tomllib
-
     from agents.distill_config import DistillConfig
     from agents.train_config import TrainConfig
 
     file = Path(path)
-    try:
-        values: dict[str, Any] = tomllib.loads(file.read_text())
-    except OSError as error:
-        raise ValueError(f"cannot read the distillation file {file}: {error}") from None
-    except tomllib.TOMLDecodeError as error:
-        raise ValueError(f"{file} is not valid TOML: {error}") from None
-    table = values.pop("distill", None)
+    values: dict[str, Any] = {}
+    table: Any = None
+    for _, layer in toml_chain(file, "distillation"):  # [distill] merges key by key
+        own = layer.pop("distill", None)
+        if isinstance(own, dict) and isinstance(table, dict):
+            table = {**table, **own}
+        elif own is not None:
+            table = own
+        values.update(layer)
     if not isinstance(table, dict):
         raise ValueError(
             f"{file} needs a [distill] table (DistillConfig: teacher, rounds, steps, ...); "

@@ -1,22 +1,26 @@
-"""``cpf-train --config FILE.toml``: hyperparameters from a file, overridden by flags.
+"""``cpf-train --config FILE.toml`` and ``--set KEY=VALUE``: hyperparameters from a file.
 
 The file is TOML (read with the standard library's ``tomllib``, Python 3.11+;
 no new dependency), flat, its keys the ``agents.TrainConfig`` field names
-(``n_epochs``, ``reward_form``, ``net_arch``, ``gamma``, ... also those without a
-flag) and the run's schedule (``eval_every``, ``eval_seeds``,
-``checkpoint_every``). Precedence: the defaults, then the file, then the
-flags given on the command line. ``cpf-train`` writes the resolved values
-into the run folder as ``hyperparameters.toml``, so
-``cpf-train --config runs/x/hyperparameters.toml --out runs/y`` repeats a run;
-``examples/hyperparameters/`` holds the defaults.
+(``n_epochs``, ``reward_form``, ``net_arch``, ``gamma``, ...) and the run's
+schedule (``eval_every``, ``eval_seeds``, ``checkpoint_every``). A file may
+start from another: ``extends = "base.toml"`` (a path relative to the file;
+chains are followed, a cycle is refused) reads that file first and lets this
+one override its keys. ``--set KEY=VALUE`` overrides one key, VALUE read as a
+TOML value (``--set n_epochs=5 'net_arch=[64, 64]'``; a bare word is a
+string, and ``none`` leaves a field whose default is None unset:
+``--set encoder=none``). Precedence: the defaults, then the
+file (after what it extends), then ``--set``, then the flags given.
+``cpf-train`` writes the resolved values into the run folder as
+``hyperparameters.toml``, so ``cpf-train --config runs/x/hyperparameters.toml
+--out runs/y`` repeats a run; ``examples/hyperparameters/`` holds the defaults.
 
 Example file::
 
-    algo = "ppo"
+    extends = "ppo_defaults.toml"
     scenario = "bench_lossy_links"
     net_arch = [64, 64]
     learning_rate = 3e-4
-    eval_every = 500_000
 """
 
 from __future__ import annotations
@@ -28,8 +32,17 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-__all__ = ["SCHEDULE_KEYS", "hyperparameters_toml", "read_hyperparameters"]
+__all__ = [
+    "EXTENDS",
+    "SCHEDULE_KEYS",
+    "hyperparameters_toml",
+    "parse_settings",
+    "read_hyperparameters",
+    "toml_chain",
+]
 
+#: The key naming the file a hyperparameter file starts from.
+EXTENDS = "extends"
 #: Keys of the run's schedule (not ``TrainConfig`` fields).
 SCHEDULE_KEYS = ("eval_every", "eval_seeds", "checkpoint_every")
 
@@ -41,32 +54,91 @@ def _valid_keys() -> list[str]:
 
 
 def read_hyperparameters(path: str | Path) -> dict[str, Any]:
-    """The keys and values of a hyperparameter file (checked by name, not yet by value).
+    """The keys and values of a hyperparameter file, after the files it extends.
 
     Raises:
-        ValueError: A missing or unreadable file, invalid TOML, or an unknown key (also a
-            ``[section]``; the message lists the valid ones). Values are checked by
+        ValueError: A missing or unreadable file, invalid TOML, an unknown key (also a
+            ``[section]``; the message lists the valid ones), or an ``extends`` that is
+            not a string or comes back to a file of its chain. Values are checked by
             ``TrainConfig`` (a field whose value is a mapping is an inline table).
+    """
+    valid = _valid_keys()  # a [section] is an unknown key too: the file is flat
+    merged: dict[str, Any] = {}
+    for file, values in toml_chain(path, "hyperparameter"):
+        unknown = sorted(set(values) - set(valid))
+        if unknown:
+            raise ValueError(f"{file} has unknown keys {unknown}; valid keys: {valid}.")
+        merged.update(values)
+    return merged
+
+
+def toml_chain(path: str | Path, kind: str) -> list[tuple[Path, dict[str, Any]]]:
+    """A TOML file and those it ``extends``, each with its own keys, the first base first.
+
+    Args:
+        path: The file.
+        kind: What the file is, for messages (``"hyperparameter"``, ``"distillation"``).
+
+    Raises:
+        ValueError: A missing or unreadable file, invalid TOML, an ``extends`` that is
+            not a string, or a chain that comes back to one of its files.
     """
     try:
         import tomllib
     except ImportError:  # Python 3.10
         raise ValueError(
-            "--config needs Python 3.11 or later (the standard library's tomllib); give the "
-            "settings as flags instead."
+            "a TOML file needs Python 3.11 or later (the standard library's tomllib); give "
+            "the settings with --set instead."
         ) from None
+    chain: list[tuple[Path, dict[str, Any]]] = []
     file = Path(path)
-    try:
-        values = tomllib.loads(file.read_text())
-    except OSError as error:
-        raise ValueError(f"cannot read the hyperparameter file {file}: {error}") from None
-    except tomllib.TOMLDecodeError as error:
-        raise ValueError(f"{file} is not valid TOML: {error}") from None
-    valid = _valid_keys()  # a [section] is an unknown key too: the file is flat
-    unknown = sorted(set(values) - set(valid))
-    if unknown:
-        raise ValueError(f"{file} has unknown keys {unknown}; valid keys: {valid}.")
-    return values
+    while True:
+        if file.resolve() in [known.resolve() for known, _ in chain]:
+            names = " -> ".join(str(known) for known, _ in [*chain, (file, {})])
+            raise ValueError(f"{EXTENDS} comes back to a file of its chain: {names}.")
+        try:
+            values = tomllib.loads(file.read_text())
+        except OSError as error:
+            raise ValueError(f"cannot read the {kind} file {file}: {error}") from None
+        except tomllib.TOMLDecodeError as error:
+            raise ValueError(f"{file} is not valid TOML: {error}") from None
+        base = values.pop(EXTENDS, None)
+        chain.append((file, values))
+        if base is None:
+            return chain[::-1]
+        if not isinstance(base, str):
+            raise ValueError(f"{file}: {EXTENDS} must be a file name (a string), got {base!r}.")
+        file = file.parent / base
+
+
+def parse_settings(items: list[str]) -> dict[str, Any]:
+    """``--set KEY=VALUE`` items as keys and values (VALUE a TOML value, a bare word a string).
+
+    Raises:
+        ValueError: Not ``KEY=VALUE``, or an unknown key (the message lists the valid ones).
+    """
+    import tomllib
+
+    from agents.train_config import TrainConfig
+
+    valid = _valid_keys()
+    optional = {f.name for f in dataclasses.fields(TrainConfig) if f.default is None}
+    settings: dict[str, Any] = {}
+    for item in items:
+        key, sep, raw = item.partition("=")
+        key = key.strip()
+        if not sep or not key:
+            raise ValueError(f"--set takes KEY=VALUE (e.g. n_epochs=5), got {item!r}.")
+        if key not in valid:
+            raise ValueError(f"--set: unknown key {key!r}; valid keys: {valid}.")
+        if raw == "none" and key in optional:
+            settings[key] = None  # TOML has no null: "none" leaves an optional field unset
+            continue
+        try:
+            settings[key] = tomllib.loads(f"value = {raw}")["value"]
+        except tomllib.TOMLDecodeError:
+            settings[key] = raw  # a bare word: the string itself
+    return settings
 
 
 def _toml_value(value: Any) -> str:

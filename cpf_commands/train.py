@@ -10,13 +10,15 @@ with ``agents.load_policy(DIR)`` and is accepted wherever a policy name is
 RL Zoo conventions too (``docs/residual_rl.md``, "A training run"): held-out
 evaluation on the benchmark's ``test`` split with the best agent kept
 (``--eval-every``, ``--eval-seeds``; ``agents.evaluation``),
-checkpoints and ``--resume`` (``--checkpoint-every``), a checkpoint and agent
+checkpoints and ``--resume`` (``checkpoint_every``), a checkpoint and agent
 on Ctrl-C, ``--tensorboard-log DIR``, and ``--config FILE.toml``
-(``cpf_commands.hyperparameters``; flags given override it).
+(``cpf_commands.hyperparameters``; ``--set KEY=VALUE`` sets any other hyperparameter;
+``--set`` and the flags given override the file).
 
 Example::
 
-    cpf-train --scenario bench_lossy_links --seed 0 --out runs/ppo_lossy_s0
+    cpf-train --scenarios bench_lossy_links --seed 0 --out runs/ppo_lossy_s0
+    cpf-train --config base.toml --set n_epochs=5 "net_arch=[64, 64]" --out runs/wide
     cpf-train --resume --out runs/ppo_lossy_s0 -n 4000000   # continue, or extend
 """
 
@@ -27,13 +29,18 @@ import copy
 import dataclasses
 import json
 import sys
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 from agents.evaluation import DEFAULT_EVAL_SEEDS, TestSplitEvaluator
 from cpf_commands.common.arguments import non_negative_int, positive_int
-from cpf_commands.hyperparameters import SCHEDULE_KEYS, hyperparameters_toml, read_hyperparameters
+from cpf_commands.hyperparameters import (
+    SCHEDULE_KEYS,
+    hyperparameters_toml,
+    parse_settings,
+    read_hyperparameters,
+)
 from cpf_env import scenarios
 from cpf_env.scenarios.splits import SHIFT_SUFFIX, check_training
 from cpf_env.scenarios.suite import SUITE
@@ -67,34 +74,9 @@ def _scenarios(names: list[str]) -> str | tuple[str, ...]:
     return expanded[0] if len(expanded) == 1 else tuple(expanded)
 
 
-def _reward_overrides(items: list[str]) -> dict[str, float]:
-    """``--reward-weight NAME=VALUE`` items as a dict (values checked by ``TrainConfig``)."""
-    overrides = {}
-    for item in items:
-        name, sep, value = item.partition("=")
-        try:
-            overrides[name.strip()] = float(value)
-        except ValueError:
-            sep = ""
-        if not sep:
-            raise ValueError(f"--reward-weight takes NAME=NUMBER (e.g. heading=1.0), got {item!r}.")
-    return overrides
-
-
-#: ``--encoder``'s value for an MLP over the flat input (``TrainConfig(encoder=None)``).
-NO_ENCODER = "none"
-
-
-def _encoder(value: str) -> str | None:
-    """``--encoder`` as ``TrainConfig.encoder``: ``none`` is None (an MLP)."""
-    return None if value == NO_ENCODER else value
-
-
 def _parser() -> argparse.ArgumentParser:
-    from agents.train_config import ENCODERS, INIT_LOG_STD, TrainConfig
+    from agents.train_config import INIT_LOG_STD, TrainConfig
     from baselines import POLICIES
-    from cpf_env.envs.residual import EXTRAS, RESIDUAL_MODES
-    from cpf_env.scenarios.reward_weights import REWARD_FORMS
 
     defaults = TrainConfig()
     parser = argparse.ArgumentParser(
@@ -110,7 +92,8 @@ def _parser() -> argparse.ArgumentParser:
         "--algo", default=defaults.algo, choices=["ppo", "sac"], help="SB3 algorithm"
     )
     parser.add_argument(
-        "--scenario",
+        "--scenarios",
+        dest="scenario",
         nargs="+",
         default=[defaults.scenario],
         choices=[*training_scenarios(), "suite"],
@@ -119,64 +102,6 @@ def _parser() -> argparse.ArgumentParser:
         "their mixture (the suite agent of docs/results.md: --config "
         "examples/hyperparameters/suite_residual_ppo.toml). Choices: "
         + ", ".join([*training_scenarios(), "suite"]),
-    )
-    parser.add_argument(
-        "--neighbour-slots",
-        type=positive_int,
-        default=None,
-        help="neighbour slots of the agent's input (default: the training scenarios' largest "
-        "degree); the agent then runs on every graph of degree <= this",
-    )
-    parser.add_argument(
-        "--balance-rewards",
-        action=argparse.BooleanOptionalAction,
-        default=defaults.balance_rewards,
-        help="in a mixture, divide each scenario's rewards by its running mean cost per step",
-    )
-    parser.add_argument(
-        "--shared-slot-statistics",
-        action=argparse.BooleanOptionalAction,
-        default=defaults.shared_slot_statistics,
-        help="normalize every neighbour slot with the same pooled statistics",
-    )
-    parser.add_argument(
-        "--encoder",
-        default=defaults.encoder,
-        choices=[*ENCODERS, NO_ENCODER],
-        help="read the neighbour slots through a DeepSets encoder (PPO; with normalization "
-        "needs --shared-slot-statistics): the agent then runs on any number of slots; "
-        f"{NO_ENCODER}: an MLP over the K slots (the default; overrides a --config file's "
-        "encoder)",
-    )
-    parser.add_argument(
-        "--history",
-        type=int,
-        default=defaults.history,
-        help="own-history entries (own features, action, valid) appended to each vessel's "
-        "input, kept by the loaded policy in evaluation; 0: none",
-    )
-    parser.add_argument(
-        "--asymmetric-critic",
-        action=argparse.BooleanOptionalAction,
-        default=defaults.asymmetric_critic,
-        help="PPO's critic also reads what no vessel observes (the true lumped force, v0, the "
-        "vessel's offset from the fleet's mean path variable); the actor, and the agent "
-        "folder, stay local",
-    )
-    parser.add_argument(
-        "--yield-at-limit",
-        action=argparse.BooleanOptionalAction,
-        default=defaults.yield_at_limit,
-        help="drop a force residual that pulls the command back from an actuator limit the "
-        "base commands (in training and wherever the agent runs)",
-    )
-    parser.add_argument(
-        "--reward-weight",
-        nargs="+",
-        default=[],
-        metavar="NAME=VALUE",
-        help="change reward fields for training only, e.g. heading=1.0 heading_scale=0.01; "
-        "the benchmark's cost is unchanged",
     )
     parser.add_argument(
         "--base",
@@ -202,34 +127,6 @@ def _parser() -> argparse.ArgumentParser:
         "--out", required=True, default=argparse.SUPPRESS, help="output folder (the run's folder)"
     )
     parser.add_argument(
-        "--mode", default=defaults.mode, choices=sorted(RESIDUAL_MODES), help="residual mode"
-    )
-    parser.add_argument(
-        "--scale", type=float, default=defaults.scale, help="residual range, fraction of limits"
-    )
-    parser.add_argument(
-        "--extras", nargs="*", default=list(defaults.extras), choices=sorted(EXTRAS),
-        help="local inputs appended to the observation",
-    )  # fmt: skip
-    parser.add_argument(
-        "--reward", default=None, choices=REWARD_FORMS, help="override the scenario's reward form"
-    )
-    parser.add_argument(
-        "--log-std-init", type=float, default=defaults.log_std_init, help="initial exploration"
-    )
-    parser.add_argument(
-        "--learning-rate", type=float, default=defaults.learning_rate, help="Adam step size"
-    )
-    parser.add_argument(
-        "--n-steps", type=positive_int, default=defaults.n_steps, help="PPO rollout length per slot"
-    )
-    parser.add_argument(
-        "--batch-size", type=positive_int, default=defaults.batch_size, help="minibatch size"
-    )
-    parser.add_argument(
-        "--epochs", type=positive_int, default=defaults.n_epochs, help="PPO epochs per rollout"
-    )
-    parser.add_argument(
         "--eval-every", type=non_negative_int, default=DEFAULT_EVAL_EVERY,
         help="vessel-steps between evaluations of the deterministic agent on the benchmark's "
         "test split (evaluations.csv, best/); 0: none",
@@ -237,10 +134,6 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument(
         "--eval-seeds", type=positive_int, default=DEFAULT_EVAL_SEEDS,
         help="evaluation episodes per scenario (cpf-bench --seeds)",
-    )  # fmt: skip
-    parser.add_argument(
-        "--checkpoint-every", type=non_negative_int, default=DEFAULT_CHECKPOINT_EVERY,
-        help="vessel-steps between checkpoints (checkpoint/, for --resume); 0: none",
     )  # fmt: skip
     parser.add_argument(
         "--resume", action="store_true",
@@ -253,9 +146,17 @@ def _parser() -> argparse.ArgumentParser:
         "(tensorboard --logdir DIR)",
     )  # fmt: skip
     parser.add_argument(
+        "--set", nargs="+", action="extend", default=[], dest="settings", metavar="KEY=VALUE",
+        help="override one hyperparameter, any TrainConfig field or schedule key, VALUE a "
+        "TOML value (a bare word is a string): e.g. --set n_epochs=5 'net_arch=[64, 64]' "
+        "mode=force_and_rate scale=0.3 'extras=[\"base_action\"]'; over --config, under the "
+        "flags",
+    )  # fmt: skip
+    parser.add_argument(
         "--config", metavar="FILE.toml", default=None,
         help="hyperparameter file (TOML, TrainConfig field names and eval_every, eval_seeds, "
-        "checkpoint_every); flags given override it; the resolved values are saved as "
+        "checkpoint_every; extends = \"OTHER.toml\" starts from another file); --set and "
+        "the flags given override it; the resolved values are saved as "
         "--out/hyperparameters.toml",
     )  # fmt: skip
     parser.add_argument(
@@ -268,7 +169,7 @@ def _parser() -> argparse.ArgumentParser:
         help="start PPO's actor and observation statistics from this agent folder (a "
         "cpf-distill student, say) of the same recipe (base, mode, scale, slots, encoder, "
         "history, net_arch; a differing one is refused), the critic fresh, the statistics "
-        "frozen; --log-std-init "
+        "frozen; log_std_init "
         f"then defaults to {INIT_LOG_STD}; recorded in run.json and config.json",
     )  # fmt: skip
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -282,8 +183,11 @@ def _given(parser: argparse.ArgumentParser, argv: Sequence[str] | None) -> set[s
     """The destinations of the options given on the command line (not left at their default)."""
     unset = object()
     probe = copy.deepcopy(parser)
-    probe.set_defaults(**{action.dest: unset for action in probe._actions if action.dest != "help"})
-    return {name for name, value in vars(probe.parse_args(argv)).items() if value is not unset}
+    for action in probe._actions:  # an "extend" option (--set) starts from None, not a sentinel
+        if action.dest != "help":
+            action.default = None if isinstance(action, argparse._ExtendAction) else unset
+    parsed = vars(probe.parse_args(argv))
+    return {name for name, value in parsed.items() if value is not unset and value is not None}
 
 
 #: Options that may be given with --resume (the rest come from the run's run.json).
@@ -300,21 +204,14 @@ NOT_HYPERPARAMETERS = {
     "tensorboard_log",
     "device",
     "init_from",
-}
-#: Options whose ``TrainConfig`` field has another name or form: destination -> (field,
-#: conversion of the parsed value or None). Every other hyperparameter option's destination
-#: is its field's name and its value the field's value (``hyperparameters.toml`` keys).
-FLAG_FIELDS: dict[str, tuple[str, Callable[[Any], Any] | None]] = {
-    "epochs": ("n_epochs", None),
-    "reward": ("reward_form", None),
-    "extras": ("extras", tuple),
-    "reward_weight": ("reward_overrides", _reward_overrides),
-    "encoder": ("encoder", _encoder),
+    "settings",
 }
 
 
 def _resolve(args: argparse.Namespace, given: set[str]) -> tuple[TrainConfig, RunSchedule, int]:
-    """The run's configuration, schedule and evaluation seeds: defaults < ``--config`` < flags.
+    """The run's configuration, schedule and evaluation seeds.
+
+    Precedence: the defaults, ``--config``, ``--set``, then the flags given.
 
     Raises:
         ValueError: A bad hyperparameter file or value.
@@ -323,10 +220,9 @@ def _resolve(args: argparse.Namespace, given: set[str]) -> tuple[TrainConfig, Ru
     from agents.train_config import INIT_LOG_STD, TrainConfig
 
     values = {} if args.config is None else read_hyperparameters(args.config)
+    values.update(parse_settings(args.settings))
     for dest in sorted(given - NOT_HYPERPARAMETERS):
-        field, convert = FLAG_FIELDS.get(dest, (dest, None))
-        value = getattr(args, dest)
-        values[field] = value if convert is None else convert(value)
+        values[dest] = getattr(args, dest)
     if args.init_from is not None and "log_std_init" not in values:
         values["log_std_init"] = INIT_LOG_STD  # the distilled actor's behaviour, barely perturbed
     fields = {k: v for k, v in values.items() if k not in SCHEDULE_KEYS}
@@ -336,7 +232,7 @@ def _resolve(args: argparse.Namespace, given: set[str]) -> tuple[TrainConfig, Ru
     config = TrainConfig(**fields)
     schedule = RunSchedule(
         values.get("eval_every", args.eval_every),
-        values.get("checkpoint_every", args.checkpoint_every),
+        values.get("checkpoint_every", DEFAULT_CHECKPOINT_EVERY),
     )
     seeds = values.get("eval_seeds", args.eval_seeds)
     if isinstance(seeds, bool) or not isinstance(seeds, int) or seeds < 1:

@@ -202,7 +202,7 @@ class ResidualConfig:
                 f"this learner takes at most {self.neighbour_slots} neighbours per vessel, and "
                 f"the scenario gives a vessel {layout.n_slots}: use a graph of degree <= "
                 f"{self.neighbour_slots}, or train with more neighbour slots "
-                "(cpf-train --neighbour-slots)."
+                "(cpf-train --set neighbour_slots=K)."
             )
         return ObsLayout(n_slots=self.neighbour_slots, msg_size=layout.msg_size)
 

@@ -208,7 +208,7 @@ def test_cpf_train_takes_the_asymmetric_critic_and_refuses_it_for_sac(
         TrainConfig(algo="sac", asymmetric_critic=True)
     with pytest.raises(ValueError, match="asymmetric_critic must be true or false"):
         TrainConfig(asymmetric_critic=1)  # type: ignore[arg-type]
-    argv = ["--algo", "sac", "--asymmetric-critic", "--out", str(tmp_path / "x")]
+    argv = ["--algo", "sac", "--set", "asymmetric_critic=true", "--out", str(tmp_path / "x")]
     with pytest.raises(SystemExit):
         train_main(argv)
     assert "asymmetric_critic is implemented for PPO" in capsys.readouterr().err

@@ -602,3 +602,24 @@ def test_evaluation_rows_are_cpf_trains_and_leave_the_student_unchanged(tmp_path
     )  # fmt: skip
     assert rows[-1]["mean_cost"] == float(np.mean(final[0].metrics["cost"]))
     assert rows[-1]["mean_cost"] != rows[0]["mean_cost"]
+
+
+def test_a_distillation_file_extends_another_and_merges_its_distill_table(
+    tmp_path: Path,
+) -> None:
+    """The student recipes are a chain: ``extends`` first, ``[distill]`` merged key by key."""
+    tuned, settings = read_distill_config(ROOT / "studies/student/student_mpc_tuned.toml", 0)
+    applied, applied_settings = read_distill_config(
+        ROOT / "studies/student/student_mpc_tuned_applied.toml", 0
+    )
+    assert applied == tuned and (tuned.base, tuned.neighbour_slots) == ("mpc_tuned", 6)
+    assert applied_settings == dataclasses.replace(settings, fit_applied=True)
+    (tmp_path / "base.toml").write_text('scenario = "bench_mild"\n[distill]\nrounds = 3\n')
+    (tmp_path / "child.toml").write_text(
+        'extends = "base.toml"\nscale = 0.3\n[distill]\nsteps = 7\n'
+    )
+    config, merged = read_distill_config(tmp_path / "child.toml", 0)
+    assert (config.scenario, config.scale, merged.rounds, merged.steps) == ("bench_mild", 0.3, 3, 7)
+    (tmp_path / "base.toml").write_text('extends = "child.toml"\n')
+    with pytest.raises(ValueError, match="comes back to a file of its chain"):
+        read_distill_config(tmp_path / "child.toml", 0)

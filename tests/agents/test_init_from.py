@@ -65,9 +65,9 @@ def test_a_folder_of_another_recipe_is_refused_and_nothing_written(tmp_path: Pat
 def test_cpf_train_init_from_on_mpc_records_the_folder_and_resumes_exactly(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    common = ["--scenario", "bench_saturation", "--base", "mpc", "--scale", "0.5"]
-    common += ["--neighbour-slots", "6", "--fleets", "1", "--n-steps", "8", "--batch-size"]
-    common += ["40", "--epochs", "1", "--eval-every", "0", "--checkpoint-every", "40", "--quiet"]
+    common = ["--scenarios", "bench_saturation", "--base", "mpc", "--fleets", "1"]
+    common += ["--set", "scale=0.5", "neighbour_slots=6", "n_steps=8", "batch_size=40"]
+    common += ["n_epochs=1", "checkpoint_every=40", "--eval-every", "0", "--quiet"]
     whole, parts = tmp_path / "whole", tmp_path / "parts"
     start = ["--init-from", str(MLP)]
     assert train_main([*common, *start, "-n", "80", "--out", str(whole)]) == 0

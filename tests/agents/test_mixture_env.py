@@ -164,17 +164,17 @@ def test_cpf_train_expands_suite_and_refuses_shift_scenarios(tmp_path: Path) -> 
     out = tmp_path / "suite"
     # no evaluations: 10 whole episodes of the 7 scenarios, twice, were 3/4 of the time
     code = train_main(
-        ["--scenario", "suite", "-n", "100", "--fleets", "7", "--n-steps", "16",
-         "--batch-size", "80", "--epochs", "1", "--reward-weight", "heading=1.0",
+        ["--scenarios", "suite", "-n", "100", "--fleets", "7", "--set", "n_steps=16",
+         "--set", "batch_size=80", "--set", "n_epochs=1", "--set", "reward_overrides={heading=1.0}",
          "--eval-every", "0", "--out", str(out), "--quiet"]
     )  # fmt: skip
     assert code == 0
     record = load_policy(out).config
     assert record.scenarios == SUITE and record.reward_overrides == {"heading": 1.0}
     with pytest.raises(SystemExit):
-        train_main(["--scenario", "bench_mild_shift", "--out", str(tmp_path / "x")])
+        train_main(["--scenarios", "bench_mild_shift", "--out", str(tmp_path / "x")])
     with pytest.raises(SystemExit):
-        train_main(["--reward-weight", "heading", "--out", str(tmp_path / "y")])
+        train_main(["--set", "reward_overrides={heading}", "--out", str(tmp_path / "y")])
 
 
 def test_balanced_rewards_divide_each_scenario_by_its_running_mean_cost() -> None:

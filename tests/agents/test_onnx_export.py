@@ -197,7 +197,7 @@ def test_an_encoder_agent_with_history_runs_from_onnx_as_from_torch(
     message = str(caught.value)
     assert "exported for 1 neighbour slots" in message and "gives a vessel 2" in message
     assert "re-export the agent folder with cpf-export FOLDER OUT.onnx --slots K, K >= 2" in message
-    assert "--neighbour-slots" not in message
+    assert "neighbour_slots" not in message
 
 
 @pytest.mark.parametrize("slots", ["5", "100"])
@@ -222,7 +222,7 @@ def test_an_mlp_agent_is_not_exported_for_a_fleet_of_higher_degree(
     with pytest.raises(SystemExit):
         export_main([str(AGENT), str(out), "--scenario", "bench_large_fleet_shift"])
     error = capsys.readouterr().err
-    assert "train with --neighbour-slots to run on graphs of higher degree" in error
+    assert "train with --set neighbour_slots=K to run on graphs of higher degree" in error
     assert not out.exists()
 
 

@@ -215,8 +215,8 @@ def test_cpf_train_stops_on_a_real_ctrl_c_with_status_130_and_resumes(tmp_path: 
     import time
 
     out = tmp_path / "run"
-    argv = ["--scenario", "bench_mild", "--fleets", "4", "-n", "400000", "--n-steps", "16",
-            "--batch-size", "320", "--epochs", "1", "--eval-every", "0", "--out", str(out),
+    argv = ["--scenarios", "bench_mild", "--fleets", "4", "-n", "400000", "--eval-every", "0",
+            "--set", "n_steps=16", "batch_size=320", "n_epochs=1", "--out", str(out),
             "--quiet"]  # fmt: skip
     code = f"from cpf_commands.train import train_main; raise SystemExit(train_main({argv!r}))"
     process = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE,

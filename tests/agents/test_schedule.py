@@ -17,8 +17,8 @@ from cpf_commands.train import train_main
 
 TINY = {"fleets": 2, "n_steps": 16, "batch_size": 80, "n_epochs": 1, "net_arch": (16, 16)}
 #: cpf-train flags of a tiny run (160 vessel-steps per rollout).
-ARGV = ["--scenario", "bench_mild", "--fleets", "2", "--n-steps", "16", "--batch-size", "80",
-        "--epochs", "1", "--eval-seeds", "2"]  # fmt: skip
+ARGV = ["--scenarios", "bench_mild", "--fleets", "2", "--eval-seeds", "2",
+        "--set", "n_steps=16", "batch_size=80", "n_epochs=1"]  # fmt: skip
 
 
 def _rows(folder: Path) -> list[dict[str, str]]:
@@ -102,8 +102,8 @@ def test_cpf_train_help_lists_the_new_options(capsys: pytest.CaptureFixture[str]
     with pytest.raises(SystemExit):
         train_main(["--help"])
     text = capsys.readouterr().out
-    for flag in ("--eval-every", "--eval-seeds", "--checkpoint-every", "--resume",
-                 "--tensorboard-log", "--device"):  # fmt: skip
+    for flag in ("--eval-every", "--eval-seeds", "--set", "--resume", "--tensorboard-log",
+                 "--device"):  # fmt: skip
         assert flag in text
 
 

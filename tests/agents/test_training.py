@@ -104,8 +104,8 @@ def test_load_policy_says_what_a_folder_lacks(tmp_path: Path) -> None:
 
 def test_cpf_train_command(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "cli"
-    argv = ["--scenario", "wang2014", "--fleets", "2", "-n", "160", "--n-steps", "16",
-            "--batch-size", "32", "--epochs", "1", "--eval-every", "0", "--out", str(out),
+    argv = ["--scenarios", "wang2014", "--fleets", "2", "-n", "160", "--set", "n_steps=16",
+            "--set", "batch_size=32", "--set", "n_epochs=1", "--eval-every", "0", "--out", str(out),
             "--quiet"]  # fmt: skip
     assert train_main(argv) == 0
     assert "saved to" in capsys.readouterr().out
@@ -117,14 +117,14 @@ def test_cpf_train_command(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -
     assert sorted(p.name for p in tmp_path.iterdir()) == [".cli.lock", "cli"]  # no staging left
     for bad, message in ((["--out", ""], "output folder is empty"),
                          (["--seed", str(2**32)], "seed must be"),
-                         (["--log-std-init", "1e6"], "log_std_init")):  # fmt: skip
+                         (["--set", "log_std_init=1e6"], "log_std_init")):  # fmt: skip
         with pytest.raises(SystemExit):
             train_main([*argv[:-3], *bad, "--quiet"] if bad[0] == "--out" else
                        [*argv, *bad, "--force"])  # fmt: skip
         assert message in capsys.readouterr().err
     assert sorted(p.name for p in tmp_path.iterdir()) == [".cli.lock", "cli"]  # nothing created
     with pytest.raises(SystemExit):
-        train_main(["--out", str(out), "--scale", "0"])
+        train_main(["--out", str(out), "--set", "scale=0"])
     assert "residual scale" in capsys.readouterr().err
 
 
@@ -211,17 +211,17 @@ def test_cpf_train_takes_the_encoder_and_the_history(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     out = tmp_path / "encoder"
-    argv = ["--scenario", "bench_mild", "--fleets", "2", "-n", "32", "--n-steps", "16",
-            "--batch-size", "32", "--epochs", "1", "--eval-every", "0", "--out", str(out),
-            "--quiet", "--encoder", "deepsets", "--shared-slot-statistics",
-            "--history", "2"]  # fmt: skip
+    argv = ["--scenarios", "bench_mild", "--fleets", "2", "-n", "32", "--set", "n_steps=16",
+            "--set", "batch_size=32", "--set", "n_epochs=1", "--eval-every", "0", "--out", str(out),
+            "--quiet", "--set", "encoder=deepsets", "shared_slot_statistics=true",
+            "history=2"]  # fmt: skip
     assert train_main(argv) == 0
     config = load_policy(out).config
     assert (config.encoder, config.history) == ("deepsets", 2)
     saved = (out / "hyperparameters.toml").read_text()
     assert 'encoder = "deepsets"' in saved and "history = 2" in saved
     with pytest.raises(SystemExit):
-        train_main([a for a in argv if a != "--shared-slot-statistics"] + ["--force"])
+        train_main([a for a in argv if a != "shared_slot_statistics=true"] + ["--force"])
     assert "set shared_slot_statistics=true" in capsys.readouterr().err
 
 

@@ -10,7 +10,7 @@ from conftest import ROOT
 
 from agents import TrainConfig
 from agents.evaluation import DEFAULT_EVAL_SEEDS
-from cpf_commands.hyperparameters import hyperparameters_toml, read_hyperparameters
+from cpf_commands.hyperparameters import hyperparameters_toml, parse_settings, read_hyperparameters
 from cpf_commands.train import DEFAULT_CHECKPOINT_EVERY, DEFAULT_EVAL_EVERY, train_main
 
 EXAMPLES = ROOT / "examples" / "hyperparameters"
@@ -78,8 +78,8 @@ def test_flags_override_the_file_and_the_resolved_file_is_saved(
     path = tmp_path / "h.toml"
     path.write_text(TINY)
     out = tmp_path / "run"
-    assert train_main(["--config", str(path), "--seed", "4", "--epochs", "2", "--out", str(out),
-                       "--quiet"]) == 0  # fmt: skip
+    assert train_main(["--config", str(path), "--seed", "4", "--set", "n_epochs=2",
+                       "--out", str(out), "--quiet"]) == 0  # fmt: skip
     config = TrainConfig.from_json(json.loads((out / "run.json").read_text())["config"])
     assert (config.seed, config.n_epochs, config.gamma, config.net_arch) == (4, 2, 0.95, (8,))
     assert config.scenario == "bench_mild" and config.learning_rate == 3e-4  # file, default
@@ -91,7 +91,7 @@ def test_flags_override_the_file_and_the_resolved_file_is_saved(
     assert (again / "policy.safetensors").read_bytes() == (out / "policy.safetensors").read_bytes()
     with pytest.raises(SystemExit):
         train_main(["--config", str(path), "--out", str(tmp_path / "x"), "--quiet",
-                    "--learning-rate", "-1"])  # fmt: skip
+                    "--set", "learning_rate=-1"])  # fmt: skip
     assert "learning_rate must be a number > 0" in capsys.readouterr().err
 
 
@@ -110,14 +110,48 @@ def test_a_mixture_and_reward_overrides_round_trip_through_the_file(tmp_path: Pa
 
 
 def test_encoder_none_overrides_the_files_encoder(tmp_path: Path) -> None:
-    """``--encoder none``: an MLP, whatever the file says; its folder is format version 1."""
+    """``--set encoder=none``: an MLP, whatever the file says; its folder is format version 1."""
     path = tmp_path / "h.toml"
     path.write_text(TINY + 'encoder = "deepsets"\nshared_slot_statistics = true\n')
     out = tmp_path / "run"
-    assert train_main(["--config", str(path), "--encoder", "none", "--out", str(out),
+    assert train_main(["--config", str(path), "--set", "encoder=none", "--out", str(out),
                        "--quiet"]) == 0  # fmt: skip
     record = json.loads((out / "config.json").read_text())
     assert "encoder" not in record["config"] and "actor" not in record
     assert TrainConfig.from_json(record["config"]).shared_slot_statistics  # the file's
     assert json.loads((out / "manifest.json").read_text())["format_version"] == 1
     assert "encoder" not in (out / "hyperparameters.toml").read_text()
+
+
+def test_a_file_extends_another_and_set_overrides_both(tmp_path: Path) -> None:
+    """``extends``: the base file first, the extending file's keys over it; --set over both."""
+    (tmp_path / "base.toml").write_text(TINY.replace("n_epochs = 1", "n_epochs = 3"))
+    (tmp_path / "child.toml").write_text('extends = "base.toml"\ngamma = 0.97\n')
+    values = read_hyperparameters(tmp_path / "child.toml")
+    assert values["gamma"] == 0.97 and values["n_epochs"] == 3 and "extends" not in values
+    out = tmp_path / "run"
+    argv = ["--config", str(tmp_path / "child.toml"), "--set", "n_epochs=2", "net_arch=[4, 4]"]
+    assert train_main([*argv, "--set", "mode=force_and_rate", "--out", str(out), "--quiet"]) == 0
+    config = TrainConfig.from_json(json.loads((out / "run.json").read_text())["config"])
+    assert (config.gamma, config.n_epochs, config.net_arch) == (0.97, 2, (4, 4))
+    assert config.mode == "force_and_rate"
+    (tmp_path / "base.toml").write_text('extends = "child.toml"\n')
+    with pytest.raises(ValueError, match="comes back to a file of its chain"):
+        read_hyperparameters(tmp_path / "child.toml")
+    (tmp_path / "odd.toml").write_text("extends = 3\n")
+    with pytest.raises(ValueError, match="extends must be a file name"):
+        read_hyperparameters(tmp_path / "odd.toml")
+
+
+@pytest.mark.parametrize(
+    ("items", "message"),
+    [(["n_epochs"], "takes KEY=VALUE"), (["epochs=2"], "unknown key 'epochs'")],
+)
+def test_set_refuses_what_it_cannot_read(items: list[str], message: str) -> None:
+    with pytest.raises(ValueError, match=message):
+        parse_settings(items)
+    assert parse_settings(["encoder=none", "reward_form=tracking", "scale=0.3"]) == {
+        "encoder": None,
+        "reward_form": "tracking",
+        "scale": 0.3,
+    }

@@ -62,7 +62,7 @@ def test_cpf_train_refuses_evaluation_seeds(capsys):
     from cpf_commands.train import train_main
 
     with pytest.raises(SystemExit):
-        train_main(["--scenario", "bench_mild", "--seed", "10000", "--out", "unused"])
+        train_main(["--scenarios", "bench_mild", "--seed", "10000", "--out", "unused"])
     assert "evaluation seeds" in capsys.readouterr().err
 
 
