@@ -4,7 +4,7 @@
 scenario over the evaluation seeds ``EVALUATION_SEED + k`` (k < seeds; one
 episode on a scenario in which nothing is random), through
 ``cpf_bench.evaluate`` and ``agents.load_policy``: the number
-``cpf-bench --policies FOLDER --scenarios NAME --split test --seeds S`` reports
+``cpf-bench --policies FOLDER --scenarios NAME --split test --num-seeds S`` reports
 as the mean cost of that folder. ``cpf-train`` and ``cpf-distill`` hand it to
 ``agents.training.train`` and ``agents.distill.distill``.
 
@@ -26,7 +26,7 @@ from cpf_bench import evaluate
 
 __all__ = ["DEFAULT_EVAL_SEEDS", "TestSplitEvaluator"]
 
-#: Evaluation episodes per scenario (``cpf-bench``'s default ``--seeds``).
+#: Evaluation episodes per scenario (``cpf-bench``'s default ``--num-seeds``).
 DEFAULT_EVAL_SEEDS = 10
 
 
@@ -35,7 +35,7 @@ class TestSplitEvaluator:
 
     Args:
         scenarios: Registered scenario names.
-        seeds: Episodes per scenario (paired evaluation seeds, as ``cpf-bench --seeds``).
+        seeds: Episodes per scenario (paired evaluation seeds, as ``cpf-bench --num-seeds``).
         steps: Horizon override (``cpf-bench --steps``); None: each scenario's own.
 
     Attributes:

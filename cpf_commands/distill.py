@@ -189,7 +189,7 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument(
         "--eval-seeds", type=non_negative_int, default=0,
         help="evaluate the student before round 0 (the base) and after each round on the "
-        "training scenarios' test split, this many episodes each (cpf-bench --seeds), into "
+        "training scenarios' test split, this many episodes each (cpf-bench --num-seeds), into "
         "evaluations.csv (cpf-train's columns; cpf-curves reads it); 0: none",
     )  # fmt: skip
     parser.add_argument(

@@ -133,7 +133,7 @@ def _parser() -> argparse.ArgumentParser:
     )  # fmt: skip
     parser.add_argument(
         "--eval-seeds", type=positive_int, default=DEFAULT_EVAL_SEEDS,
-        help="evaluation episodes per scenario (cpf-bench --seeds)",
+        help="evaluation episodes per scenario (cpf-bench --num-seeds)",
     )  # fmt: skip
     parser.add_argument(
         "--resume", action="store_true",

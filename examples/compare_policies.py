@@ -9,7 +9,7 @@ same paired seeds; the table printed is the run's ``summary.md``.
 Usage::
 
     python examples/compare_policies.py [--scenarios bench_mild bench_saturation]
-        [--seeds 5] [--steps N] [--out outputs/compare_policies]
+        [--num-seeds 5] [--steps N] [--out outputs/compare_policies]
 """
 
 from __future__ import annotations
@@ -44,7 +44,7 @@ def main(argv: Sequence[str] | None = None) -> list[CellResult]:
         default=["bench_mild", "bench_saturation"],
         choices=scenarios.list_scenarios(),
     )
-    parser.add_argument("--seeds", type=int, default=5)
+    parser.add_argument("--num-seeds", type=int, default=5)
     parser.add_argument("--steps", type=int, default=None)
     parser.add_argument("--out", default="outputs/compare_policies")
     args = parser.parse_args(argv)
@@ -52,7 +52,7 @@ def main(argv: Sequence[str] | None = None) -> list[CellResult]:
     cells = run_bench(
         policies,
         args.scenarios,
-        num_seeds=args.seeds,
+        num_seeds=args.num_seeds,
         steps=args.steps,
         out=args.out,
         command=shlex.join(

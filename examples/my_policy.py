@@ -9,7 +9,7 @@ Two ways to hand the commands a policy, both named ``module:NAME``:
 Run from the repository root (the folder of this file on ``PYTHONPATH``)::
 
     PYTHONPATH=examples cpf-bench --policies nn_dsc my_policy:ProportionalPolicy \\
-        my_policy:tuned_backstepping --scenarios bench_mild --seeds 3
+        my_policy:tuned_backstepping --scenarios bench_mild --num-seeds 3
     PYTHONPATH=examples cpf-run --policy my_policy:ProportionalPolicy --scenario wang2014
 
 Copy this file into your own package and name it there

@@ -19,7 +19,7 @@ compensate), both with random starts so seeds matter.
 Usage::
 
     python examples/train_residual_ppo.py train --timesteps 1500000
-    python examples/train_residual_ppo.py evaluate --seeds 20
+    python examples/train_residual_ppo.py evaluate --num-seeds 20
 """
 
 from __future__ import annotations
@@ -139,7 +139,7 @@ def _evaluate_command(runs: Path, results: Path, seeds: int) -> str:
     """The command line of the evaluate phase with these folders."""
     return (
         f"python examples/train_residual_ppo.py evaluate --runs {runs} --results {results} "
-        f"--seeds {seeds}"
+        f"--num-seeds {seeds}"
     )
 
 
@@ -208,7 +208,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--timesteps", type=int, default=1_500_000, help="per training run")
     parser.add_argument("--train-seeds", type=int, nargs="+", default=[0, 1, 2], help="seeds")
     parser.add_argument("--fleets", type=int, default=64, help="fleets per training run")
-    parser.add_argument("--seeds", type=int, default=20, help="evaluation episodes")
+    parser.add_argument("--num-seeds", type=int, default=20, help="evaluation episodes")
     parser.add_argument("--scenarios", nargs="+", default=list(SCENARIOS), help="scenarios")
     parser.add_argument(
         "--agents",
@@ -222,9 +222,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.phase == "train":
         train_runs(runs, args.timesteps, args.train_seeds, args.fleets, args.scenarios, args.agents)
     elif args.phase == "evaluate":
-        evaluate(runs, results, args.seeds, args.scenarios)
+        evaluate(runs, results, args.num_seeds, args.scenarios)
     else:
-        (results / "summary.md").write_text(report(results, args.scenarios, args.seeds, runs))
+        (results / "summary.md").write_text(report(results, args.scenarios, args.num_seeds, runs))
     return 0
 
 

@@ -108,7 +108,16 @@ def test_full_episode_of_every_policy_on_every_scenario(name, policy):
 
 def test_compare_policies_example_runs_the_bench_with_a_custom_policy(tmp_path, capsys):
     example = _load_example("compare_policies")
-    argv = ["--scenarios", "bench_mild", "--seeds", "2", "--steps", "20", "--out", str(tmp_path)]
+    argv = [
+        "--scenarios",
+        "bench_mild",
+        "--num-seeds",
+        "2",
+        "--steps",
+        "20",
+        "--out",
+        str(tmp_path),
+    ]
     cells = example.main(argv)
     assert [cell.policy for cell in cells] == ["nn_dsc", "backstepping", "nn_dsc_soft"]
     assert cells[0].seeds == cells[2].seeds

@@ -84,13 +84,13 @@ def _parser() -> argparse.ArgumentParser:
         default=list_suite(),
     )
     parser.add_argument(
-        "--seeds", type=int, default=10, help="episodes per policy and scenario (default: 10)"
+        "--num-seeds", type=int, default=10, help="episodes per policy and scenario (default: 10)"
     )
     parser.add_argument(
-        "--base-seed",
+        "--seed",
         type=non_negative_int,
         default=BASE_SEED,
-        help=f"seed of episode 0; episode k uses base + k (default: {BASE_SEED})",
+        help=f"seed of episode 0; episode k uses seed + k (default: {BASE_SEED})",
     )
     parser.add_argument(
         "--steps",
@@ -148,15 +148,15 @@ def _parser() -> argparse.ArgumentParser:
 def _command(args: argparse.Namespace) -> str:
     """The command line that regenerates a run's files (the output folder left out)."""
     parts = ["cpf-bench", "--policies", *args.policies, "--scenarios", *args.scenarios]
-    parts += ["--seeds", str(args.seeds)]
+    parts += ["--num-seeds", str(args.num_seeds)]
     if args.split != "test":
         parts += ["--split", args.split]
     if args.reference is not None:
         parts += ["--reference", args.reference]
     if args.cost_margin != COST_MARGIN:
         parts += ["--cost-margin", repr(args.cost_margin)]
-    if args.base_seed != BASE_SEED:
-        parts += ["--base-seed", str(args.base_seed)]
+    if args.seed != BASE_SEED:
+        parts += ["--seed", str(args.seed)]
     if args.steps is not None:
         parts += ["--steps", str(args.steps)]
     return shlex.join(parts)
@@ -177,7 +177,7 @@ def _memory_needed(args: argparse.Namespace) -> tuple[int, int]:
     batches, episodes = [], []
     for name in args.scenarios:
         scenario = make_scenario(name)
-        seeds = 1 if is_deterministic(scenario) else args.seeds
+        seeds = 1 if is_deterministic(scenario) else args.num_seeds
         horizon = args.steps or scenario.max_steps
         batches.append(
             seeds * (horizon * SERIES_BYTES_PER_STEP + scenario.n * STATE_BYTES_PER_VESSEL)
@@ -193,19 +193,19 @@ def _memory_needed(args: argparse.Namespace) -> tuple[int, int]:
 
 def _claim_output(args: argparse.Namespace) -> atomic.FolderLock:
     """Refuse a run whose flags, memory or output folder would fail it; lock --out."""
-    if args.seeds < 1:
-        raise ValueError(f"--seeds must be >= 1, got {args.seeds}.")
+    if args.num_seeds < 1:
+        raise ValueError(f"--num-seeds must be >= 1, got {args.num_seeds}.")
     labelled_policies(args.policies)  # a policy listed twice
     check_margin(args.cost_margin)
     batch, summary = _memory_needed(args)
     available = _available_memory()
     if available is not None and max(batch, summary) > available:
         raise ValueError(
-            f"{len(args.policies)} policies x --seeds {args.seeds} need about "
+            f"{len(args.policies)} policies x --num-seeds {args.num_seeds} need about "
             f"{max(batch, summary) / 2**30:.1f} GiB of memory ({batch / 2**30:.1f} GiB for the "
             f"largest batch, every policy's fleets on a scenario at once; "
             f"{summary / 2**30:.1f} GiB for the summary's bootstrap intervals), but "
-            f"{available / 2**30:.1f} GiB are available; lower --seeds or --steps, or bench "
+            f"{available / 2**30:.1f} GiB are available; lower --num-seeds or --steps, or bench "
             "fewer policies at a time."
         )
     if args.marl_eval is not None:
@@ -216,7 +216,7 @@ def _claim_output(args: argparse.Namespace) -> atomic.FolderLock:
         args.force,
         "cpf-bench",
         needed_bytes=OUTPUT_BYTES_PER_EPISODE
-        * args.seeds
+        * args.num_seeds
         * len(args.policies)
         * len(args.scenarios),
     )
@@ -247,8 +247,8 @@ def bench_main(argv: Sequence[str] | None = None) -> int:
         cells = run_bench(
             args.policies,
             args.scenarios,
-            num_seeds=args.seeds,
-            seed=args.base_seed,
+            num_seeds=args.num_seeds,
+            seed=args.seed,
             steps=args.steps,
             out=args.out,
             command=_command(args),

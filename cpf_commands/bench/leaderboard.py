@@ -200,7 +200,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     runs = {}
     for split, seeds in (("test", 20), ("shift", 10)):
         command = shlex.join(
-            ["cpf-bench", "--policies", *policies, "--split", split, "--seeds", str(seeds)]
+            ["cpf-bench", "--policies", *policies, "--split", split, "--num-seeds", str(seeds)]
         )
         runs[split] = run_bench(
             policies,

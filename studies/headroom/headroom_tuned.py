@@ -1,9 +1,9 @@
 r"""What a local controller could still gain over ``mpc_tuned``: its headroom, split by information.
 
     export NUMBA_NUM_THREADS=1
-    python studies/headroom/headroom_tuned.py --split test --seeds 20 \
+    python studies/headroom/headroom_tuned.py --split test --num-seeds 20 \
         --out runs/headroom_decomposition_tuned
-    python studies/headroom/headroom_tuned.py --split shift --seeds 10 \
+    python studies/headroom/headroom_tuned.py --split shift --num-seeds 10 \
         --out runs/headroom_decomposition_tuned_shift
 
 ``cpf-bench`` of ``oracle``, ``mpc_tuned`` and the members of
@@ -52,7 +52,7 @@ TOLD = {
 def main(argv: list[str] | None = None) -> list[CellResult]:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--split", choices=("test", "shift"), default="test")
-    parser.add_argument("--seeds", type=int, default=20, help="episodes per cell (default 20)")
+    parser.add_argument("--num-seeds", type=int, default=20, help="episodes per cell (default 20)")
     parser.add_argument("--steps", type=int, default=None,
                         help="episode length in control steps (default: scenario's)")  # fmt: skip
     parser.add_argument("--scenarios", nargs="+", default=list_suite(), metavar="NAME",
@@ -64,7 +64,7 @@ def main(argv: list[str] | None = None) -> list[CellResult]:
         policies[label] = partial(baselines.make_policy, name, **MPCTuned.DEFAULTS)
     given = sys.argv[1:] if argv is None else argv
     command = shlex.join(["python", "studies/headroom/headroom_tuned.py", *given])
-    cells = run_bench(policies, args.scenarios, num_seeds=args.seeds, steps=args.steps,
+    cells = run_bench(policies, args.scenarios, num_seeds=args.num_seeds, steps=args.steps,
                       out=args.out, command=command, figures=False, reference="mpc_tuned",
                       split=args.split)  # fmt: skip
     print("| policy | scenario | mean cost |")

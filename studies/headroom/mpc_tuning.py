@@ -1,7 +1,7 @@
 """The sweep that chose ``mpc_tuned``'s estimator: v0-estimator settings on training seeds.
 
     NUMBA_NUM_THREADS=1 python studies/headroom/mpc_tuning.py   # seeds 0-4, every suite scenario
-    NUMBA_NUM_THREADS=1 python studies/headroom/mpc_tuning.py --seeds 2 --scenarios bench_mild
+    NUMBA_NUM_THREADS=1 python studies/headroom/mpc_tuning.py --num-seeds 2 --scenarios bench_mild
     NUMBA_NUM_THREADS=1 python studies/headroom/mpc_tuning.py --oracle --scenarios bench_saturation
 
 Runs ``mpc_tuned`` (``baselines.mpc_tuned``) at each setting of ``GRID`` (gains
@@ -58,14 +58,14 @@ def _oracle(names: list[str], seeds: list[int]) -> None:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--seeds", type=int, default=5, help="training seeds 0 .. N-1")
+    parser.add_argument("--num-seeds", type=int, default=5, help="training seeds 0 .. N-1")
     parser.add_argument("--scenarios", nargs="+", default=list_suite())
     parser.add_argument("--oracle", action="store_true", help="sweep the oracle's ramp instead")
     args = parser.parse_args()
     if args.oracle:
-        _oracle(args.scenarios, list(range(args.seeds)))
+        _oracle(args.scenarios, list(range(args.num_seeds)))
         return
-    seeds = list(range(args.seeds))
+    seeds = list(range(args.num_seeds))
     costs: dict[tuple[str, str], float] = {}
     start = time.perf_counter()
     for name in args.scenarios:
@@ -76,7 +76,7 @@ def main() -> None:
             cost = rollout(policy, scenario, seeds)["cost"]
             costs[(name, _label(gain, rate))] = float(np.mean(cost))
     labels = [_label(*setting) for setting in GRID]
-    print(f"Mean episode cost over training seeds 0-{args.seeds - 1}\n")
+    print(f"Mean episode cost over training seeds 0-{args.num_seeds - 1}\n")
     print("| scenario | " + " | ".join(labels) + " |")
     print("|---" * (len(labels) + 1) + "|")
     for name in args.scenarios:

@@ -12,7 +12,16 @@ def test_headroom_tuned_tells_mpc_tuned_not_mpc(tmp_path: Path) -> None:
     # when it keeps mpc_tuned's estimator settings (with mpc's it costs what mpc does, another
     # number); told its dynamics or v0 it differs.
     study = load_script(ROOT / "studies" / "headroom" / "headroom_tuned.py")
-    argv = ["--scenarios", "bench_mild", "--seeds", "1", "--steps", "40", "--out", str(tmp_path)]
+    argv = [
+        "--scenarios",
+        "bench_mild",
+        "--num-seeds",
+        "1",
+        "--steps",
+        "40",
+        "--out",
+        str(tmp_path),
+    ]
     cost = {cell.policy: cell.metrics["cost"].tolist() for cell in study.main(argv)}
     assert list(cost) == ["oracle", "mpc_tuned", *study.TOLD]
     assert cost["mpc_tuned_told_links"] == cost["mpc_tuned"]

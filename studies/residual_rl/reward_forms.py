@@ -59,10 +59,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         formatter_class=argparse.ArgumentDefaultsHelpFormatter,
     )
     parser.add_argument("--scenario", default="saturation_heavy", help="scenario name")
-    parser.add_argument("--seeds", type=int, default=1, help="episodes (seeds 0 .. N-1)")
+    parser.add_argument("--num-seeds", type=int, default=1, help="episodes (seeds 0 .. N-1)")
     args = parser.parse_args(argv)
-    seeds = range(args.seeds)
-    print(f"{args.scenario}, {args.seeds} episode(s); tail = last quarter")
+    seeds = range(args.num_seeds)
+    print(f"{args.scenario}, {args.num_seeds} episode(s); tail = last quarter")
     print("form       policy        cost      first 10 s  tail path RMS  tail cost shares")
     for form in ("log", "quadratic"):
         for policy in ("nn_dsc", "backstepping"):

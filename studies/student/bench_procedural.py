@@ -14,7 +14,7 @@ training draw had.
 
 Example (what runs/student/bench_procedural holds)::
 
-    python studies/student/bench_procedural.py --draws 8 --seeds 5 \
+    python studies/student/bench_procedural.py --draws 8 --num-seeds 5 \
         --policies nn_dsc mpc runs/student/agents/student_s0 \
         --out runs/student/bench_procedural
 """
@@ -41,7 +41,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], allow_abbrev=False)
     parser.add_argument("--policies", nargs="+", required=True, help="as cpf-bench --policies")
     parser.add_argument("--draws", type=int, default=8, help="held-out fleets (draw seeds 10000+)")
-    parser.add_argument("--seeds", type=int, default=5, help="episodes per policy and fleet")
+    parser.add_argument("--num-seeds", type=int, default=5, help="episodes per policy and fleet")
     parser.add_argument(
         "--max-degree", type=int, default=MAX_DEGREE,
         help="largest neighbour count of a drawn fleet (ScenarioDistribution.max_degree)",
@@ -53,8 +53,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--out", required=True, help="output folder, as cpf-bench --out")
     parser.add_argument("--force", action="store_true", help="replace an existing --out")
     args = parser.parse_args(argv)
-    if args.draws < 1 or args.seeds < 1:
-        parser.error("--draws and --seeds must be >= 1.")
+    if args.draws < 1 or args.num_seeds < 1:
+        parser.error("--draws and --num-seeds must be >= 1.")
     if Path(args.out).exists() and not args.force:
         parser.error(f"{args.out} exists; pass --force to replace it.")
     try:
@@ -67,7 +67,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     given = sys.argv[1:] if argv is None else list(argv)
     command = "python studies/student/bench_procedural.py " + " ".join(given)
     run_bench(
-        args.policies, fleets, num_seeds=args.seeds, out=args.out, command=command, figures=False
+        args.policies,
+        fleets,
+        num_seeds=args.num_seeds,
+        out=args.out,
+        command=command,
+        figures=False,
     )
     return 0
 

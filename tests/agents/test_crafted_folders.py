@@ -159,7 +159,7 @@ def test_a_fifo_manifest_blocks_neither_cpf_run_nor_cpf_bench(
                   "--quiet", "--no-figures"])  # fmt: skip
     assert "FIFO" in capsys.readouterr().err
     with pytest.raises(SystemExit):
-        bench_main(["--policies", str(folder), "--scenarios", "bench_lossy_links", "--seeds",
+        bench_main(["--policies", str(folder), "--scenarios", "bench_lossy_links", "--num-seeds",
                     "1", "--steps", "2", "--out", str(tmp_path / "b")])  # fmt: skip
     assert "FIFO" in capsys.readouterr().err
 

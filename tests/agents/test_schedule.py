@@ -44,7 +44,7 @@ def test_evaluations_are_the_numbers_cpf_bench_prints_and_best_is_the_lowest(
     load_policy(folder / "best")  # a complete agent folder
     bench = tmp_path / "bench"
     argv = ["--policies", str(folder / "best"), "--scenarios", "bench_mild", "--split", "test",
-            "--seeds", "2", "--steps", "30", "--out", str(bench), "--quiet",
+            "--num-seeds", "2", "--steps", "30", "--out", str(bench), "--quiet",
             "--no-figures"]  # fmt: skip
     assert bench_main(argv) == 0
     summary = list(csv.DictReader((bench / "summary.csv").open()))

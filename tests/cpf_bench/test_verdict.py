@@ -87,7 +87,7 @@ def test_reference_must_be_one_of_the_policies():
 
 
 def test_terminal_prints_the_verdict_against_any_reference(tmp_path, capsys):
-    argv = ["--policies", "backstepping", "dsc", "--scenarios", "bench_mild", "--seeds", "3"]
+    argv = ["--policies", "backstepping", "dsc", "--scenarios", "bench_mild", "--num-seeds", "3"]
     argv += ["--steps", "20", "--reference", "backstepping", "--out", str(tmp_path), "--quiet"]
     assert bench_main([*argv, "--no-figures"]) == 0
     out = capsys.readouterr().out
@@ -113,7 +113,7 @@ def test_marl_eval_export_has_the_nested_layout(tmp_path):
     import json
 
     out = tmp_path / "marl.json"
-    argv = ["--policies", "nn_dsc", "dsc", "--scenarios", "bench_mild", "--seeds", "2"]
+    argv = ["--policies", "nn_dsc", "dsc", "--scenarios", "bench_mild", "--num-seeds", "2"]
     argv += ["--steps", "5", "--out", str(tmp_path / "b"), "--quiet", "--no-figures"]
     assert bench_main([*argv, "--marl-eval", str(out)]) == 0
     data = json.loads(out.read_text())

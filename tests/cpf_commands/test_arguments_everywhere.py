@@ -1,4 +1,4 @@
-"""Every command refuses abbreviated options (``--seed`` is not ``--seeds``)."""
+"""Every command refuses abbreviated options (``--num-seed`` is not ``--num-seeds``)."""
 
 from __future__ import annotations
 
@@ -35,11 +35,11 @@ def test_every_command_disallows_abbreviations(
     assert seen and all(parser.allow_abbrev is False for parser in seen), script
 
 
-def test_bench_seed_is_not_taken_for_seeds(
+def test_bench_num_seed_is_not_taken_for_num_seeds(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     from cpf_commands.bench.cli import bench_main
 
     with pytest.raises(SystemExit):
-        bench_main(["--seed", "3", "--out", str(tmp_path / "b")])
-    assert "unrecognized arguments: --seed" in capsys.readouterr().err
+        bench_main(["--num-seed", "3", "--out", str(tmp_path / "b")])
+    assert "unrecognized arguments: --num-seed" in capsys.readouterr().err

@@ -27,8 +27,8 @@ def _error(main, argv: list[str], capsys: pytest.CaptureFixture[str]) -> str:
 def test_a_negative_seed_names_its_flag(capsys, tmp_path):
     line = _error(run_main, ["--seed", "-1", "--out", str(tmp_path)], capsys)
     assert line == "cpf-run: error: argument --seed: must be an integer >= 0, got -1"
-    line = _error(bench_main, ["--base-seed", "-1", "--out", str(tmp_path)], capsys)
-    assert line == "cpf-bench: error: argument --base-seed: must be an integer >= 0, got -1"
+    line = _error(bench_main, ["--seed", "-1", "--out", str(tmp_path)], capsys)
+    assert line == "cpf-bench: error: argument --seed: must be an integer >= 0, got -1"
     assert not list(tmp_path.iterdir())
 
 

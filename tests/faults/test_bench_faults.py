@@ -103,11 +103,11 @@ def test_the_memory_check_counts_policies_x_seeds_x_series(
     monkeypatch.setattr(cli, "_available_memory", lambda: 8 * 2**30)
     policies = ["nn_dsc", "dsc", "nn_dsc_no_aux", "nn_dsc_global_v0", "backstepping",
                 "nn_dsc_delay_comp", "backstepping_delay_comp", "nn_dsc_privileged"]  # fmt: skip
-    argv = ["--policies", *policies, "--scenarios", "bench_large_fleet", "--seeds", "5000",
+    argv = ["--policies", *policies, "--scenarios", "bench_large_fleet", "--num-seeds", "5000",
             "--out", str(tmp_path / "out"), "--quiet"]  # fmt: skip
     message = _refused(argv, capsys)
     # 8 x 5000 fleets x (2000 steps x 256 B + 10 vessels x 32 KiB) = 3.35872e10 B
-    assert "8 policies x --seeds 5000 need about 31.3 GiB" in message
+    assert "8 policies x --num-seeds 5000 need about 31.3 GiB" in message
     assert ran == []
     monkeypatch.setattr(cli, "_available_memory", lambda: 32 * 2**30)
     assert bench_main(argv) == 0 and len(ran) == 1

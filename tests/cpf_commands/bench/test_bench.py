@@ -184,7 +184,7 @@ def test_a_deterministic_scenario_runs_one_episode():
 
 def test_identical_arguments_give_identical_files(tmp_path):
     argv = ["--policies", "nn_dsc", "backstepping", "--scenarios", "bench_mild", "wang2014"]
-    argv += ["--seeds", "3", "--steps", "15", "--quiet"]
+    argv += ["--num-seeds", "3", "--steps", "15", "--quiet"]
     for run in ("one", "two"):
         assert bench_main([*argv, "--out", str(tmp_path / run)]) == 0
     names = sorted(path.name for path in (tmp_path / "one").iterdir())
@@ -395,7 +395,7 @@ def test_bench_ray_sends_each_cell_to_ray_with_agent_folders_made_absolute(
     monkeypatch.setattr(bench_run, "start_ray", start_ray)
     monkeypatch.chdir(folder.parent)  # the agent is given relative to here
     argv = ["--policies", "nn_dsc", folder.name, "--scenarios", "bench_mild", "bench_saturation"]
-    argv += ["--seeds", "2", "--steps", "20", "--no-figures", "--quiet"]
+    argv += ["--num-seeds", "2", "--steps", "20", "--no-figures", "--quiet"]
     assert bench_main([*argv, "--out", "here"]) == 0
     assert not started
     assert bench_main([*argv, "--out", "cluster", "--address", "10.0.0.7:6379"]) == 0
@@ -436,7 +436,7 @@ def test_default_bench_is_every_baseline_and_the_headroom_reference_on_the_suite
     args = _parser().parse_args([])
     assert args.policies == [*POLICIES, HEADROOM_REFERENCE]
     assert HEADROOM_REFERENCE in PRIVILEGED and args.scenarios == suite.list_suite()
-    assert args.seeds == 10
+    assert args.num_seeds == 10
 
 
 # --- layering -------------------------------------------------------------------------------
@@ -471,6 +471,6 @@ def test_layering_no_import_runs_back_up(package):
 def test_the_terminal_says_when_cells_did_not_run(tmp_path, capsys):
     agent = str(ROOT / "tests/fixtures/agents/residual_ppo_lossy_links")
     argv = ["--policies", "nn_dsc", agent, "--scenarios", "bench_lossy_links", "bench_switching"]
-    argv += ["--seeds", "2", "--steps", "5", "--out", str(tmp_path / "b"), "--quiet"]
+    argv += ["--num-seeds", "2", "--steps", "5", "--out", str(tmp_path / "b"), "--quiet"]
     assert bench_main([*argv, "--no-figures"]) == 0
     assert "1 of 4 (policy, scenario) cells did not run" in capsys.readouterr().out

@@ -14,7 +14,7 @@ from cpf_commands.bench import cli
 from cpf_commands.bench.cli import bench_main
 from cpf_env.infra import atomic
 
-QUICK = ["--policies", "nn_dsc", "--scenarios", "wang2014", "--seeds", "1", "--steps", "3",
+QUICK = ["--policies", "nn_dsc", "--scenarios", "wang2014", "--num-seeds", "1", "--steps", "3",
          "--quiet"]  # fmt: skip
 
 
@@ -71,12 +71,12 @@ def test_an_unwritable_out_and_too_many_seeds_are_refused_before_the_run(
     blocker.write_text("")
     assert "cannot write" in _refused([*QUICK, "--out", str(blocker / "out")], capsys)
     start = time.perf_counter()
-    message = _refused(["--policies", "nn_dsc", "dsc", "--seeds", "1000000", "--scenarios",
+    message = _refused(["--policies", "nn_dsc", "dsc", "--num-seeds", "1000000", "--scenarios",
                         "bench_mild", "--out", str(tmp_path / "o"), "--quiet"], capsys)  # fmt: skip
     assert time.perf_counter() - start < 5.0
     # batch: 2 policies x 1e6 fleets x (2000 steps x 256 B + 5 vessels x 32 KiB) = 1.35e12 B;
     # summary: 1e6 seeds x 54 metrics x 2000 replicates x 24 B = 2.592e12 B, the larger
-    assert "2 policies x --seeds 1000000 need about 2414.0 GiB" in message
+    assert "2 policies x --num-seeds 1000000 need about 2414.0 GiB" in message
     monkeypatch.setattr(atomic.shutil, "disk_usage", lambda path: type("U", (), {"free": 10}))
     assert "MiB free" in _refused([*QUICK, "--out", str(tmp_path / "o")], capsys)
     assert ran == []
@@ -96,7 +96,9 @@ def test_disk_full_while_writing_keeps_the_old_results(
         real(path, text)
 
     monkeypatch.setattr(atomic, "write_text", full)
-    err = _refused([*QUICK, "--out", str(out), "--no-figures", "--force", "--seeds", "2"], capsys)
+    err = _refused(
+        [*QUICK, "--out", str(out), "--no-figures", "--force", "--num-seeds", "2"], capsys
+    )
     assert "could not write the results" in err and "No space" in err
     assert {p.name: p.read_bytes() for p in out.iterdir()} == before
     assert sorted(p.name for p in tmp_path.iterdir()) == [".bench.lock", "bench"]

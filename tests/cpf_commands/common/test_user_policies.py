@@ -90,7 +90,7 @@ def test_cpf_bench_labels_user_policies_by_their_spec_and_benches_the_template(
     monkeypatch.syspath_prepend(str(ROOT / "examples"))
     specs = ["my_policy:ProportionalPolicy", "my_policy:tuned_backstepping"]
     out = tmp_path / "bench"
-    argv = ["--policies", "nn_dsc", *specs, "--scenarios", "bench_mild", "--seeds", "2"]
+    argv = ["--policies", "nn_dsc", *specs, "--scenarios", "bench_mild", "--num-seeds", "2"]
     assert bench_main([*argv, "--steps", "20", "--quiet", "--no-figures", "--out", str(out)]) == 0
     with open(out / "summary.csv") as handle:
         labels = {row["policy"] for row in csv.DictReader(handle)}
