@@ -1,34 +1,35 @@
 """The agent-folder format: data only (safetensors and JSON), tied together by a manifest.
 
-A folder that ``cpf-train`` writes, and the only thing evaluation reads:
+One format, ``cpf-agent``, for every trainer: the folder ``cpf-train`` and
+``cpf-distill`` write (trainer ``sb3``) and the one ``agents.marl.save_marl_policy``
+writes for a BenchMARL actor (trainer ``benchmarl``). It is the only thing
+evaluation reads:
 
 - ``policy.safetensors``: the deterministic actor's weights, float32
   (``hidden.<i>.weight`` (out, in), ``hidden.<i>.bias`` (out,), ``output.weight``,
-  ``output.bias``);
-- ``normalization.json``: the observation statistics (``mean``, ``var`` (k,),
-  ``epsilon``, ``clip``), or ``null`` if the run did not normalize;
-- ``config.json``: the ``TrainConfig`` and the run's record (as before);
-- ``manifest.json``: the format name and version, the package version that
-  wrote it, and the SHA-256 and size of each of the three files above.
-
-Version 1 holds an MLP over the flat input of K neighbour slots. Version 2
-(written when the ``TrainConfig`` has an ``encoder`` or a ``history``) adds:
-
-- in ``policy.safetensors``, the neighbour encoder's tensors
+  ``output.bias``), and with a neighbour encoder its tensors
   (``encoder.phi.0.weight`` (hidden, slot_size), ``encoder.phi.0.bias``,
   ``encoder.phi.2.weight`` (hidden, hidden), ``encoder.phi.2.bias``, and the
   scalars ``encoder.empty_weight`` and ``encoder.tolerance``), the MLP then
   reading the encoder's features (``agents.encoder.NeighbourSetEncoder``);
-- in ``config.json``, the field ``actor``: ``encoder`` (``"deepsets"`` or
-  null), ``history`` (own-history entries, ``agents.history``) and, with an
-  encoder, ``pooling``, ``hidden``, ``slot_size`` (3 + m), ``slots`` (K of
-  training, which ``normalization.json`` covers) and ``tail`` (floats after
-  the slots: extras and history).
+- ``normalization.json``: the observation statistics (``mean``, ``var`` (k,),
+  ``epsilon``, ``clip``), or ``null`` if the run did not normalize;
+- ``config.json``: the trainer's record (``sb3``: ``{"config": TrainConfig, ...}``
+  and the run's record; ``benchmarl``: the task, algorithm and layer sizes,
+  ``agents.marl.policy_folder``), and, for an actor with an encoder or a
+  history, the field ``actor``: ``encoder`` (``"deepsets"`` or null),
+  ``history`` (own-history entries, ``agents.history``) and, with an encoder,
+  ``pooling``, ``hidden``, ``slot_size`` (3 + m), ``slots`` (K of training,
+  which ``normalization.json`` covers) and ``tail`` (floats after the slots:
+  extras and history);
+- ``manifest.json``: the format name and version (3), the ``trainer``, the
+  package version that wrote it, and the SHA-256 and size of each of the
+  three files above.
 
-Version 1 folders are read as before, and an MLP without history is still
-written as version 1: no ``actor`` field, and ``TrainConfig.to_json`` leaves
-out ``encoder`` and ``history`` at their defaults, so earlier cpf_env versions
-read its ``config.json``.
+Folders of earlier versions are read as before: ``cpf-agent`` versions 1 (an
+MLP) and 2 (the ``actor`` field), and the BenchMARL actors' former format
+name ``cpf-marl-agent`` (versions 1 and 2, the same layout): both without a
+``trainer`` field, which the name implies (``LEGACY_FORMATS``).
 
 Reading trusts nothing in the folder (``agents.folder_files``): only regular
 files inside it are opened, with size and JSON depth limits; every field is
@@ -77,6 +78,7 @@ from agents.folder_files import (
     check_fields,
     field,
     parse_json,
+    read_file,
     read_manifest,
     read_verified,
     statistics_arrays,
@@ -88,8 +90,9 @@ from cpf_env.infra import atomic
 __all__ = [
     "FORMAT",
     "FORMAT_VERSION",
-    "FORMAT_VERSIONS",
+    "LEGACY_FORMATS",
     "MANIFEST",
+    "TRAINERS",
     "Normalization",
     "actor_from_record",
     "agent_files",
@@ -99,6 +102,7 @@ __all__ = [
     "network_from_tensors",
     "normalization_from_json",
     "read_agent",
+    "read_agent_manifest",
     "read_json",
     "read_weights",
     "training_config",
@@ -107,10 +111,17 @@ __all__ = [
 ]
 
 FORMAT = "cpf-agent"
-#: The version written for an actor with an encoder or a history (an MLP alone: 1).
-FORMAT_VERSION = 2
-#: The versions read.
-FORMAT_VERSIONS = (1, 2)
+#: The version written (its manifest names the trainer).
+FORMAT_VERSION = 3
+#: The trainers whose folders the format holds: their ``config.json`` records differ.
+TRAINERS = ("sb3", "benchmarl")
+#: Earlier (name, version) pairs read, and the trainer each implies (no ``trainer`` field).
+LEGACY_FORMATS = {
+    ("cpf-agent", 1): "sb3",
+    ("cpf-agent", 2): "sb3",
+    ("cpf-marl-agent", 1): "benchmarl",
+    ("cpf-marl-agent", 2): "benchmarl",
+}
 MANIFEST = "manifest.json"
 WEIGHTS = "policy.safetensors"
 NORMALIZATION = "normalization.json"
@@ -145,20 +156,26 @@ def agent_files(
     }
 
 
-def write_with_manifest(
-    folder: Path, files: dict[str, bytes], format_name: str, format_version: int
-) -> None:
+def write_with_manifest(folder: Path, files: dict[str, bytes], trainer: str) -> None:
     """Write ``files`` and the manifest of their hashes into ``folder``, each atomically.
 
     The caller makes the folder as a whole appear at once (``cpf_env.infra.atomic.staged_folder``).
+
+    Args:
+        folder: Existing folder to write into.
+        files: The data files by name (``agent_files``).
+        trainer: One of ``TRAINERS``: which record ``config.json`` holds.
     """
     import cpf_env
 
+    if trainer not in TRAINERS:
+        raise ValueError(f"trainer must be one of {TRAINERS}, got {trainer!r}.")
     for name, data in files.items():
         atomic.write_bytes(folder / name, data)
     manifest = {
-        "format": format_name,
-        "format_version": format_version,
+        "format": FORMAT,
+        "format_version": FORMAT_VERSION,
+        "trainer": trainer,
         "cpf_env": cpf_env.__version__,
         "files": {
             name: {"sha256": _sha256(data), "bytes": len(data)} for name, data in files.items()
@@ -178,8 +195,8 @@ def write_agent(
     Each file is written atomically; the caller makes the folder as a whole
     appear at once (``cpf_env.infra.atomic.staged_folder``).
 
-    An actor with an encoder, or a run with a history, is written as version 2
-    (``record`` gains the ``actor`` field); an MLP alone as version 1.
+    An actor with an encoder, or a run with a history, gains the ``actor`` field
+    in ``record``.
 
     Args:
         folder: Existing folder to write into.
@@ -188,11 +205,69 @@ def write_agent(
         normalization: The observation statistics, or None.
     """
     actor = actor_record(network, TrainConfig.from_json(record["config"]))
-    version = 1 if actor is None else FORMAT_VERSION
     if actor is not None:
         record = {**record, "actor": actor}
     tensors = {name: value.detach().contiguous() for name, value in network.state_dict().items()}
-    write_with_manifest(folder, agent_files(tensors, normalization, record), FORMAT, version)
+    write_with_manifest(folder, agent_files(tensors, normalization, record), "sb3")
+
+
+def read_agent_manifest(folder: Path, trainer: str | None = None) -> tuple[str, dict[str, Any]]:
+    """The trainer and the checked manifest of an agent folder, any version read.
+
+    Args:
+        folder: The agent folder.
+        trainer: The trainer the caller reads (one of ``TRAINERS``), or None for any.
+
+    Returns:
+        The trainer (``"sb3"`` or ``"benchmarl"``) and the manifest, its file list checked.
+
+    Raises:
+        AgentFolderError: ``folder`` is missing or a file, holds no manifest (a plain
+            SB3 save among them), or its manifest is unreadable, of another format,
+            version or trainer than ``trainer``.
+    """
+    if not folder.is_dir():
+        what = "is a file" if folder.exists() else "does not exist"
+        raise AgentFolderError(
+            f"{folder} {what}: give a cpf-train --out folder (or a baseline name)."
+        )
+    path = folder / MANIFEST
+    if not (path.exists() or path.is_symlink()):
+        if (folder / "model.zip").is_file():
+            raise AgentFolderError(
+                f"{folder} holds a plain SB3 save (model.zip) and no {MANIFEST}: its files "
+                "are pickles, which run any code their author put in them, so they are not "
+                "read. Train the agent with cpf-train --out DIR, which writes its weights "
+                "and statistics as data (safetensors and JSON)."
+            )
+        raise AgentFolderError(
+            f"{folder} is not a cpf-train output folder: no {MANIFEST}. Train one with "
+            "`cpf-train --out DIR`, or give a baseline name."
+        )
+    name = field(parse_json(read_file(path, MAX_JSON_BYTES, folder), path), "format", path)
+    names = sorted({FORMAT, *(legacy for legacy, _ in LEGACY_FORMATS)})
+    if name not in names:
+        raise AgentFolderError(
+            f"{path}: field 'format' is {name!r}; this cpf_env reads {' and '.join(names)} folders."
+        )
+    versions = [v for legacy, v in LEGACY_FORMATS if legacy == name]
+    if name == FORMAT:
+        versions.append(FORMAT_VERSION)
+    manifest = read_manifest(path, str(name), tuple(versions))
+    found = LEGACY_FORMATS.get((name, manifest["format_version"]))
+    if found is None:
+        check_fields(manifest, {"trainer": "str"}, path, required=True)
+        found = manifest["trainer"]
+        if found not in TRAINERS:
+            raise AgentFolderError(
+                f"{path}: field 'trainer' is {found!r}; this cpf_env reads {list(TRAINERS)}."
+            )
+    if trainer is not None and found != trainer:
+        raise AgentFolderError(
+            f"{path}: the folder holds a {found} agent, not a {trainer} one; load it with "
+            "agents.load_policy, which reads both."
+        )
+    return found, manifest
 
 
 def read_json(folder: Path, name: str, manifest: dict[str, Any]) -> Any:
@@ -256,7 +331,8 @@ def actor_from_record(
 
     Args:
         record: The ``config.json`` object.
-        version: The manifest's format version (1: no ``actor`` field).
+        version: The manifest's format version (1: no ``actor`` field; 2: one; 3: one
+            for an encoder or a history).
         config: The record's ``TrainConfig``.
         source: ``config.json``, for messages.
 
@@ -270,8 +346,11 @@ def actor_from_record(
             contradicts (``slots`` and ``slot_size``: ``config.learner_slots()``; ``tail``:
             ``config.learner_tail()``), naming ``source``.
     """
+    described = "actor" in record or config.encoder is not None or bool(config.history)
+    if version == FORMAT_VERSION and not described:
+        return None
     if version == 1:
-        if "actor" in record or config.encoder is not None or config.history:
+        if described:
             raise AgentFolderError(
                 f"{source} describes an encoder or a history (field 'actor', or config encoder="
                 f"{config.encoder!r}, history={config.history}) but the manifest says format "
@@ -454,7 +533,7 @@ def _shapes(tensors: dict[str, torch.Tensor]) -> list[str]:
 
 
 def read_agent(folder: Path) -> tuple[dict[str, Any], PolicyNetwork, Normalization | None]:
-    """Read an agent folder (format version 1 or 2), verifying every file against the manifest.
+    """Read an ``sb3`` agent folder (any version), verifying every file against the manifest.
 
     Returns:
         The ``config.json`` record, the actor, and the statistics (or None).
@@ -462,7 +541,7 @@ def read_agent(folder: Path) -> tuple[dict[str, Any], PolicyNetwork, Normalizati
     Raises:
         AgentFolderError: A missing, unreadable, altered or inconsistent file (named).
     """
-    manifest = read_manifest(folder / MANIFEST, FORMAT, FORMAT_VERSIONS)
+    _, manifest = read_agent_manifest(folder, "sb3")
     record = read_json(folder, CONFIG, manifest)
     config = training_config(field(record, "config", folder / CONFIG), folder / CONFIG)
     encoder = actor_from_record(record, manifest["format_version"], config, folder / CONFIG)

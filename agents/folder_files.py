@@ -314,9 +314,9 @@ def read_manifest(
             f"{path}: field 'format_version' must be an integer, got {_kind(version)}."
         )
     if version not in versions:
-        known = " and ".join(str(v) for v in versions)
+        known = ", ".join(str(v) for v in versions)
         raise AgentFolderError(
-            f"{path} has format version {version}; this cpf_env reads version {known} only. "
+            f"{path} has format version {version}; this cpf_env reads version(s) {known} only. "
             "Use the cpf_env that wrote it, or retrain."
         )
     files = field(manifest, "files", path)

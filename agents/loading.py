@@ -34,30 +34,16 @@ from numpy.typing import ArrayLike, NDArray
 from agents.actor import PolicyNetwork
 from agents.agent_folder import (
     CONFIG,
-    FORMAT,
-    FORMAT_VERSIONS,
-    MANIFEST,
     Normalization,
     read_agent,
+    read_agent_manifest,
     read_json,
     training_config,
 )
 from agents.encoder import statistics_for_slots
-from agents.folder_files import (
-    MAX_JSON_BYTES,
-    AgentFolderError,
-    field,
-    parse_json,
-    read_file,
-    read_manifest,
-)
+from agents.folder_files import AgentFolderError, field
 from agents.history import OwnHistory
-from agents.marl.policy_folder import (
-    MARL_FORMAT,
-    MARL_FORMAT_VERSION,
-    marl_config,
-    read_marl_agent,
-)
+from agents.marl.policy_folder import marl_config, read_marl_agent
 from agents.resolve import resolve_base_policy
 from agents.train_config import TrainConfig
 from cpf_env.envs.policy import FleetPolicy
@@ -101,9 +87,9 @@ def load_policy(path: str | Path, scenario: str | Scenario | None = None) -> Tra
         ValueError: The scenario's observations do not fit the network.
     """
     folder = Path(path)
-    kind = _format(folder)
+    trainer, _ = read_agent_manifest(folder)
     overrides: dict[str, Any] = {}  # a MARL task's Scenario field overrides
-    if kind == MARL_FORMAT:  # a BenchMARL actor (agents.marl.policy_folder)
+    if trainer == "benchmarl":  # a BenchMARL actor (agents.marl.policy_folder)
         config, network, normalization, overrides = read_marl_agent(folder)
     else:
         record, network, normalization = read_agent(folder)
@@ -122,10 +108,9 @@ def read_config(path: str | Path) -> TrainConfig:
         AgentFolderError: Not an agent folder, or an unreadable or invalid configuration.
     """
     folder = Path(path)
-    kind = _format(folder)
-    if kind == MARL_FORMAT:
-        return _marl_record(folder)[0]
-    manifest = read_manifest(folder / MANIFEST, FORMAT, FORMAT_VERSIONS)
+    trainer, manifest = read_agent_manifest(folder)
+    if trainer == "benchmarl":
+        return _marl_record(folder, manifest)[0]
     record = read_json(folder, CONFIG, manifest)
     return training_config(field(record, "config", folder / CONFIG), folder / CONFIG)
 
@@ -140,47 +125,15 @@ def read_scenario_overrides(path: str | Path) -> dict[str, Any]:
         AgentFolderError: Not an agent folder, or an unreadable or invalid configuration.
     """
     folder = Path(path)
-    return _marl_record(folder)[2] if _format(folder) == MARL_FORMAT else {}
+    trainer, manifest = read_agent_manifest(folder)
+    return _marl_record(folder, manifest)[2] if trainer == "benchmarl" else {}
 
 
-def _marl_record(folder: Path) -> tuple[TrainConfig, list[int], dict[str, Any]]:
+def _marl_record(
+    folder: Path, manifest: dict[str, Any]
+) -> tuple[TrainConfig, list[int], dict[str, Any]]:
     """``marl_config`` of a MARL folder's ``config.json``, checked against its manifest."""
-    manifest = read_manifest(folder / MANIFEST, MARL_FORMAT, MARL_FORMAT_VERSION)
     return marl_config(read_json(folder, CONFIG, manifest), folder / CONFIG)
-
-
-def _format(folder: Path) -> str:
-    """The format a folder's manifest names.
-
-    Raises:
-        AgentFolderError: ``folder`` is missing, a file, holds no manifest (a plain SB3
-            save among them), or its manifest is unreadable or names another format.
-    """
-    if not folder.is_dir():
-        what = "is a file" if folder.exists() else "does not exist"
-        raise AgentFolderError(
-            f"{folder} {what}: give a cpf-train --out folder (or a baseline name)."
-        )
-    path = folder / MANIFEST
-    if not (path.exists() or path.is_symlink()):
-        if (folder / "model.zip").is_file():
-            raise AgentFolderError(
-                f"{folder} holds a plain SB3 save (model.zip) and no {MANIFEST}: its files "
-                "are pickles, which run any code their author put in them, so they are not "
-                "read. Train the agent with cpf-train --out DIR, which writes its weights "
-                "and statistics as data (safetensors and JSON)."
-            )
-        raise AgentFolderError(
-            f"{folder} is not a cpf-train output folder: no {MANIFEST}. Train one with "
-            "`cpf-train --out DIR`, or give a baseline name."
-        )
-    name = field(parse_json(read_file(path, MAX_JSON_BYTES, folder), path), "format", path)
-    if name not in (FORMAT, MARL_FORMAT):
-        raise AgentFolderError(
-            f"{path}: field 'format' is {name!r}; this cpf_env reads {FORMAT!r} and "
-            f"{MARL_FORMAT!r} folders."
-        )
-    return str(name)
 
 
 class Actor(Protocol):

@@ -18,16 +18,17 @@ neighbour encoder, then an MLP):
   the encoder, the field ``actor`` of ``agents.agent_folder``'s version 2
   (``encoder``, ``history``, ``pooling``, ``hidden``, ``slot_size``, ``slots``,
   ``tail``);
-- ``manifest.json``: format ``cpf-marl-agent``, version 1 (an MLP) or 2 (with
-  the encoder), and the SHA-256 and size of each file (the manifest of
-  ``agents.agent_folder``, with its own format name).
+- ``manifest.json``: ``agents.agent_folder``'s manifest (format ``cpf-agent``,
+  version 3) with trainer ``benchmarl``, and the SHA-256 and size of each
+  file. Folders of the former format name ``cpf-marl-agent`` (versions 1 and
+  2) are read too.
 
 ``read_marl_agent`` reads it back (every hash checked, every field typed
 strictly, the weights' shapes, dtype and values checked before any network is
 allocated: ``agents.agent_folder``'s discipline; no pickle anywhere) as a
 ``TrainConfig``, the actor and its statistics; ``agents.load_policy`` (and so
 ``cpf-bench --policies FOLDER`` and ``cpf-run --policy FOLDER``) dispatches
-here on the format name and runs it as an ``agents.TrainedPolicy``: the named
+here on the manifest's trainer and runs it as an ``agents.TrainedPolicy``: the named
 base policy underneath, the same residual composition and statistics, local
 observations only. An encoder actor runs on any number of neighbour slots
 (its statistics shared by the slots, ``agents.encoder.statistics_for_slots``),
@@ -45,7 +46,6 @@ import torch
 from agents.actor import PolicyNetwork, encoder_layout
 from agents.agent_folder import (
     CONFIG,
-    MANIFEST,
     NORMALIZATION,
     WEIGHTS,
     actor_from_record,
@@ -53,21 +53,19 @@ from agents.agent_folder import (
     check_empty_weight,
     network_from_layers,
     normalization_from_json,
+    read_agent_manifest,
     read_json,
     read_weights,
     write_with_manifest,
 )
-from agents.folder_files import AgentFolderError, check_fields, field, read_manifest
+from agents.folder_files import AgentFolderError, check_fields, field
 from agents.train_config import TrainConfig
 from cpf_env.envs.input_statistics import InputStatistics
 from cpf_env.infra import atomic
 from cpf_env.scenarios import make_scenario
 
-__all__ = ["MARL_FORMAT", "marl_config", "marl_overrides", "read_marl_agent", "save_marl_policy"]
+__all__ = ["marl_config", "marl_overrides", "read_marl_agent", "save_marl_policy"]
 
-MARL_FORMAT = "cpf-marl-agent"
-#: The format's versions, all read: 1, an MLP actor; 2, the neighbour encoder and an MLP.
-MARL_FORMAT_VERSION = (1, 2)
 #: ``config.json``'s ``actor.encoder`` of an encoder actor (``TrainConfig.encoder``).
 ENCODER = "deepsets"
 #: BenchMARL algorithms whose actor this format holds (a Gaussian over [-1, 1], tanh-squashed).
@@ -176,12 +174,8 @@ def save_marl_policy(
     )
     target = Path(folder)
     with atomic.staged_folder(target) as staging:
-        write_with_manifest(
-            staging,
-            agent_files(tensors, env.input_statistics, record),
-            MARL_FORMAT,
-            2 if networks else 1,
-        )
+        files = agent_files(tensors, env.input_statistics, record)
+        write_with_manifest(staging, files, "benchmarl")
     return target
 
 
@@ -278,7 +272,7 @@ def read_marl_agent(
     Raises:
         AgentFolderError: A missing, unreadable, altered or inconsistent file (named).
     """
-    manifest = read_manifest(folder / MANIFEST, MARL_FORMAT, MARL_FORMAT_VERSION)
+    _, manifest = read_agent_manifest(folder, "benchmarl")
     record = read_json(folder, CONFIG, manifest)
     config, sizes, overrides = marl_config(record, folder / CONFIG)
     encoder = actor_from_record(record, manifest["format_version"], config, folder / CONFIG)

@@ -155,7 +155,7 @@ def test_the_loaded_agent_acts_as_sb3_predicts(tmp_path: Path) -> None:
     np.testing.assert_array_equal(policy.actor(rows), expected)  # type: ignore[attr-defined]
 
 
-# ---- format version 2: the neighbour encoder and the own history -------------------------------
+# ---- the neighbour encoder and the own history (the actor field, since version 2) ---------
 
 ENCODER_CONFIG = TrainConfig(
     scenario="bench_mild",
@@ -188,10 +188,15 @@ def write_encoder_agent(folder: Path) -> PolicyNetwork:
     return network
 
 
-def test_a_version_2_folder_round_trips_the_encoder_and_its_layout(tmp_path: Path) -> None:
+def test_an_encoder_folder_round_trips_the_encoder_and_its_layout(tmp_path: Path) -> None:
     folder = tmp_path / "encoder"
     network = write_encoder_agent(folder)
-    assert json.loads((folder / "manifest.json").read_text())["format_version"] == 2
+    manifest = json.loads((folder / "manifest.json").read_text())
+    assert (manifest["format"], manifest["format_version"], manifest["trainer"]) == (
+        "cpf-agent",
+        3,
+        "sb3",
+    )
     record, loaded, normalization = read_agent(folder)
     assert record["actor"] == {"encoder": "deepsets", "history": 2, "pooling": "mean",
                                "hidden": 32, "slot_size": 4, "tail": 44, "slots": 6}  # fmt: skip
@@ -206,8 +211,9 @@ def test_a_version_2_folder_round_trips_the_encoder_and_its_layout(tmp_path: Pat
         assert torch.equal(loaded(rows.float()), network(rows.float()))
 
 
-def test_an_mlp_without_history_is_still_written_as_version_1(tmp_path: Path) -> None:
-    """The committed agents are version 1; a new MLP folder too, without an 'actor' field."""
+def test_a_version_1_folder_is_read_and_written_again_as_version_3(tmp_path: Path) -> None:
+    """The fixture is version 1; written again, its data files are the same bytes and only the
+    manifest moves to version 3 (with the trainer), without an 'actor' field."""
     record, network, normalization = read_agent(AGENT)
     assert json.loads((AGENT / "manifest.json").read_text())["format_version"] == 1
     folder = tmp_path / "mlp"
@@ -215,7 +221,9 @@ def test_an_mlp_without_history_is_still_written_as_version_1(tmp_path: Path) ->
     write_agent(folder, record, network, normalization)
     for name in ("policy.safetensors", "normalization.json", "config.json"):
         assert (folder / name).read_bytes() == (AGENT / name).read_bytes(), name
-    assert json.loads((folder / "manifest.json").read_text())["format_version"] == 1
+    manifest = json.loads((folder / "manifest.json").read_text())
+    assert (manifest["format_version"], manifest["trainer"]) == (3, "sb3")
+    assert manifest["files"] == json.loads((AGENT / "manifest.json").read_text())["files"]
 
 
 @pytest.mark.parametrize("encoder", [None, "deepsets"])
@@ -245,7 +253,7 @@ HISTORY_INPUTS = 18 + 2 * 4 + 2 * 22
 
 
 def write_history_mlp(folder: Path) -> PolicyNetwork:
-    """A version-2 folder of an untrained MLP with a history (seeded), with statistics."""
+    """A folder of an untrained MLP with a history (seeded), with statistics."""
     torch.manual_seed(0)
     network = build_actor(HISTORY_CONFIG, HISTORY_INPUTS, 3)
     with torch.no_grad():
@@ -257,11 +265,11 @@ def write_history_mlp(folder: Path) -> PolicyNetwork:
     return network
 
 
-def test_a_version_2_mlp_with_history_round_trips(tmp_path: Path) -> None:
+def test_an_mlp_with_history_round_trips(tmp_path: Path) -> None:
     folder = tmp_path / "mlp"
     network = write_history_mlp(folder)
     assert HISTORY_CONFIG.learner_input_size() == HISTORY_INPUTS
-    assert json.loads((folder / "manifest.json").read_text())["format_version"] == 2
+    assert json.loads((folder / "manifest.json").read_text())["format_version"] == 3
     record, loaded, normalization = read_agent(folder)
     assert record["actor"] == {"encoder": None, "history": 2}
     assert "encoder" not in record["config"] and record["config"]["history"] == 2
@@ -276,9 +284,9 @@ def test_a_version_2_mlp_with_history_round_trips(tmp_path: Path) -> None:
         assert torch.equal(loaded(rows), network(rows))
 
 
-def test_a_fresh_mlp_folder_holds_only_the_fields_of_format_1(tmp_path: Path) -> None:
-    """No 'encoder', 'history', 'asymmetric_critic', 'yield_at_limit' nor 'actor': older
-    versions read it."""
+def test_a_fresh_mlp_config_holds_only_the_first_fields(tmp_path: Path) -> None:
+    """No 'encoder', 'history', 'asymmetric_critic', 'yield_at_limit' nor 'actor' in its
+    config.json: an MLP's record is the one of version 1."""
     config = dataclasses.replace(HISTORY_CONFIG, history=0)
     folder = tmp_path / "mlp"
     folder.mkdir()
@@ -296,7 +304,7 @@ def test_a_fresh_mlp_folder_holds_only_the_fields_of_format_1(tmp_path: Path) ->
         "yield_at_limit",
     }
     assert TrainConfig.from_json(record["config"]) == config
-    assert json.loads((folder / "manifest.json").read_text())["format_version"] == 1
+    assert json.loads((folder / "manifest.json").read_text())["format_version"] == 3
     assert read_agent(folder)[1].input_size == 26
     yielding = dataclasses.replace(config, yield_at_limit=True)
     for other in (HISTORY_CONFIG, ENCODER_CONFIG, yielding):  # set: written, and read back

@@ -578,10 +578,10 @@ def test_an_onnx_link_to_a_sealed_file_is_followed(
     assert load_onnx_policy(link).actor.input_size == 26
 
 
-# ---- format version 2: the encoder's layout and tensors, checked against each other -----------
+# ---- the actor field: the encoder's layout and tensors, checked against each other -----------
 
 
-def _v2(tmp_path: Path) -> Path:
+def _encoder_folder(tmp_path: Path) -> Path:
     from test_agent_folder import write_encoder_agent
 
     folder = tmp_path / "encoder"
@@ -615,13 +615,17 @@ def _bump_weight_mean(data: Any) -> None:
         ("normalization.json", _bump_slot_mean, ["differ between slots"]),
         ("normalization.json", _bump_weight_mean, ["empty slot's a_ij becomes", "masks slots at"]),
         ("manifest.json", _set("format_version", 1), ["format version 1, an MLP without"]),
-        ("manifest.json", _set("format_version", 3), ["format version 3", "version 1 and 2"]),
+        ("manifest.json", _set("format_version", 4), ["format version 4", "version(s) 1, 2, 3"]),
+        ("manifest.json", _set("trainer", "torchrl"), ["'trainer' is 'torchrl'", "'benchmarl'"]),
+        ("manifest.json", lambda data: data.pop("trainer"), ["lacks the field 'trainer'"]),
+        ("manifest.json", _set("format", "cpf-marl-agent"), ["version 3", "version(s) 1, 2"]),
+        ("manifest.json", _set("format", "cpf-policy"), ["'cpf-policy'", "cpf-agent and"]),
     ],
 )
-def test_a_tampered_version_2_folder_is_refused_naming_what(
+def test_a_tampered_encoder_folder_is_refused_naming_what(
     tmp_path: Path, name: str, edit: Callable[[Any], None], patterns: list[str]
 ) -> None:
-    folder = _v2(tmp_path)
+    folder = _encoder_folder(tmp_path)
     load_policy(folder)  # valid before the edit
     _edit_json(folder, name, edit)
     _refused(folder, *patterns)
@@ -649,16 +653,16 @@ def test_a_tampered_version_2_folder_is_refused_naming_what(
         ),
     ],
 )
-def test_a_version_2_folder_with_forged_encoder_tensors_is_refused(
+def test_an_encoder_folder_with_forged_encoder_tensors_is_refused(
     tmp_path: Path, edit: Callable[[dict[str, torch.Tensor]], None], patterns: list[str]
 ) -> None:
-    folder = _v2(tmp_path)
+    folder = _encoder_folder(tmp_path)
     _edit_tensors(folder, edit)
     _refused(folder, *patterns)
 
 
-def test_a_version_2_weights_file_edited_without_the_manifest_is_refused(tmp_path: Path) -> None:
-    folder = _v2(tmp_path)
+def test_an_encoder_weights_file_edited_without_the_manifest_is_refused(tmp_path: Path) -> None:
+    folder = _encoder_folder(tmp_path)
     data = bytearray((folder / "policy.safetensors").read_bytes())
     data[-1] ^= 1
     (folder / "policy.safetensors").write_bytes(bytes(data))
@@ -698,7 +702,7 @@ def _drop_statistics(folder: Path) -> None:
     ],
 )
 @pytest.mark.parametrize("normalized", [True, False])
-def test_a_version_2_actor_record_is_checked_against_the_config_on_every_load_path(
+def test_the_actor_record_is_checked_against_the_config_on_every_load_path(
     tmp_path: Path, edits: list[tuple[str, Any]], patterns: list[str], normalized: bool
 ) -> None:
     """load_policy and export_onnx (cpf-export) both refuse it, naming config.json.
@@ -706,7 +710,7 @@ def test_a_version_2_actor_record_is_checked_against_the_config_on_every_load_pa
     Without statistics nothing else ties ``actor.slots`` to the weights: 10**12 slots
     loaded, and cpf-export then allocated 18 + 4 x 10**12 floats per vessel.
     """
-    folder = _v2(tmp_path)
+    folder = _encoder_folder(tmp_path)
     if not normalized:
         _drop_statistics(folder)
     load_policy(folder)  # valid before the edit
@@ -746,7 +750,7 @@ def test_an_mlp_with_history_whose_input_is_not_the_configurations_is_refused(
 
 def test_a_huge_encoder_is_refused_naming_its_fields(tmp_path: Path) -> None:
     """actor.hidden = 10**5: 4 x 10**10 bytes of encoder weights, refused before any is built."""
-    folder = _v2(tmp_path)
+    folder = _encoder_folder(tmp_path)
     _edit_json(folder, "config.json", _set("actor.hidden", 10**5))
     _exported_refused(
         folder, tmp_path, "actor.hidden = 100000", "actor.slot_size = 4", "config.json"

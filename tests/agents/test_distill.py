@@ -536,7 +536,7 @@ def test_an_encoder_student_is_a_format_2_folder_that_runs_on_any_degree(
     assert "encoder.phi.0.weight" in first
     manifest = json.loads((tmp_path / "a" / "manifest.json").read_text())
     record = json.loads((tmp_path / "a" / "config.json").read_text())
-    assert manifest["format_version"] == 2
+    assert (manifest["format_version"], manifest["trainer"]) == (3, "sb3")
     assert record["actor"]["encoder"] == "deepsets" and record["actor"]["history"] == 2
     assert record["distillation"]["draws"] == [[0], [1], [2]]
     # cpf-train's actor of the same TrainConfig has the same tensors and shapes

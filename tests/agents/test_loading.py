@@ -61,10 +61,10 @@ def _recording(policy: TrainedPolicy) -> list[np.ndarray]:
     return actions
 
 
-def test_the_folder_is_version_2_and_describes_the_actor(agent: Path) -> None:
+def test_the_folder_is_version_3_and_describes_the_actor(agent: Path) -> None:
     manifest = json.loads((agent / "manifest.json").read_text())
     record = json.loads((agent / "config.json").read_text())
-    assert manifest["format_version"] == 2
+    assert (manifest["format_version"], manifest["trainer"]) == (3, "sb3")
     # own 18, 6 slots of 4; tail: 3 entries of (18 own + 3 actions + 1 valid)
     assert record["actor"] == {
         "encoder": "deepsets",

@@ -373,7 +373,12 @@ def test_a_neighbour_encoder_actor_trains_saves_and_runs_on_a_higher_degree(
     folder = policy_folder.save_marl_policy(experiment, tmp_path / "agent", "mappo")
     manifest = json.loads((folder / "manifest.json").read_text())
     record = json.loads((folder / "config.json").read_text())
-    assert manifest["format_version"] == 2 and record["sizes"] == [18 + 8 + 1, 16, 3]
+    assert (manifest["format"], manifest["format_version"], manifest["trainer"]) == (
+        "cpf-agent",
+        3,
+        "benchmarl",
+    )
+    assert record["sizes"] == [18 + 8 + 1, 16, 3]
     assert record["actor"] == {"encoder": "deepsets", "history": 0, "pooling": "mean",
                                "hidden": 8, "slot_size": 4, "slots": 2, "tail": 0}  # fmt: skip
     # the saved actor acts as BenchMARL's deterministic policy on the training task

@@ -110,7 +110,7 @@ def test_a_mixture_and_reward_overrides_round_trip_through_the_file(tmp_path: Pa
 
 
 def test_encoder_none_overrides_the_files_encoder(tmp_path: Path) -> None:
-    """``--set encoder=none``: an MLP, whatever the file says; its folder is format version 1."""
+    """``--set encoder=none``: an MLP, whatever the file says; its folder has no actor field."""
     path = tmp_path / "h.toml"
     path.write_text(TINY + 'encoder = "deepsets"\nshared_slot_statistics = true\n')
     out = tmp_path / "run"
@@ -119,7 +119,7 @@ def test_encoder_none_overrides_the_files_encoder(tmp_path: Path) -> None:
     record = json.loads((out / "config.json").read_text())
     assert "encoder" not in record["config"] and "actor" not in record
     assert TrainConfig.from_json(record["config"]).shared_slot_statistics  # the file's
-    assert json.loads((out / "manifest.json").read_text())["format_version"] == 1
+    assert json.loads((out / "manifest.json").read_text())["format_version"] == 3
     assert "encoder" not in (out / "hyperparameters.toml").read_text()
 
 
