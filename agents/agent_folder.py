@@ -83,8 +83,9 @@ from agents.folder_files import (
     read_verified,
     statistics_arrays,
 )
-from agents.train_config import ENCODERS, TrainConfig
+from agents.train_config import ENCODERS, TrainConfig, upgrade_record
 from cpf_env.envs.input_statistics import InputStatistics
+from cpf_env.envs.residual import ResidualConfig
 from cpf_env.infra import atomic
 
 __all__ = [
@@ -104,6 +105,7 @@ __all__ = [
     "read_agent",
     "read_agent_manifest",
     "read_json",
+    "read_record",
     "read_weights",
     "training_config",
     "write_agent",
@@ -286,15 +288,38 @@ def read_weights(folder: Path, manifest: dict[str, Any]) -> dict[str, torch.Tens
         raise AgentFolderError(f"{folder / WEIGHTS} is not a safetensors file: {message}") from None
 
 
+def read_record(folder: Path, manifest: dict[str, Any]) -> dict[str, Any]:
+    """An ``sb3`` folder's ``config.json``, its ``config`` in today's layout.
+
+    A folder of format 1 or 2 holds the ``TrainConfig`` of that time (``base`` and the
+    residual's fields at the top level): ``agents.train_config.upgrade_record`` moves it
+    to today's; a folder of format 3 is read as it is.
+
+    Raises:
+        AgentFolderError: An unreadable file or one that does not match the manifest.
+    """
+    record = read_json(folder, CONFIG, manifest)
+    if manifest["format_version"] < FORMAT_VERSION and isinstance(record, dict):
+        config = record.get("config")
+        if isinstance(config, dict):  # its fields' types checked where the file has them
+            types = {f.name: str(f.type) for f in dataclasses.fields(ResidualConfig)}
+            check_fields(config, {**types, "base": "str"}, folder / CONFIG, "config.")
+            record = {**record, "config": upgrade_record(config)}
+    return record
+
+
 def training_config(data: Any, source: Path | str) -> TrainConfig:
     """A ``TrainConfig`` from its JSON object, every field's JSON type checked first.
 
     Raises:
-        AgentFolderError: A field of the wrong type (``scale: true``, ``net_arch: ["64"]``),
-            an unknown field, or a value ``TrainConfig`` refuses; naming ``source``.
+        AgentFolderError: A field of the wrong type (``residual.scale: true``, ``net_arch:
+            ["64"]``), an unknown field, or a value ``TrainConfig`` refuses; naming ``source``.
     """
-    types = {f.name: str(f.type) for f in dataclasses.fields(TrainConfig)}
+    types = {f.name: str(f.type) for f in dataclasses.fields(TrainConfig) if f.name != "residual"}
     check_fields(data, types, source, "config.")
+    if isinstance(data, dict) and "residual" in data:
+        residual = {f.name: str(f.type) for f in dataclasses.fields(ResidualConfig)}
+        check_fields(data["residual"], residual, source, "config.residual.")
     try:
         config = TrainConfig.from_json(data)
         config.learner_slots()  # the home scenario's degree fits neighbour_slots
@@ -542,7 +567,7 @@ def read_agent(folder: Path) -> tuple[dict[str, Any], PolicyNetwork, Normalizati
         AgentFolderError: A missing, unreadable, altered or inconsistent file (named).
     """
     _, manifest = read_agent_manifest(folder, "sb3")
-    record = read_json(folder, CONFIG, manifest)
+    record = read_record(folder, manifest)
     config = training_config(field(record, "config", folder / CONFIG), folder / CONFIG)
     encoder = actor_from_record(record, manifest["format_version"], config, folder / CONFIG)
     network = network_from_tensors(

@@ -179,9 +179,9 @@ def make_env(config: TrainConfig, num_fleets: int | None = None) -> FleetVecEnv 
 
     A ``FleetVecEnv`` for one scenario, a ``MixtureVecEnv`` for several.
     """
-    base = None if config.base == "none" else config.base
+    base = None if config.base_policy == "none" else config.base_policy
     fleets = config.fleets if num_fleets is None else num_fleets
-    residual = config.residual_config()
+    residual = config.residual
     if len(config.scenarios) > 1:
         return MixtureVecEnv(
             config.scenarios,

@@ -22,7 +22,7 @@ The teacher's command is turned into the residual that would reproduce it,
 and clipped to [-1, 1]: the student learns what the teacher would add to the
 base it runs on; where the teacher's correction is beyond the residual's
 reach the label is clipped (``DistillReport.clipped`` says how often; raise
-``TrainConfig.scale`` if it is large).
+``TrainConfig.residual.scale`` if it is large).
 
 Which base the label is taken on: ``DistillConfig.label_base``
 (``agents.distill_config``).
@@ -80,7 +80,7 @@ The result is an ordinary agent folder (``agents.load_policy``,
 ``cpf-bench --policies FOLDER``): the ``TrainConfig`` it was distilled for,
 the input statistics of round 0's data, the actor, and a ``distillation``
 record (settings, per-round losses, clipped share, wall time). With an
-evaluator (``distill(..., evaluate=)``, ``cpf-distill --eval-seeds``) the
+evaluator (``distill(..., evaluate=)``, ``cpf-distill --eval-num-seeds``) the
 student is also evaluated before round 0 and after each round, into the
 rows of ``evaluations.csv`` (``DistillReport.evaluations``).
 ``cpf-distill`` (``cpf_commands.distill``) runs it from a TOML file.
@@ -333,7 +333,7 @@ def _fit(
 
 def _learner_residual(config: TrainConfig) -> ResidualConfig:
     """The run's residual with its neighbour slots fixed (all groups' inputs share K)."""
-    residual = config.residual_config()
+    residual = config.residual
     if residual.neighbour_slots is None:  # one named scenario: its own degree
         residual = dataclasses.replace(residual, neighbour_slots=config.learner_slots()[0])
     return residual
@@ -363,7 +363,7 @@ def _group(
     of the env's base taken before the env resets it, then reset with the
     seed the env gives it.
     """
-    base = None if config.base == "none" else config.base  # mpc runs fleet by fleet
+    base = None if config.base_policy == "none" else config.base_policy  # mpc: fleet by fleet
     env = FleetVecEnv(
         scenario, num_fleets=fleets, base_policy=base, residual=_learner_residual(config)
     )
@@ -478,7 +478,7 @@ def distill(
 ) -> DistillReport:
     """Distill a teacher into a local residual student; write its agent folder.
 
-    With ``evaluate`` (``cpf-distill --eval-seeds``: ``cpf-train``'s evaluator
+    With ``evaluate`` (``cpf-distill --eval-num-seeds``: ``cpf-train``'s evaluator
     on the benchmark's ``test`` split) the student is evaluated before round 0
     and after each round (``agents.schedule.EvaluationLog``, no ``best/``: the
     student is the last round's). Before round 0 its output is exactly zero

@@ -197,11 +197,13 @@ def check_distillation(config: TrainConfig, settings: DistillConfig) -> None:
     """Refuse what ``distill`` cannot do, before anything runs (see ``distill``)."""
     for name in config.scenarios:
         check_training(name, range(config.seed, config.seed + config.fleets))
-    if config.mode not in LABEL_MODES or config.algo != "ppo" or not config.normalize_observations:
+    mode = config.residual.mode
+    if mode not in LABEL_MODES or config.algo != "ppo" or not config.normalize_observations:
         raise ValueError(
-            "distill needs a force or force_and_rate residual (or base='none') with the PPO "
-            f"actor format and normalized inputs (mode in {list(LABEL_MODES)}, algo='ppo', "
-            f"normalize_observations); got mode={config.mode!r}, algo={config.algo!r}, "
+            "distill needs a force or force_and_rate residual (or base_policy='none') with the "
+            f"PPO actor format and normalized inputs (residual.mode in {list(LABEL_MODES)}, "
+            f"algo='ppo', normalize_observations); got residual.mode={mode!r}, "
+            f"algo={config.algo!r}, "
             f"normalize_observations={config.normalize_observations}."
         )
     groups = len(config.scenarios) + settings.procedural
@@ -211,14 +213,15 @@ def check_distillation(config: TrainConfig, settings: DistillConfig) -> None:
             f"at least one fleet each; got fleets={config.fleets}. Raise fleets."
         )
     if settings.label_base == "twin" and (
-        config.base not in WHOLE_BATCH_BASES or not config.hide_residual_from_base
+        config.base_policy not in WHOLE_BATCH_BASES or not config.residual.hide_residual_from_base
     ):
         raise ValueError(
             'label_base = "twin" takes the labels on a copy of the base shown the whole '
             "applied force: it is for a base with a residual-force observer "
-            f"({', '.join(WHOLE_BATCH_BASES)}) that hides the residual (hide_residual_from_base "
-            f'= true, the default); this run has base = "{config.base}", '
-            f"hide_residual_from_base = {str(config.hide_residual_from_base).lower()}. "
+            f"({', '.join(WHOLE_BATCH_BASES)}) that hides the residual "
+            "(residual.hide_residual_from_base = true, the default); this run has "
+            f'base_policy = "{config.base_policy}", residual.hide_residual_from_base = '
+            f"{str(config.residual.hide_residual_from_base).lower()}. "
             'Leave label_base out (it defaults to "env") or change those settings.'
         )
     draws = settings.procedural * (settings.rounds if settings.redraw else 1)

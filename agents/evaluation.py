@@ -10,7 +10,7 @@ as the mean cost of that folder. ``cpf-train`` and ``cpf-distill`` hand it to
 
 Example::
 
-    evaluate = TestSplitEvaluator(["bench_lossy_links"], seeds=10)
+    evaluate = TestSplitEvaluator(["bench_lossy_links"], num_seeds=10)
     evaluate(Path("runs/ppo/best"))  # {"bench_lossy_links": 41.7}
 """
 
@@ -24,10 +24,10 @@ import numpy as np
 from agents.loading import load_policy
 from cpf_bench import evaluate
 
-__all__ = ["DEFAULT_EVAL_SEEDS", "TestSplitEvaluator"]
+__all__ = ["DEFAULT_EVAL_NUM_SEEDS", "TestSplitEvaluator"]
 
 #: Evaluation episodes per scenario (``cpf-bench``'s default ``--num-seeds``).
-DEFAULT_EVAL_SEEDS = 10
+DEFAULT_EVAL_NUM_SEEDS = 10
 
 
 class TestSplitEvaluator:
@@ -35,7 +35,7 @@ class TestSplitEvaluator:
 
     Args:
         scenarios: Registered scenario names.
-        seeds: Episodes per scenario (paired evaluation seeds, as ``cpf-bench --num-seeds``).
+        num_seeds: Episodes per scenario (paired evaluation seeds, as ``cpf-bench --num-seeds``).
         steps: Horizon override (``cpf-bench --steps``); None: each scenario's own.
 
     Attributes:
@@ -48,17 +48,20 @@ class TestSplitEvaluator:
     __test__ = False  # not a pytest class despite its name
 
     def __init__(
-        self, scenarios: Sequence[str], seeds: int = DEFAULT_EVAL_SEEDS, steps: int | None = None
+        self,
+        scenarios: Sequence[str],
+        num_seeds: int = DEFAULT_EVAL_NUM_SEEDS,
+        steps: int | None = None,
     ) -> None:
-        if isinstance(seeds, bool) or int(seeds) != seeds or seeds < 1:
-            raise ValueError(f"evaluation seeds must be an integer >= 1, got {seeds!r}.")
+        if isinstance(num_seeds, bool) or int(num_seeds) != num_seeds or num_seeds < 1:
+            raise ValueError(f"num_seeds must be an integer >= 1, got {num_seeds!r}.")
         if not scenarios:
             raise ValueError("give at least one evaluation scenario.")
-        self.scenarios, self.seeds, self.steps = tuple(scenarios), int(seeds), steps
+        self.scenarios, self.num_seeds, self.steps = tuple(scenarios), int(num_seeds), steps
         self.settings = {
             "split": "test",
             "scenarios": list(self.scenarios),
-            "seeds": self.seeds,
+            "num_seeds": self.num_seeds,
             "steps": steps,
         }
 
@@ -67,7 +70,7 @@ class TestSplitEvaluator:
         result = evaluate(
             {"agent": lambda task: load_policy(Path(folder), task)},
             self.scenarios,
-            num_seeds=self.seeds,
+            num_seeds=self.num_seeds,
             steps=self.steps,
             split="test",
         )

@@ -221,6 +221,10 @@ _CHECKS: dict[str, tuple[str, Any]] = {
         "a string or a list of strings",
         lambda v: isinstance(v, str) or _is_strings(v),
     ),
+    "tuple[float, float, float]": (
+        "a list of three finite numbers",
+        lambda v: isinstance(v, list) and len(v) == 3 and all(_is_number(x) for x in v),
+    ),
     "dict[str, float]": (
         "an object of finite numbers",
         lambda v: isinstance(v, dict) and all(_is_number(x) for x in v.values()),

@@ -38,7 +38,7 @@ from __future__ import annotations
 import hashlib
 from dataclasses import dataclass
 from pathlib import Path
-from typing import cast
+from typing import Any, cast
 
 import numpy as np
 import torch
@@ -53,15 +53,17 @@ from agents.train_config import TrainConfig
 
 __all__ = ["RECIPE", "InitSource", "read_init_source"]
 
-#: ``TrainConfig`` fields an agent folder must share with the run it starts.
+#: ``TrainConfig`` fields (``residual.*``: of its ``ResidualConfig``) an agent folder must
+#: share with the run it starts; the neighbour slots are compared as the learner's K.
 RECIPE = (
     "algo",
-    "base",
-    "mode",
-    "scale",
-    "extras",
-    "hide_residual_from_base",
-    "yield_at_limit",
+    "base_policy",
+    "residual.mode",
+    "residual.scale",
+    "residual.kinematic_scale",
+    "residual.extras",
+    "residual.hide_residual_from_base",
+    "residual.yield_at_limit",
     "normalize_observations",
     "shared_slot_statistics",
     "encoder",
@@ -120,6 +122,14 @@ class InitSource:
             env.epsilon, env.clip_obs = self.normalization.epsilon, self.normalization.clip
 
 
+def _value(config: TrainConfig, key: str) -> Any:
+    """The value of a ``RECIPE`` key (``"residual.mode"``: ``config.residual.mode``)."""
+    value: Any = config
+    for name in key.split("."):
+        value = getattr(value, name)
+    return value
+
+
 def read_init_source(folder: str | Path, config: TrainConfig) -> InitSource:
     """Read the agent folder ``folder`` and check that it can start the run ``config``.
 
@@ -142,9 +152,9 @@ def read_init_source(folder: str | Path, config: TrainConfig) -> InitSource:
     record, network, normalization = read_agent(path)
     saved = training_config(record["config"], path / "config.json")
     differ = [
-        f"{key} (folder {getattr(saved, key)!r}, run {getattr(config, key)!r})"
+        f"{key} (folder {_value(saved, key)!r}, run {_value(config, key)!r})"
         for key in RECIPE
-        if getattr(saved, key) != getattr(config, key)
+        if _value(saved, key) != _value(config, key)
     ]
     layout = ("neighbour_slots", saved.learner_slots()[0], config.learner_slots()[0])
     if not differ and layout[1] != layout[2]:

@@ -38,6 +38,7 @@ from agents.agent_folder import (
     read_agent,
     read_agent_manifest,
     read_json,
+    read_record,
     training_config,
 )
 from agents.encoder import statistics_for_slots
@@ -111,7 +112,7 @@ def read_config(path: str | Path) -> TrainConfig:
     trainer, manifest = read_agent_manifest(folder)
     if trainer == "benchmarl":
         return _marl_record(folder, manifest)[0]
-    record = read_json(folder, CONFIG, manifest)
+    record = read_record(folder, manifest)
     return training_config(field(record, "config", folder / CONFIG), folder / CONFIG)
 
 
@@ -242,8 +243,8 @@ class TrainedPolicy(FleetPolicy):
         self.act_dim = 4 + scenario.message_size
         self.agents = [f"vessel_{i}" for i in range(self.n)]
         self.diagnostics: dict[str, Array] = {}
-        self._base = resolve_base_policy(config.base, scenario)
-        residual = config.residual_config()
+        self._base = resolve_base_policy(config.base_policy, scenario)
+        residual = config.residual
         if config.encoder is not None:
             slots = self._encoder_slots(config, actor)
             residual = dataclasses.replace(residual, neighbour_slots=slots)
@@ -258,7 +259,8 @@ class TrainedPolicy(FleetPolicy):
                 f"scenario {scenario.name!r} gives inputs of size {size} but the "
                 f"network of {name!r} takes {actor.input_size}: evaluate it on a scenario with "
                 f"the training scenarios' neighbour slots and message size "
-                f"({config.home_scenario!r}), or train with --set neighbour_slots=K to run on "
+                f"({config.home_scenario!r}), or train with --set "
+                f"residual.neighbour_slots=K to run on "
                 "graphs of higher degree."
             )
         if actor.action_size != self._residual.action_size:

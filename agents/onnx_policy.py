@@ -101,8 +101,8 @@ def residual_range(config: TrainConfig, scenario: Scenario) -> NDArray[np.float3
     """
     from cpf_env.envs.residual import ResidualController, learner_config
 
-    residual = config.residual_config()
-    if config.base == "none":  # the learner's own composition, without the base object
+    residual = config.residual
+    if config.base_policy == "none":  # the learner's own composition, without the base object
         residual = learner_config(None, residual)
     if residual.mode == "kinematic":
         offsets = np.asarray(residual.kinematic_scale, dtype=np.float64)

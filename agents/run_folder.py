@@ -77,7 +77,7 @@ from agents.schedule import (
     evaluations_csv,
 )
 from agents.slot_statistics import SlotSharedVecNormalize
-from agents.train_config import TrainConfig
+from agents.train_config import TrainConfig, config_from_record
 from cpf_env.infra import atomic
 
 __all__ = [
@@ -127,6 +127,9 @@ def write_run_record(
 def read_run_record(folder: Path) -> tuple[TrainConfig, RunSchedule, Any]:
     """The configuration, schedule and evaluation settings in ``folder/run.json``.
 
+    A record written before agent-folder format 3 (the configuration's ``base`` and flat
+    residual fields, the evaluation's ``seeds``) is read in today's layout.
+
     Raises:
         ValueError: No run record (not a run folder), or an unreadable one.
     """
@@ -138,8 +141,11 @@ def read_run_record(folder: Path) -> tuple[TrainConfig, RunSchedule, Any]:
         )
     try:
         record = json.loads(path.read_text())
-        config = TrainConfig.from_json(record["config"])
-        return config, RunSchedule(**record["schedule"]), record.get("evaluation")
+        evaluation = record.get("evaluation")
+        if evaluation is not None and "seeds" in evaluation:  # written before num_seeds
+            evaluation["num_seeds"] = evaluation.pop("seeds")
+        config = config_from_record(record["config"])
+        return config, RunSchedule(**record["schedule"]), evaluation
     except (OSError, json.JSONDecodeError, KeyError, TypeError) as error:
         raise ValueError(f"{path} is not a readable run record: {error}") from None
 

@@ -24,28 +24,28 @@ from cpf_env.sim.observation import SLOTS
 __all__ = [
     "ALGORITHM_NAMES",
     "ENCODERS",
+    "FLAT_RESIDUAL_FIELDS",
     "INIT_LOG_STD",
     "LOG_STD_RANGE",
     "MAX_SEED",
-    "SINCE_FORMAT_2",
     "TrainConfig",
+    "config_from_record",
+    "upgrade_record",
 ]
 
 #: Algorithms ``agents.training.ALGORITHMS`` maps to SB3 classes.
 ALGORITHM_NAMES = ("ppo", "sac")
 #: Neighbour encoders of the actor (``agents.encoder``); None: an MLP over the flat input.
 ENCODERS = ("deepsets",)
-#: Fields added since agent-folder format version 1, and the defaults ``to_json`` leaves out,
-#: so a record at these defaults reads in the versions before them (``encoder`` and
-#: ``history`` came with format version 2; ``asymmetric_critic`` shapes only training;
-#: a version without ``yield_at_limit`` refuses a record that sets it, rather than
-#: composing the residual without it).
-SINCE_FORMAT_2: dict[str, Any] = {
-    "encoder": None,
-    "history": 0,
-    "asymmetric_critic": False,
-    "yield_at_limit": False,
-}
+#: ``ResidualConfig`` fields that records before agent-folder format 3 held at the top level.
+FLAT_RESIDUAL_FIELDS = (
+    "mode",
+    "scale",
+    "extras",
+    "hide_residual_from_base",
+    "neighbour_slots",
+    "yield_at_limit",
+)
 #: Largest training seed: numpy's legacy seeding, which SB3 calls, takes 32 bits.
 MAX_SEED = 2**32 - 1
 #: Accepted initial log standard deviations: exp(-20) is no noise, exp(5) = 148 already
@@ -71,18 +71,17 @@ class TrainConfig:
         scenario: A registered scenario name, or several (a tuple): a mixture, one
             group of fleets per scenario (``agents.mixture_env``). The first is the
             agent's default evaluation scenario (``home_scenario``).
-        base: A name of ``baselines.POLICIES``, or ``"none"``: the agent commands
+        base_policy: A name of ``baselines.POLICIES``, or ``"none"``: the agent commands
             forces and path-variable rate itself (learning from scratch).
+        residual: How the learner's action enters (``cpf_env.envs.residual.ResidualConfig``:
+            ``mode``, ``scale``, ``kinematic_scale``, ``extras``,
+            ``hide_residual_from_base``, ``neighbour_slots``, ``yield_at_limit``), or a
+            mapping of those fields (a TOML ``[residual]`` table). In a mixture, its
+            ``neighbour_slots`` left None become the largest degree of the training
+            scenarios, so the agent runs on every one of them.
         fleets: Fleets simulated together (num_envs = fleets x n).
         timesteps: Training budget in vessel-steps (SB3 timesteps).
         seed: Seeds the networks (torch), SB3 and the fleets (fleet k: seed + k).
-        mode: Residual mode (``cpf_env.envs.residual.RESIDUAL_MODES``).
-        scale: Residual range as a fraction of the limits.
-        extras: Local extras appended to the observation (``cpf_env.envs.residual.EXTRAS``).
-        hide_residual_from_base: Show the base the applied force minus the residual.
-        yield_at_limit: Drop a force residual that pulls the command back from an
-            actuator limit the base commands (``cpf_env.envs.residual``), in training
-            and wherever the agent runs.
         reward_form: ``"log"`` or ``"quadratic"`` to override the scenario's
             reward form, or None to keep it.
         normalize_observations: Wrap in ``VecNormalize`` (observations only).
@@ -98,9 +97,6 @@ class TrainConfig:
         torch_threads: Threads torch may use; None keeps torch's default (all cores).
             On a quiet 2-core machine 2 threads ran PPO 1.4x faster than 1; on a
             machine shared with other jobs 1 thread was faster.
-        neighbour_slots: Neighbour slots of the learner's input (``ResidualConfig``);
-            None: the largest degree of the training scenarios. An agent with K slots
-            runs on every scenario whose graph has degree <= K.
         reward_overrides: ``RewardWeights`` fields changed for training only (e.g.
             ``{"heading": 1.0}``), applied after ``reward_form``; the benchmark's
             cost stays the scenario's own reward.
@@ -125,14 +121,11 @@ class TrainConfig:
 
     algo: str = "ppo"
     scenario: str | tuple[str, ...] = "wang2014"
-    base: str = "nn_dsc"
+    base_policy: str = "nn_dsc"
+    residual: ResidualConfig = dataclasses.field(default_factory=ResidualConfig)
     fleets: int = 256
     timesteps: int = 2_000_000
     seed: int = 0
-    mode: str = "force"
-    scale: float = 0.2
-    extras: tuple[str, ...] = ()
-    hide_residual_from_base: bool = True
     reward_form: str | None = None
     normalize_observations: bool = True
     log_std_init: float = -1.0
@@ -145,29 +138,28 @@ class TrainConfig:
     gradient_steps: int = 4
     buffer_size: int = 1_000_000
     torch_threads: int | None = None
-    neighbour_slots: int | None = None
     reward_overrides: dict[str, float] = dataclasses.field(default_factory=dict)
     balance_rewards: bool = True
     shared_slot_statistics: bool = False
     encoder: str | None = None
     history: int = 0
     asymmetric_critic: bool = False
-    yield_at_limit: bool = False
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "extras", tuple(self.extras))
         object.__setattr__(self, "net_arch", tuple(int(x) for x in self.net_arch))
         if self.algo not in ALGORITHM_NAMES:
             raise ValueError(f"algo must be one of {sorted(ALGORITHM_NAMES)}, got {self.algo!r}.")
         object.__setattr__(self, "scenario", _scenario_field(self.scenario))
         object.__setattr__(self, "reward_overrides", dict(self.reward_overrides))
-        if self.neighbour_slots is None and len(self.scenarios) > 1:
+        residual = _residual_field(self.residual)
+        if residual.neighbour_slots is None and len(self.scenarios) > 1:
             degrees = [observation_layout(scenarios.get(n)).n_slots for n in self.scenarios]
-            object.__setattr__(self, "neighbour_slots", max(degrees))
-        if self.base != "none" and self.base not in POLICIES:
+            residual = dataclasses.replace(residual, neighbour_slots=max(degrees))
+        object.__setattr__(self, "residual", residual)
+        if self.base_policy != "none" and self.base_policy not in POLICIES:
             raise ValueError(
-                f"base must be one of {sorted(POLICIES)} or 'none' (learn from scratch), "
-                f"got {self.base!r}."
+                f"base_policy must be one of {sorted(POLICIES)} or 'none' (learn from "
+                f"scratch), got {self.base_policy!r}."
             )
         if self.reward_form is not None and self.reward_form not in REWARD_FORMS:
             raise ValueError(
@@ -211,19 +203,15 @@ class TrainConfig:
                 f"{self.log_std_init!r}."
             )
         flags = (
-            "hide_residual_from_base",
             "normalize_observations",
             "balance_rewards",
             "shared_slot_statistics",
             "asymmetric_critic",
-            "yield_at_limit",
         )
         for name in flags:
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"{name} must be true or false, got {getattr(self, name)!r}.")
         self._check_actor()
-        if self.base != "none":
-            self.residual_config()  # validates mode, scale, extras and neighbour slots
         for name in self.scenarios:
             self.scenario_overrides(name)  # validates the reward overrides
 
@@ -266,24 +254,13 @@ class TrainConfig:
         """The default evaluation scenario: the first training scenario."""
         return self.scenarios[0]
 
-    def residual_config(self) -> ResidualConfig:
-        """The ``ResidualConfig`` of this run."""
-        return ResidualConfig(
-            mode=self.mode,
-            scale=self.scale,
-            extras=self.extras,
-            hide_residual_from_base=self.hide_residual_from_base,
-            neighbour_slots=self.neighbour_slots,
-            yield_at_limit=self.yield_at_limit,
-        )
-
     def learner_config(self) -> ResidualConfig:
-        """The learner's composition: ``residual_config()``, or the learner's own without a base.
+        """The learner's composition: ``residual``, or the learner's own without a base.
 
-        ``base="none"``: ``cpf_env.envs.residual.learner_config``'s (forces and rate, no extras).
+        ``base_policy="none"``: ``cpf_env.envs.residual.learner_config``'s (forces and rate,
+        no extras).
         """
-        residual = self.residual_config()
-        return learner_config(None, residual) if self.base == "none" else residual
+        return learner_config(None, self.residual) if self.base_policy == "none" else self.residual
 
     def learner_slots(self) -> tuple[int, int]:
         """(K, floats per slot) of the learner's input: its neighbour slots' layout.
@@ -291,9 +268,7 @@ class TrainConfig:
         Raises:
             ValueError: The home scenario's degree exceeds ``neighbour_slots``.
         """
-        layout = self.residual_config().learner_layout(
-            observation_layout(scenarios.get(self.home_scenario))
-        )
+        layout = self.residual.learner_layout(observation_layout(scenarios.get(self.home_scenario)))
         return layout.n_slots, layout.slot_size
 
     def learner_tail(self) -> int:
@@ -338,26 +313,64 @@ class TrainConfig:
         return {"reward": dataclasses.replace(reward, **self.reward_overrides)}  # type: ignore[arg-type]
 
     def to_json(self) -> dict[str, Any]:
-        """A JSON-ready dict of the fields, those of ``SINCE_FORMAT_2`` only when not default.
-
-        So the record of an MLP without history (``config.json`` of a format-1 agent
-        folder) holds the fields cpf_env versions before the encoder and the history
-        read, and those versions read it.
-        """
-        return {
-            f.name: getattr(self, f.name)
-            for f in dataclasses.fields(self)
-            if f.name not in SINCE_FORMAT_2 or getattr(self, f.name) != SINCE_FORMAT_2[f.name]
-        }
+        """A JSON-ready dict of every field, ``residual`` as an object of its fields."""
+        record = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+        record["residual"] = dataclasses.asdict(self.residual)
+        return record
 
     @classmethod
     def from_json(cls, data: dict[str, Any]) -> TrainConfig:
-        """Inverse of ``to_json``: absent fields take their defaults; unknown keys: ValueError."""
+        """Inverse of ``to_json``: absent fields take their defaults; unknown keys: ValueError.
+
+        Records written before agent-folder format 3 go through ``upgrade_record`` first.
+        """
         names = {f.name for f in dataclasses.fields(cls)}
         unknown = sorted(set(data) - names)
         if unknown:
             raise ValueError(f"unknown TrainConfig field(s) {unknown}; valid: {sorted(names)}.")
         return cls(**data)
+
+
+def upgrade_record(data: dict[str, Any]) -> dict[str, Any]:
+    """A ``TrainConfig`` record written before agent-folder format 3, in today's layout.
+
+    Those records (``config.json`` of format 1 and 2 folders, ``run.json`` of their
+    runs) name the base policy ``base`` and hold the ``ResidualConfig`` fields at the
+    top level; today's hold ``base_policy`` and a ``residual`` object. Other fields
+    pass through unchanged, so ``from_json`` still refuses an unknown one.
+    """
+    moved = ("base", *FLAT_RESIDUAL_FIELDS)
+    record = {key: value for key, value in data.items() if key not in moved}
+    if "base" in data:
+        record["base_policy"] = data["base"]
+    residual = {key: data[key] for key in FLAT_RESIDUAL_FIELDS if key in data}
+    if residual:
+        record["residual"] = residual
+    return record
+
+
+def config_from_record(data: dict[str, Any]) -> TrainConfig:
+    """The ``TrainConfig`` of a run record (``run.json``'s ``config``) of any version.
+
+    A record written before agent-folder format 3 always holds ``base``, today's never:
+    such a record goes through ``upgrade_record`` first.
+    """
+    return TrainConfig.from_json(upgrade_record(data) if "base" in data else data)
+
+
+def _residual_field(value: Any) -> ResidualConfig:
+    """``TrainConfig.residual`` checked: a ``ResidualConfig``, or a mapping of its fields."""
+    if isinstance(value, ResidualConfig):
+        return value
+    if not isinstance(value, dict):
+        raise ValueError(
+            f"residual must be a ResidualConfig or a table of its fields, got {value!r}."
+        )
+    names = [f.name for f in dataclasses.fields(ResidualConfig)]
+    unknown = sorted(set(value) - set(names))
+    if unknown:
+        raise ValueError(f"residual has unknown field(s) {unknown}; valid: {names}.")
+    return ResidualConfig(**value)
 
 
 def _scenario_field(value: Any) -> str | tuple[str, ...]:

@@ -131,7 +131,7 @@ def ray_figures(scenario: str, tiny_trials: int, steps: int, fleets: int) -> dic
             (scenario,),
             tuple(range(tiny_trials)),
             fixed={"timesteps": 1, "fleets": 4},
-            eval_seeds=0,
+            eval_num_seeds=0,
         )
         start = time.perf_counter()
         rows = run_sweep(tiny, Path(folder) / "tiny", quiet=True)
@@ -142,7 +142,7 @@ def ray_figures(scenario: str, tiny_trials: int, steps: int, fleets: int) -> dic
             (scenario,),
             tuple(range(cores)),
             fixed={"timesteps": steps, "fleets": fleets},
-            eval_seeds=10,
+            eval_num_seeds=10,
         )
         rows = run_sweep(real, Path(folder) / "real", quiet=True)
     figures["trial_steps_per_s"] = float(np.mean([row["vessel_steps_per_second"] for row in rows]))

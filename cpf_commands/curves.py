@@ -3,7 +3,7 @@
 Reads the ``evaluations.csv`` of each run folder (one per training seed; the
 cost on the benchmark's held-out ``test`` seeds): a ``cpf-train --out``
 folder, or a ``cpf-distill`` run (``--out``, or ``--log`` where given) with
-``--eval-seeds N``, whose rows are the student before round 0 (its base) and
+``--eval-num-seeds N``, whose rows are the student before round 0 (its base) and
 after each DAgger round at the labelled vessel-steps so far (the simulated
 ones, as ``cpf-train`` counts them; the seconds include the teacher's). It
 writes to ``--out``:
@@ -26,7 +26,7 @@ schedule evaluate at the same counts). Wall-clock axis: every time at which
 some run evaluated, between the latest first evaluation and the earliest last
 one; each run's cost at time t is its latest evaluation at or before t.
 
-The base's cost: with ``--base NAME``, that analytic policy run by the
+The base's cost: with ``--base-policy NAME``, that analytic policy run by the
 benchmark on the runs' evaluation settings (``run.json``); without it, the
 runs' evaluation at 0 vessel-steps, which for a residual agent is exactly its
 base policy (the correction starts at zero).
@@ -117,7 +117,7 @@ def read_run(folder: Path) -> RunCurve:
     if not path.is_file():
         raise ValueError(
             f"{folder} has no evaluations.csv; train with cpf-train --eval-every N (> 0) or "
-            "cpf-distill --eval-seeds N (> 0)."
+            "cpf-distill --eval-num-seeds N (> 0)."
         )
     rows = list(csv.DictReader(io.StringIO(path.read_text())))
     if not rows:
@@ -237,24 +237,32 @@ def figure(curves: Sequence[Curve], base_cost: float, names: Sequence[str]) -> F
 
 def _base_cost(folders: Sequence[Path], runs: Sequence[RunCurve], base: str | None) -> float:
     """The base policy's evaluation cost (see the module docstring)."""
+    from agents.evaluation import DEFAULT_EVAL_NUM_SEEDS
+    from agents.train_config import config_from_record
+
     records = [json.loads((folder / "run.json").read_text()) for folder in folders]
+    configs = [config_from_record(record["config"]) for record in records]
     if base is not None:
         evaluation = records[0].get("evaluation") or {}
+        # "seeds": a run written before the count was named num_seeds
+        num_seeds = evaluation.get("num_seeds", evaluation.get("seeds", DEFAULT_EVAL_NUM_SEEDS))
         cells = run_bench(
             [base],
-            evaluation.get("scenarios") or [records[0]["config"]["scenario"]],
-            num_seeds=int(evaluation.get("seeds", 10)),
+            evaluation.get("scenarios") or list(configs[0].scenarios),
+            num_seeds=int(num_seeds),
             steps=evaluation.get("steps"),
             split="test",
         )
         return float(np.mean([np.mean(cell.metrics["cost"]) for cell in cells]))
-    if any(record["config"]["base"] == "none" for record in records):
+    if any(config.base_policy == "none" for config in configs):
         raise ValueError(
-            "runs trained from scratch have no base to compare with; give --base NAME."
+            "runs trained from scratch have no base to compare with; give --base-policy NAME."
         )
     starts = [run.cost[run.steps == 0] for run in runs]
     if any(start.size == 0 for start in starts):
-        raise ValueError("a run has no evaluation at 0 vessel-steps (its base); give --base NAME.")
+        raise ValueError(
+            "a run has no evaluation at 0 vessel-steps (its base); give --base-policy NAME."
+        )
     return float(iqm(np.array([start[0] for start in starts])))
 
 
@@ -271,11 +279,11 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument(
         "runs", nargs="+", metavar="RUN_DIR",
         help="cpf-train --out folders, or cpf-distill run folders (--out, or --log if given) "
-        "of runs with --eval-seeds",
+        "of runs with --eval-num-seeds",
     )  # fmt: skip
     parser.add_argument("--out", required=True, help="output folder (curves.csv, curves.png)")
     parser.add_argument(
-        "--base", default=None,
+        "--base-policy", default=None,
         help="analytic policy whose test-split cost is the line to beat (default: the runs' "
         "evaluation at 0 vessel-steps, their base policy)",
     )  # fmt: skip
@@ -301,7 +309,7 @@ def curves_main(argv: Sequence[str] | None = None) -> int:
     folders = [Path(run) for run in args.runs]
     try:
         runs = [read_run(folder) for folder in folders]
-        base_cost = _base_cost(folders, runs, args.base)
+        base_cost = _base_cost(folders, runs, args.base_policy)
         curves = [steps_curve(runs), time_curve(runs)]
     except (ValueError, OSError, KeyError, json.JSONDecodeError) as error:
         parser.error(str(error))

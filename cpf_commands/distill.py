@@ -24,7 +24,7 @@ seeds and the data order). ``--out`` receives an ordinary agent folder
   ``zero_loss`` (the base's, a = 0), ``clipped`` (share of label components
   beyond the residual's reach), ``at_limit`` (share of force label components
   at an actuator limit or the residual's reach) and ``seconds`` (since the start);
-- with ``--eval-seeds N`` (N > 0; default 0, none), ``evaluations.csv`` in
+- with ``--eval-num-seeds N`` (N > 0; default 0, none), ``evaluations.csv`` in
   ``cpf-train``'s columns (``agents.schedule.EvaluationLog``, the evaluator
   ``agents.evaluation.TestSplitEvaluator`` on the training scenarios'
   ``test`` split, N seeds each): the student before round 0 (exactly the
@@ -59,7 +59,7 @@ from typing import TYPE_CHECKING, Any
 
 from agents.evaluation import TestSplitEvaluator
 from cpf_commands.common.arguments import non_negative_int
-from cpf_commands.hyperparameters import toml_chain
+from cpf_commands.hyperparameters import merge_settings, moved_keys, toml_chain
 from cpf_env.infra import atomic
 from cpf_env.scenarios.suite import SUITE
 
@@ -98,7 +98,7 @@ def read_distill_config(path: str | Path, seed: int) -> tuple[TrainConfig, Disti
             table = {**table, **own}
         elif own is not None:
             table = own
-        values.update(layer)
+        values = merge_settings(values, layer)
     if not isinstance(table, dict):
         raise ValueError(
             f"{file} needs a [distill] table (DistillConfig: teacher, rounds, steps, ...); "
@@ -109,7 +109,9 @@ def read_distill_config(path: str | Path, seed: int) -> tuple[TrainConfig, Disti
     known = {f.name for f in dataclasses.fields(TrainConfig)} - {"seed"}
     unknown = sorted(set(values) - known)
     if unknown:
-        raise ValueError(f"{file} has unknown keys {unknown}; valid keys: {sorted(known)}.")
+        raise ValueError(
+            f"{file} has unknown keys {unknown}{moved_keys(unknown)}; valid keys: {sorted(known)}."
+        )
     settings_known = {f.name for f in dataclasses.fields(DistillConfig)}
     unknown = sorted(set(table) - settings_known)
     if unknown:
@@ -187,7 +189,7 @@ def _parser() -> argparse.ArgumentParser:
         "--force", action="store_true", help="replace an existing --out (and --log)"
     )
     parser.add_argument(
-        "--eval-seeds", type=non_negative_int, default=0,
+        "--eval-num-seeds", type=non_negative_int, default=0,
         help="evaluate the student before round 0 (the base) and after each round on the "
         "training scenarios' test split, this many episodes each (cpf-bench --num-seeds), into "
         "evaluations.csv (cpf-train's columns; cpf-curves reads it); 0: none",
@@ -227,7 +229,9 @@ def distill_main(argv: Sequence[str] | None = None) -> int:
     from agents.schedule import EVALUATIONS, evaluations_csv
 
     evaluate = (
-        None if args.eval_seeds == 0 else TestSplitEvaluator(config.scenarios, args.eval_seeds)
+        None
+        if args.eval_num_seeds == 0
+        else TestSplitEvaluator(config.scenarios, args.eval_num_seeds)
     )
     started = time.perf_counter()
     report = distill(config, settings, out, device=args.device, evaluate=evaluate)
@@ -256,7 +260,8 @@ def distill_main(argv: Sequence[str] | None = None) -> int:
             for name, text in files.items():
                 atomic.write_text(staging / name, text)
     print(
-        f"distilled {settings.teacher} into a {config.mode} residual on {config.base} over "
+        f"distilled {settings.teacher} into a {config.residual.mode} residual on "
+        f"{config.base_policy} over "
         f"{' + '.join(config.scenarios)}"
         f"{f' + {settings.procedural} procedural fleets' if settings.procedural else ''}"
         f"{' (redrawn every round)' if settings.redraw else ''}: "
@@ -265,7 +270,8 @@ def distill_main(argv: Sequence[str] | None = None) -> int:
         f"labels at a limit, {record['wall_clock_seconds']} s; "
         f"saved to {out}/\n"
         f"{_evaluated(report.evaluations, log)}"
-        f"evaluate: cpf-bench --policies {config.base} {settings.teacher} {out} --split test"
+        f"evaluate: cpf-bench --policies {config.base_policy} {settings.teacher} {out} "
+        "--split test"
     )
     return 0
 

@@ -9,7 +9,7 @@ with ``agents.load_policy(DIR)`` and is accepted wherever a policy name is
 
 RL Zoo conventions too (``docs/residual_rl.md``, "A training run"): held-out
 evaluation on the benchmark's ``test`` split with the best agent kept
-(``--eval-every``, ``--eval-seeds``; ``agents.evaluation``),
+(``--eval-every``, ``--eval-num-seeds``; ``agents.evaluation``),
 checkpoints and ``--resume`` (``checkpoint_every``), a checkpoint and agent
 on Ctrl-C, ``--tensorboard-log DIR``, and ``--config FILE.toml``
 (``cpf_commands.hyperparameters``; ``--set KEY=VALUE`` sets any other hyperparameter;
@@ -33,11 +33,12 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from agents.evaluation import DEFAULT_EVAL_SEEDS, TestSplitEvaluator
+from agents.evaluation import DEFAULT_EVAL_NUM_SEEDS, TestSplitEvaluator
 from cpf_commands.common.arguments import non_negative_int, positive_int
 from cpf_commands.hyperparameters import (
     SCHEDULE_KEYS,
     hyperparameters_toml,
+    merge_settings,
     parse_settings,
     read_hyperparameters,
 )
@@ -83,7 +84,7 @@ def _parser() -> argparse.ArgumentParser:
         allow_abbrev=False,
         prog="cpf-train",
         description="Train PPO or SAC on FleetVecEnv (one slot per vessel, parameter sharing): "
-        "a residual on top of an analytic policy, or from scratch (--base none). Writes "
+        "a residual on top of an analytic policy, or from scratch (--base-policy none). Writes "
         "the agent (policy.safetensors, normalization.json, config.json, manifest.json: data "
         "only), SB3's model.zip (to resume training) and progress.csv to --out.",
         formatter_class=argparse.ArgumentDefaultsHelpFormatter,
@@ -104,8 +105,8 @@ def _parser() -> argparse.ArgumentParser:
         + ", ".join([*training_scenarios(), "suite"]),
     )
     parser.add_argument(
-        "--base",
-        default=defaults.base,
+        "--base-policy",
+        default=defaults.base_policy,
         choices=[*sorted(POLICIES), "none"],
         help="base policy the agent corrects; none: the agent commands forces and rate",
     )
@@ -132,7 +133,7 @@ def _parser() -> argparse.ArgumentParser:
         "test split (evaluations.csv, best/); 0: none",
     )  # fmt: skip
     parser.add_argument(
-        "--eval-seeds", type=positive_int, default=DEFAULT_EVAL_SEEDS,
+        "--eval-num-seeds", type=positive_int, default=DEFAULT_EVAL_NUM_SEEDS,
         help="evaluation episodes per scenario (cpf-bench --num-seeds)",
     )  # fmt: skip
     parser.add_argument(
@@ -147,15 +148,16 @@ def _parser() -> argparse.ArgumentParser:
     )  # fmt: skip
     parser.add_argument(
         "--set", nargs="+", action="extend", default=[], dest="settings", metavar="KEY=VALUE",
-        help="override one hyperparameter, any TrainConfig field or schedule key, VALUE a "
-        "TOML value (a bare word is a string): e.g. --set n_epochs=5 'net_arch=[64, 64]' "
-        "mode=force_and_rate scale=0.3 'extras=[\"base_action\"]'; over --config, under the "
-        "flags",
+        help="override one hyperparameter, any TrainConfig field (residual.FIELD: one of its "
+        "ResidualConfig) or schedule key, VALUE a TOML value (a bare word is a string): e.g. "
+        "--set n_epochs=5 'net_arch=[64, 64]' residual.mode=force_and_rate residual.scale=0.3 "
+        "'residual.extras=[\"base_action\"]'; over --config, under the flags",
     )  # fmt: skip
     parser.add_argument(
         "--config", metavar="FILE.toml", default=None,
-        help="hyperparameter file (TOML, TrainConfig field names and eval_every, eval_seeds, "
-        "checkpoint_every; extends = \"OTHER.toml\" starts from another file); --set and "
+        help="hyperparameter file (TOML: TrainConfig field names, a [residual] table, and "
+        "eval_every, eval_num_seeds, checkpoint_every; extends = \"OTHER.toml\" starts from "
+        "another file); --set and "
         "the flags given override it; the resolved values are saved as "
         "--out/hyperparameters.toml",
     )  # fmt: skip
@@ -167,7 +169,7 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument(
         "--init-from", metavar="FOLDER", default=None,
         help="start PPO's actor and observation statistics from this agent folder (a "
-        "cpf-distill student, say) of the same recipe (base, mode, scale, slots, encoder, "
+        "cpf-distill student, say) of the same recipe (base_policy, residual, slots, encoder, "
         "history, net_arch; a differing one is refused), the critic fresh, the statistics "
         "frozen; log_std_init "
         f"then defaults to {INIT_LOG_STD}; recorded in run.json and config.json",
@@ -220,7 +222,7 @@ def _resolve(args: argparse.Namespace, given: set[str]) -> tuple[TrainConfig, Ru
     from agents.train_config import INIT_LOG_STD, TrainConfig
 
     values = {} if args.config is None else read_hyperparameters(args.config)
-    values.update(parse_settings(args.settings))
+    values = merge_settings(values, parse_settings(args.settings))
     for dest in sorted(given - NOT_HYPERPARAMETERS):
         values[dest] = getattr(args, dest)
     if args.init_from is not None and "log_std_init" not in values:
@@ -234,9 +236,9 @@ def _resolve(args: argparse.Namespace, given: set[str]) -> tuple[TrainConfig, Ru
         values.get("eval_every", args.eval_every),
         values.get("checkpoint_every", DEFAULT_CHECKPOINT_EVERY),
     )
-    seeds = values.get("eval_seeds", args.eval_seeds)
+    seeds = values.get("eval_num_seeds", args.eval_num_seeds)
     if isinstance(seeds, bool) or not isinstance(seeds, int) or seeds < 1:
-        raise ValueError(f"eval_seeds must be an integer >= 1, got {seeds!r}.")
+        raise ValueError(f"eval_num_seeds must be an integer >= 1, got {seeds!r}.")
     return config, schedule, seeds
 
 
@@ -260,7 +262,7 @@ def _resumed(
     config, schedule, evaluation = read_run_record(Path(args.out))
     if "timesteps" in given:
         config = dataclasses.replace(config, timesteps=args.timesteps)
-    seeds = int((evaluation or {}).get("seeds", DEFAULT_EVAL_SEEDS))
+    seeds = int((evaluation or {}).get("num_seeds", DEFAULT_EVAL_NUM_SEEDS))
     steps = (evaluation or {}).get("steps")
     return config, schedule, seeds, steps
 
@@ -271,7 +273,7 @@ def _hyperparameters(config: TrainConfig, schedule: RunSchedule, seeds: int) -> 
         config.to_json(),
         {
             "eval_every": schedule.eval_every,
-            "eval_seeds": seeds,
+            "eval_num_seeds": seeds,
             "checkpoint_every": schedule.checkpoint_every,
         },
     )
@@ -353,11 +355,13 @@ def train_main(argv: Sequence[str] | None = None) -> int:
         else ""
     )
     print(
-        f"trained {config.algo} on {' + '.join(config.scenarios)} (base {config.base}) for "
+        f"trained {config.algo} on {' + '.join(config.scenarios)} (base "
+        f"{config.base_policy}) for "
         f"{record['timesteps_done']:,} vessel-steps{rounded} in {record['train_seconds']} s "
         f"({record['vessel_steps_per_second']:,} vessel-steps/s; held-out evaluations took "
         f"{record['evaluation_seconds']} s more); saved to {folder}/{best}\n"
-        f"evaluate: cpf-bench --policies {config.base if config.base != 'none' else 'nn_dsc'} "
+        f"evaluate: cpf-bench --policies "
+        f"{config.base_policy if config.base_policy != 'none' else 'nn_dsc'} "
         f"{folder} --scenarios {' '.join(config.scenarios)} --split test"
     )
     return 0

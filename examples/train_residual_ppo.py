@@ -32,20 +32,24 @@ from pathlib import Path
 SCENARIOS = ("bench_saturation", "bench_lossy_links")
 #: Agents by name: ``TrainConfig`` fields that differ from the experiment's common settings.
 AGENTS: dict[str, dict[str, object]] = {
-    "residual_ppo": {"base": "nn_dsc"},
-    "scratch_ppo": {"base": "none", "log_std_init": -0.5},
+    "residual_ppo": {"base_policy": "nn_dsc"},
+    "scratch_ppo": {"base_policy": "none", "log_std_init": -0.5},
     "residual_ppo_extras": {
-        "base": "nn_dsc",
-        "extras": ("base_action", "base_signals", "multiscale_errors"),
+        "base_policy": "nn_dsc",
+        "residual": {"extras": ("base_action", "base_signals", "multiscale_errors")},
     },
     "residual_ppo_kinematic": {
-        "base": "nn_dsc",
-        "mode": "kinematic",
-        "extras": ("multiscale_errors",),
+        "base_policy": "nn_dsc",
+        "residual": {"mode": "kinematic", "extras": ("multiscale_errors",)},
     },
-    "residual_ppo_rate": {"base": "nn_dsc", "mode": "force_and_rate"},
-    "residual_ppo_quadratic": {"base": "nn_dsc", "reward_form": "quadratic"},
-    "residual_sac": {"algo": "sac", "base": "nn_dsc", "batch_size": 1024, "net_arch": (64, 64)},
+    "residual_ppo_rate": {"base_policy": "nn_dsc", "residual": {"mode": "force_and_rate"}},
+    "residual_ppo_quadratic": {"base_policy": "nn_dsc", "reward_form": "quadratic"},
+    "residual_sac": {
+        "algo": "sac",
+        "base_policy": "nn_dsc",
+        "batch_size": 1024,
+        "net_arch": (64, 64),
+    },
 }
 
 

@@ -30,6 +30,8 @@ STUDENT_TOML = """
 scenario = "bench_mild"
 fleets = 2
 net_arch = [16]
+
+[residual]
 mode = "force_and_rate"
 scale = 1.0
 

@@ -61,6 +61,7 @@ from agents.agent_folder import (
 from agents.folder_files import AgentFolderError, check_fields, field
 from agents.train_config import TrainConfig
 from cpf_env.envs.input_statistics import InputStatistics
+from cpf_env.envs.residual import ResidualConfig
 from cpf_env.infra import atomic
 from cpf_env.scenarios import make_scenario
 
@@ -219,10 +220,10 @@ def marl_config(record: Any, source: Path) -> tuple[TrainConfig, list[int], dict
         config = TrainConfig(
             algo="ppo",
             scenario=task["scenario"],
-            base=task["base_policy"],
-            mode=task["mode"],
-            scale=task["scale"],
-            extras=tuple(task["extras"]),
+            base_policy=task["base_policy"],
+            residual=ResidualConfig(
+                mode=task["mode"], scale=task["scale"], extras=tuple(task["extras"])
+            ),
             normalize_observations=task["normalize"],
             shared_slot_statistics=shared,
             net_arch=tuple(sizes[1:-1]),

@@ -18,12 +18,17 @@ and one over all scenarios, each policy a row, lowest mean cost first:
 
 and a sentence naming the best deployable policy (privileged references,
 which read the simulator, are ranked but never named best). ``text`` renders
-a table for the terminal; ``cpf_commands.bench.html_report`` renders the same
-tables as HTML.
+a table for the terminal; ``html_report`` renders the same tables as
+``report.html``: the bench's answer and figures in one self-contained page
+(the regressed guarded metrics, every figure inline as a base64 PNG), which
+opens in any browser with nothing beside it. No time stamp or path: the same
+run gives the same bytes.
 """
 
 from __future__ import annotations
 
+import base64
+import html
 import textwrap
 from collections import Counter
 from collections.abc import Mapping, Sequence
@@ -34,7 +39,7 @@ from cpf_bench.report import CellResult, normalized_score
 from cpf_bench.verdict import COST_MARGIN, Verdict, verdicts
 from cpf_commands.bench.views import regression_lines
 
-__all__ = ["RankedTable", "legend", "ranked_tables", "terminal_report", "text"]
+__all__ = ["RankedTable", "html_report", "legend", "ranked_tables", "terminal_report", "text"]
 
 #: The metric the tables rank by.
 METRIC = "cost"
@@ -311,3 +316,69 @@ def terminal_report(
     if notes:
         parts.append("\n".join(notes))
     return "\n\n".join(parts)
+
+
+_STYLE = (
+    "body{font-family:sans-serif;max-width:70em;margin:2em auto;padding:0 1em}"
+    "table{border-collapse:collapse;margin:0.5em 0}"
+    "th,td{border:1px solid #ccc;padding:0.2em 0.6em;text-align:left}"
+    "th{background:#f0f0f0}img{max-width:100%}"
+    "code{background:#f4f4f4}"
+)
+
+
+def _table(table: RankedTable) -> list[str]:
+    lines = [f"<h3>{html.escape(table.title)}</h3>", "<table>"]
+    lines.append("<tr>" + "".join(f"<th>{html.escape(h)}</th>" for h in table.header) + "</tr>")
+    for row in table.rows:
+        lines.append("<tr>" + "".join(f"<td>{html.escape(c)}</td>" for c in row) + "</tr>")
+    lines.append("</table>")
+    if table.best:
+        lines.append(f"<p><strong>{html.escape(table.best)}</strong></p>")
+    return lines
+
+
+def html_report(
+    tables: Sequence[RankedTable],
+    legend: str,
+    command: str,
+    notes: Sequence[str],
+    figures: Mapping[str, bytes],
+) -> str:
+    """The page: command, legend, ranked tables (the suite-wide one first), notes, figures.
+
+    Args:
+        tables: The ranked tables (``ranked_tables``).
+        legend: How to read the columns.
+        command: The command line that regenerates the run.
+        notes: Lines naming regressed guarded metrics.
+        figures: File name -> PNG bytes, drawn in this order.
+
+    Returns:
+        The HTML text.
+    """
+    ordered = [t for t in tables if t.suite] + [t for t in tables if not t.suite]
+    lines = [
+        "<!DOCTYPE html>",
+        '<html lang="en"><head><meta charset="utf-8"><title>cpf-bench report</title>',
+        f"<style>{_STYLE}</style></head><body>",
+        "<h1>cpf-bench report</h1>",
+        f"<p>Regenerate with <code>{html.escape(command)}</code>. All numbers: "
+        "summary.csv and episodes.csv beside this file.</p>",
+        f"<p>{html.escape(legend)}</p>",
+        "<h2>Ranked policies</h2>",
+    ]
+    for table in ordered:
+        lines += _table(table)
+    if notes:
+        lines += ["<h2>Regressed guarded metrics</h2>", "<ul>"]
+        lines += [f"<li>{html.escape(note.strip())}</li>" for note in notes]
+        lines.append("</ul>")
+    if figures:
+        lines.append("<h2>Figures</h2>")
+    for name, data in figures.items():
+        encoded = base64.b64encode(data).decode("ascii")
+        lines.append(f"<h3>{html.escape(name)}</h3>")
+        lines.append(f'<img alt="{html.escape(name)}" src="data:image/png;base64,{encoded}">')
+    lines.append("</body></html>")
+    return "\n".join(lines) + "\n"

@@ -28,7 +28,6 @@ from cpf_bench.evaluate import Job, evaluate, labelled_policies, run_cell
 from cpf_bench.report import HEADLINE, CellResult, episodes_csv, summarize, summary_csv
 from cpf_bench.verdict import COST_MARGIN, check_margin
 from cpf_commands.bench import profiles, ranking, views
-from cpf_commands.bench.html_report import html_report
 from cpf_commands.common.outputs import foreign_files
 from cpf_commands.common.policies import PolicySpec, policy_label, refers_to_file, resolve_policy
 from cpf_commands.common.ray_runtime import start_ray
@@ -111,7 +110,7 @@ def write_outputs(
         raise ValueError(f"{directory} holds files cpf-bench did not write: {others[:5]}.")
     rows = summarize(cells, reference)
     pictures = _figures(rows, cells, reference) if figures else {}
-    page = html_report(
+    page = ranking.html_report(
         ranking.ranked_tables(rows, cells, reference, cost_margin),
         ranking.legend(reference, cost_margin),
         command,

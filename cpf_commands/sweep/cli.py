@@ -68,7 +68,7 @@ def _parser() -> argparse.ArgumentParser:
         metavar="FIELD=VALUES",
         help="TrainConfig fields (cpf-train's options): FIELD=VALUE fixes one, FIELD=V1,V2 "
         "sweeps it, FIELD=[JSON list] for values with commas; e.g. timesteps=200000 "
-        "fleets=64 scale=0.1,0.2",
+        "fleets=64 residual.scale=0.1,0.2",
     )
     parser.add_argument("--out", required=True, help="sweep folder (resumed if it exists)")
     add_address_argument(parser)
@@ -85,7 +85,10 @@ def _parser() -> argparse.ArgumentParser:
         help="trials at once (None: as many as the CPUs allow)",
     )
     parser.add_argument(
-        "--eval-seeds", type=int, default=5, help="paired evaluation episodes per trial (0: none)"
+        "--eval-num-seeds",
+        type=int,
+        default=5,
+        help="paired evaluation episodes per trial (0: none)",
     )
     parser.add_argument(
         "--eval-steps",
@@ -297,7 +300,7 @@ def sweep_main(argv: Sequence[str] | None = None) -> int:
             args.scenarios,
             args.seeds,
             args.settings,
-            eval_seeds=args.eval_seeds,
+            eval_num_seeds=args.eval_num_seeds,
             eval_steps=args.eval_steps,
             cpus_per_trial=args.cpus_per_trial,
         )

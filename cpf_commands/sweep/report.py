@@ -133,16 +133,16 @@ def summary_markdown(spec: SweepSpec, rows: Sequence[dict[str, Any]], command: s
     """The sweep's summary: trials, then each scenario x setting over seeds."""
     lines = ["# Sweep summary", "", f"Command: `{command}`", ""]
     references = sorted({row["reference"] for row in rows if "reference" in row})
-    if spec.eval_seeds:
+    if spec.eval_num_seeds:
         lines.append(
-            f"Evaluation: {spec.eval_seeds} paired episodes per trial (seeds from {BASE_SEED}) "
+            f"Evaluation: {spec.eval_num_seeds} paired episodes per trial (seeds from {BASE_SEED}) "
             "against the trial's base policy, or nn_dsc for an agent trained from scratch "
             f"(here: {', '.join(references) or 'no trial finished yet'}); a scenario in which "
             "nothing is random runs one episode (`episodes`). cost_ratio < 1: the agent's "
             "cost is lower."
         )
     else:
-        lines.append("Evaluation: none (--eval-seeds 0).")
+        lines.append("Evaluation: none (--eval-num-seeds 0).")
     lines.append("")
     lines += _table(_TRIAL_COLUMNS, [[row.get(c) for c in _TRIAL_COLUMNS] for row in rows])
     groups: dict[tuple[Any, ...], list[dict[str, Any]]] = {}

@@ -9,12 +9,14 @@ in name order, so the order of ``--set`` does not change the sweep.
 
 ``--set`` values on the command line: ``FIELD=VALUE`` fixes a field,
 ``FIELD=V1,V2,...`` sweeps it, and ``FIELD=[...]`` (JSON) gives values that
-contain commas themselves, e.g. ``extras=[[],["base_action"]]``.
+contain commas themselves, e.g. ``residual.extras=[[],["base_action"]]``. A
+field of the residual (``cpf_env.envs.residual.ResidualConfig``) is named
+``residual.FIELD``.
 
 Example:
-    >>> spec = SweepSpec(("bench_mild",), (0, 1), grid={"scale": (0.1, 0.2)})
+    >>> spec = SweepSpec(("bench_mild",), (0, 1), grid={"residual.scale": (0.1, 0.2)})
     >>> [trial_name(p, spec) for p in spec.trials()][:2]
-    ['bench_mild-seed0-scale0.1', 'bench_mild-seed0-scale0.2']
+    ['bench_mild-seed0-residual.scale0.1', 'bench_mild-seed0-residual.scale0.2']
 """
 
 from __future__ import annotations
@@ -31,6 +33,7 @@ from typing import Any
 
 import cpf_env
 from agents.train_config import TrainConfig
+from cpf_env.envs.residual import ResidualConfig
 from cpf_env.infra import atomic
 
 __all__ = ["SweepSpec", "parse_setting", "trial_name"]
@@ -40,8 +43,11 @@ _OWN_FLAGS = ("scenario", "seed")
 
 
 def _field_types() -> dict[str, Any]:
-    """TrainConfig field name -> its annotated type."""
-    return typing.get_type_hints(TrainConfig)
+    """TrainConfig field name (``residual.FIELD``: of its ``ResidualConfig``) -> its type."""
+    types = typing.get_type_hints(TrainConfig)
+    del types["residual"]
+    residual = typing.get_type_hints(ResidualConfig)
+    return {**types, **{f"residual.{name}": kind for name, kind in residual.items()}}
 
 
 def _convert(name: str, value: Any, kind: Any) -> Any:
@@ -114,7 +120,7 @@ class SweepSpec:
         seeds: Training seeds.
         grid: TrainConfig field -> the values it takes (two or more).
         fixed: TrainConfig field -> the value it keeps in every trial.
-        eval_seeds: Evaluation episodes per trial (paired with the base policy);
+        eval_num_seeds: Evaluation episodes per trial (paired with the base policy);
             0 skips the evaluation.
         eval_steps: Evaluation horizon (None: each scenario's ``max_steps``).
         cpus_per_trial: CPUs each trial reserves, and its torch threads unless
@@ -127,7 +133,7 @@ class SweepSpec:
     seeds: tuple[int, ...]
     grid: dict[str, tuple[Any, ...]] = field(default_factory=dict)
     fixed: dict[str, Any] = field(default_factory=dict)
-    eval_seeds: int = 5
+    eval_num_seeds: int = 5
     eval_steps: int | None = None
     cpus_per_trial: int = 1
 
@@ -140,8 +146,8 @@ class SweepSpec:
         for name, count in (("scenarios", self.scenarios), ("seeds", self.seeds)):
             if len(set(count)) != len(count):
                 raise ValueError(f"{name} repeat: {list(count)}; give each once.")
-        if self.eval_seeds < 0:
-            raise ValueError(f"eval seeds must be >= 0, got {self.eval_seeds}.")
+        if self.eval_num_seeds < 0:
+            raise ValueError(f"eval seeds must be >= 0, got {self.eval_num_seeds}.")
         if self.cpus_per_trial < 1:
             raise ValueError(f"CPUs per trial must be >= 1, got {self.cpus_per_trial}.")
         fields = _field_types()
@@ -197,7 +203,14 @@ class SweepSpec:
 
         ``torch_threads`` is the CPUs per trial unless the sweep sets it.
         """
-        return TrainConfig(**{"torch_threads": self.cpus_per_trial, **self.fixed, **params})
+        values = {"torch_threads": self.cpus_per_trial, **self.fixed, **params}
+        fields = {key: value for key, value in values.items() if not key.startswith("residual.")}
+        residual = {
+            key.removeprefix("residual."): value
+            for key, value in values.items()
+            if key.startswith("residual.")
+        }
+        return TrainConfig(**fields, residual=ResidualConfig(**residual))
 
     def param_space(self, tune: Any) -> dict[str, Any]:
         """Ray Tune's parameter space: a grid search over every varying parameter."""

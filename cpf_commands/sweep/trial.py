@@ -75,7 +75,7 @@ def evaluate_agent(
         ``path_error_rms_window`` / ``reference_path_error_rms_window`` (mean
         RMS path error over the final quarter of the horizon, m).
     """
-    reference = "nn_dsc" if config.base == "none" else config.base
+    reference = "nn_dsc" if config.base_policy == "none" else config.base_policy
     policies: dict[str, str | Path] = {"agent": folder, reference: reference}
     cells = run_bench(policies, list(config.scenarios), num_seeds=seeds, steps=steps)
     rows = summarize(cells, reference)
@@ -120,9 +120,9 @@ def run_trial(params: dict[str, Any], spec: SweepSpec, out: str) -> None:
         "train_seconds": record["train_seconds"],
         "vessel_steps_per_second": record["vessel_steps_per_second"],
     }
-    if spec.eval_seeds:
+    if spec.eval_num_seeds:
         start = time.perf_counter()
-        result |= evaluate_agent(folder, config, spec.eval_seeds, spec.eval_steps)
+        result |= evaluate_agent(folder, config, spec.eval_num_seeds, spec.eval_steps)
         result["eval_seconds"] = time.perf_counter() - start
     write_evaluation(folder, result)
     tune.report(result)

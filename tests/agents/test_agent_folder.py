@@ -21,6 +21,7 @@ from agents.agent_folder import Normalization, read_agent, write_agent
 from agents.folder_files import AgentFolderError
 from cpf_commands.bench.cli import bench_main
 from cpf_commands.run.cli import run_main
+from cpf_env.envs.residual import ResidualConfig
 
 AGENT = ROOT / "tests/fixtures/agents/residual_ppo_lossy_links"
 
@@ -135,7 +136,7 @@ def test_the_loaded_agent_acts_as_sb3_predicts(tmp_path: Path) -> None:
     from agents.train_config import TrainConfig
 
     policy = load_policy(AGENT)
-    record = json.loads((AGENT / "config.json").read_text())
+    record, _, _ = read_agent(AGENT)  # a version-1 folder: its config in today's layout
     config = TrainConfig.from_json({**record["config"], "fleets": 1, "batch_size": 160})
     model = build_model(config, VecMonitor(make_env(config)))
     assert isinstance(model, PPO)
@@ -163,7 +164,7 @@ ENCODER_CONFIG = TrainConfig(
     net_arch=(16,),
     encoder="deepsets",
     history=2,
-    neighbour_slots=6,
+    residual=ResidualConfig(neighbour_slots=6),
     shared_slot_statistics=True,
 )
 #: own 18 + 6 slots of 4 + 2 history entries of (18 + 3 actions + 1 valid)
@@ -212,18 +213,28 @@ def test_an_encoder_folder_round_trips_the_encoder_and_its_layout(tmp_path: Path
 
 
 def test_a_version_1_folder_is_read_and_written_again_as_version_3(tmp_path: Path) -> None:
-    """The fixture is version 1; written again, its data files are the same bytes and only the
-    manifest moves to version 3 (with the trainer), without an 'actor' field."""
+    """The fixture is version 1: read, its configuration is today's layout (``base_policy``,
+    the ``residual`` object) with the same values; written again, the weights and statistics
+    are the same bytes, the manifest is version 3 (with the trainer), without an 'actor'."""
+    old = json.loads((AGENT / "config.json").read_text())["config"]
+    assert "base" in old and "mode" in old  # the layout of version 1
     record, network, normalization = read_agent(AGENT)
     assert json.loads((AGENT / "manifest.json").read_text())["format_version"] == 1
+    config = TrainConfig.from_json(record["config"])
+    assert (config.base_policy, config.residual.mode, config.residual.scale) == (
+        old["base"],
+        old["mode"],
+        old["scale"],
+    )
     folder = tmp_path / "mlp"
     folder.mkdir()
     write_agent(folder, record, network, normalization)
-    for name in ("policy.safetensors", "normalization.json", "config.json"):
+    for name in ("policy.safetensors", "normalization.json"):
         assert (folder / name).read_bytes() == (AGENT / name).read_bytes(), name
     manifest = json.loads((folder / "manifest.json").read_text())
     assert (manifest["format_version"], manifest["trainer"]) == (3, "sb3")
-    assert manifest["files"] == json.loads((AGENT / "manifest.json").read_text())["files"]
+    again, _, _ = read_agent(folder)
+    assert "actor" not in again and TrainConfig.from_json(again["config"]) == config
 
 
 @pytest.mark.parametrize("encoder", [None, "deepsets"])
@@ -272,7 +283,7 @@ def test_an_mlp_with_history_round_trips(tmp_path: Path) -> None:
     assert json.loads((folder / "manifest.json").read_text())["format_version"] == 3
     record, loaded, normalization = read_agent(folder)
     assert record["actor"] == {"encoder": None, "history": 2}
-    assert "encoder" not in record["config"] and record["config"]["history"] == 2
+    assert record["config"]["encoder"] is None and record["config"]["history"] == 2
     assert loaded.encoder is None and loaded.input_size == HISTORY_INPUTS
     saved = network.state_dict()
     assert sorted(loaded.state_dict()) == sorted(saved)
@@ -284,9 +295,8 @@ def test_an_mlp_with_history_round_trips(tmp_path: Path) -> None:
         assert torch.equal(loaded(rows), network(rows))
 
 
-def test_a_fresh_mlp_config_holds_only_the_first_fields(tmp_path: Path) -> None:
-    """No 'encoder', 'history', 'asymmetric_critic', 'yield_at_limit' nor 'actor' in its
-    config.json: an MLP's record is the one of version 1."""
+def test_a_fresh_mlp_config_holds_every_field_and_no_actor_record(tmp_path: Path) -> None:
+    """Every ``TrainConfig`` field, the residual's as an object, and no 'actor' field."""
     config = dataclasses.replace(HISTORY_CONFIG, history=0)
     folder = tmp_path / "mlp"
     folder.mkdir()
@@ -296,20 +306,13 @@ def test_a_fresh_mlp_config_holds_only_the_first_fields(tmp_path: Path) -> None:
     )
     record = json.loads((folder / "config.json").read_text())
     assert set(record) == {"config"}
-    fields = {f.name for f in dataclasses.fields(TrainConfig)}
-    assert set(record["config"]) == fields - {
-        "encoder",
-        "history",
-        "asymmetric_critic",
-        "yield_at_limit",
-    }
+    assert set(record["config"]) == {f.name for f in dataclasses.fields(TrainConfig)}
+    assert set(record["config"]["residual"]) == {f.name for f in dataclasses.fields(ResidualConfig)}
     assert TrainConfig.from_json(record["config"]) == config
     assert json.loads((folder / "manifest.json").read_text())["format_version"] == 3
     assert read_agent(folder)[1].input_size == 26
-    yielding = dataclasses.replace(config, yield_at_limit=True)
+    yielding = dataclasses.replace(config, residual=ResidualConfig(yield_at_limit=True))
     for other in (HISTORY_CONFIG, ENCODER_CONFIG, yielding):  # set: written, and read back
         assert TrainConfig.from_json(json.loads(json.dumps(other.to_json()))) == other
-    assert yielding.to_json()["yield_at_limit"] is True
-    assert yielding.residual_config().yield_at_limit
-    assert "encoder" not in HISTORY_CONFIG.to_json()
+    assert yielding.to_json()["residual"]["yield_at_limit"] is True
     assert ENCODER_CONFIG.to_json()["history"] == 2

@@ -179,7 +179,8 @@ def test_fine_tuning_a_student_with_an_asymmetric_critic_starts_from_the_student
     own = json.loads((STUDENT / "config.json").read_text())["config"]
     recipe = {k: own[k] for k in ("encoder", "history", "shared_slot_statistics")}
     config = TrainConfig(
-        scenario="bench_saturation", base="mpc", scale=0.5, neighbour_slots=6,
+        scenario="bench_saturation", base_policy="mpc",
+        residual=ResidualConfig(scale=0.5, neighbour_slots=6),
         net_arch=(64, 64), fleets=1, n_steps=8, batch_size=40, n_epochs=1, torch_threads=1,
         timesteps=80, asymmetric_critic=True, **recipe,
     )  # fmt: skip

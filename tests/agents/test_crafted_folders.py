@@ -616,6 +616,9 @@ def _bump_weight_mean(data: Any) -> None:
         ("normalization.json", _bump_weight_mean, ["empty slot's a_ij becomes", "masks slots at"]),
         ("manifest.json", _set("format_version", 1), ["format version 1, an MLP without"]),
         ("manifest.json", _set("format_version", 4), ["format version 4", "version(s) 1, 2, 3"]),
+        ("config.json", _set("config.residual.scale", True), ["'config.residual.scale'"]),
+        ("config.json", _set("config.residual.pace", 1), ["residual has unknown", "'pace'"]),
+        ("config.json", _set("config.mode", "force"), ["unknown TrainConfig field(s) ['mode']"]),
         ("manifest.json", _set("trainer", "torchrl"), ["'trainer' is 'torchrl'", "'benchmarl'"]),
         ("manifest.json", lambda data: data.pop("trainer"), ["lacks the field 'trainer'"]),
         ("manifest.json", _set("format", "cpf-marl-agent"), ["version 3", "version(s) 1, 2"]),
@@ -693,12 +696,12 @@ def _drop_statistics(folder: Path) -> None:
     ("edits", "patterns"),
     [
         # an extra added: the encoder's tail (the history's 44 floats) no longer fits
-        ([("config.extras", ["base_action"])], ["'actor.tail' is 44", "has 48"]),
+        ([("config.residual.extras", ["base_action"])], ["'actor.tail' is 44", "has 48"]),
         # the history lengthened in both places: the tail still says 2 entries
         ([("config.history", 3), ("actor.history", 3)], ["'actor.tail' is 44", "has 66"]),
         ([("actor.slots", 10**12)], ["'actor.slots' is 1000000000000", "has 6"]),
         ([("actor.slot_size", 10**6)], ["'actor.slot_size' is 1000000", "has 4"]),
-        ([("config.neighbour_slots", 9)], ["'actor.slots' is 6", "has 9"]),
+        ([("config.residual.neighbour_slots", 9)], ["'actor.slots' is 6", "has 9"]),
     ],
 )
 @pytest.mark.parametrize("normalized", [True, False])

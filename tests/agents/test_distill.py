@@ -45,10 +45,16 @@ from cpf_env.sim.observation import SLOTS
 TINY = DistillConfig(rounds=2, steps=30, epochs=3, batch_size=256)
 
 
+#: ``ResidualConfig`` fields, which ``_config`` passes on as the run's ``residual``.
+RESIDUAL_FIELDS = {f.name for f in dataclasses.fields(ResidualConfig)}
+
+
 def _config(**changes: object) -> TrainConfig:
+    """A small ``TrainConfig``; ``ResidualConfig`` fields among ``changes`` make its residual."""
+    residual = {key: changes.pop(key) for key in list(changes) if key in RESIDUAL_FIELDS}
     fields: dict[str, object] = {"scenario": "bench_current_waves", "fleets": 2, "net_arch": (32,)}
     fields.update(changes)
-    return TrainConfig(**fields)  # type: ignore[arg-type]
+    return TrainConfig(**fields, residual=ResidualConfig(**residual))  # type: ignore[arg-type]
 
 
 def _env_after(steps: int, residual: ResidualConfig, base: str = "nn_dsc") -> FleetVecEnv:
@@ -140,7 +146,7 @@ def _constant_residual_labels(
 
     ``horizon``: an episode length in steps (0: the scenario's), for fleets that restart.
     """
-    config = _config(base="mpc_tuned", mode="force", scale=0.5, seed=seed)
+    config = _config(base_policy="mpc_tuned", mode="force", scale=0.5, seed=seed)
     settings = DistillConfig(teacher="nn_dsc", label_base=label_base)
     scenario = scenarios.make_scenario("bench_current_waves")
     if horizon:
@@ -186,13 +192,15 @@ def test_without_a_residual_the_twin_is_the_envs_base_through_restarts(
 
 def test_twin_labels_need_an_observer_base_that_hides_the_residual(tmp_path: Path) -> None:
     twin = dataclasses.replace(TINY, label_base="twin")
-    base = {"base": "mpc_tuned", "mode": "force"}
+    base = {"base_policy": "mpc_tuned", "mode": "force"}
     with pytest.raises(ValueError, match=r'"twin".*hide_residual_from_base = false'):
         distill(_config(**base, hide_residual_from_base=False), twin, tmp_path / "x")
-    with pytest.raises(ValueError, match=r'label_base = "twin".*mpc, mpc_tuned.*base = "nn_dsc"'):
+    with pytest.raises(
+        ValueError, match=r'label_base = "twin".*mpc, mpc_tuned.*base_policy = "nn_dsc"'
+    ):
         distill(_config(), twin, tmp_path / "x")
-    with pytest.raises(ValueError, match=r'base = "none"'):
-        distill(_config(base="none", mode="force_and_rate", scale=1.0), twin, tmp_path / "x")
+    with pytest.raises(ValueError, match=r'base_policy = "none"'):
+        distill(_config(base_policy="none", mode="force_and_rate", scale=1.0), twin, tmp_path / "x")
     assert not (tmp_path / "x").exists()
 
 
@@ -272,7 +280,7 @@ def test_a_student_that_yields_at_a_limit_yields_wherever_it_is_loaded(tmp_path:
     settings = DistillConfig(rounds=1, steps=20, epochs=2, batch_size=256, fit_applied=True)
     distill(config, settings, tmp_path / "s")
     record = json.loads((tmp_path / "s" / "config.json").read_text())
-    assert record["config"]["yield_at_limit"] is True
+    assert record["config"]["residual"]["yield_at_limit"] is True
     policy = load_policy(tmp_path / "s")  # bench_saturation, on nn_dsc: saturated at first
     sim = FleetVecEnv("bench_saturation", num_fleets=2).sim
     obs = sim.reset(seeds=[1, 2])
@@ -352,7 +360,7 @@ def test_distill_writes_a_loadable_deterministic_student(tmp_path: Path) -> None
 def test_a_mixture_student_on_an_mpc_base_with_rate_labels(tmp_path: Path) -> None:
     config = _config(
         scenario=("bench_mild", "bench_large_fleet"),
-        base="mpc",
+        base_policy="mpc",
         mode="force_and_rate",
         scale=1.0,
         fleets=3,
@@ -416,10 +424,12 @@ def test_cpf_distill_writes_the_agent_and_its_run_files(tmp_path: Path) -> None:
     run = json.loads((log / "run.json").read_text())
     assert run["config"]["seed"] == 3 and run["distill"]["teacher"] == "nn_dsc_privileged"
     assert run["device"] == "cpu" and run["draws"] == [[], []]  # no procedural fleets
-    assert run["evaluation"] is None and not (log / "evaluations.csv").exists()  # no --eval-seeds
+    assert (
+        run["evaluation"] is None and not (log / "evaluations.csv").exists()
+    )  # no --eval-num-seeds
     rows = list(csv.DictReader((log / "rounds.csv").open()))
     assert [int(r["round"]) for r in rows] == [0, 1] and int(rows[1]["samples"]) == 200
-    assert load_policy(out).config.mode == "force_and_rate"
+    assert load_policy(out).config.residual.mode == "force_and_rate"
 
 
 @pytest.mark.parametrize(
@@ -577,7 +587,7 @@ def test_distill_refuses_a_device_it_does_not_have(tmp_path: Path) -> None:
 
 
 def test_evaluation_rows_are_cpf_trains_and_leave_the_student_unchanged(tmp_path: Path) -> None:
-    evaluate = TestSplitEvaluator(["bench_current_waves"], seeds=1, steps=20)
+    evaluate = TestSplitEvaluator(["bench_current_waves"], num_seeds=1, steps=20)
     evaluated = distill(_config(), TINY, tmp_path / "a", evaluate=evaluate)
     plain = distill(_config(), TINY, tmp_path / "b")
     assert plain.evaluations == () and plain.losses == evaluated.losses
@@ -612,14 +622,20 @@ def test_a_distillation_file_extends_another_and_merges_its_distill_table(
     applied, applied_settings = read_distill_config(
         ROOT / "studies/student/student_mpc_tuned_applied.toml", 0
     )
-    assert applied == tuned and (tuned.base, tuned.neighbour_slots) == ("mpc_tuned", 6)
+    assert applied == tuned
+    assert (tuned.base_policy, tuned.residual.neighbour_slots) == ("mpc_tuned", 6)
     assert applied_settings == dataclasses.replace(settings, fit_applied=True)
     (tmp_path / "base.toml").write_text('scenario = "bench_mild"\n[distill]\nrounds = 3\n')
     (tmp_path / "child.toml").write_text(
-        'extends = "base.toml"\nscale = 0.3\n[distill]\nsteps = 7\n'
+        'extends = "base.toml"\n[residual]\nscale = 0.3\n[distill]\nsteps = 7\n'
     )
     config, merged = read_distill_config(tmp_path / "child.toml", 0)
-    assert (config.scenario, config.scale, merged.rounds, merged.steps) == ("bench_mild", 0.3, 3, 7)
+    assert (config.scenario, config.residual.scale, merged.rounds, merged.steps) == (
+        "bench_mild",
+        0.3,
+        3,
+        7,
+    )
     (tmp_path / "base.toml").write_text('extends = "child.toml"\n')
     with pytest.raises(ValueError, match="comes back to a file of its chain"):
         read_distill_config(tmp_path / "child.toml", 0)

@@ -20,15 +20,20 @@ STUDENTS = Path(__file__).parents[2] / "tests" / "fixtures" / "agents"
 MLP = STUDENTS / "student_mpc_k6"
 DEEPSETS = STUDENTS / "student_mpc_deepsets"
 #: The students' recipe on one scenario; 1 fleet x 5 vessels x 8 steps a PPO rollout.
-RECIPE = {"base": "mpc", "scale": 0.5, "neighbour_slots": 6, "net_arch": (64, 64)}
+RECIPE = {"base_policy": "mpc", "net_arch": (64, 64)}
+#: The students' residual.
+RESIDUAL = {"scale": 0.5, "neighbour_slots": 6}
 TINY = {"fleets": 1, "n_steps": 8, "batch_size": 40, "n_epochs": 1, "torch_threads": 1}
 
 
-def _config(folder: Path, **changes: object) -> TrainConfig:
+def _config(
+    folder: Path, residual: dict[str, object] | None = None, **changes: object
+) -> TrainConfig:
     own = json.loads((folder / "config.json").read_text())["config"]
     recipe = {k: own[k] for k in ("encoder", "history", "shared_slot_statistics") if k in own}
     fields = {"scenario": "bench_saturation", "timesteps": 80, **RECIPE, **recipe, **TINY}
-    return TrainConfig(**{**fields, **changes})  # type: ignore[arg-type]
+    fields.update(changes)
+    return TrainConfig(**fields, residual={**RESIDUAL, **(residual or {})})  # type: ignore[arg-type]
 
 
 @pytest.mark.parametrize("folder", [MLP, DEEPSETS], ids=["mlp", "deepsets_history"])
@@ -50,11 +55,13 @@ def test_the_initial_policy_is_the_folders(tmp_path: Path, folder: Path) -> None
 
 def test_a_folder_of_another_recipe_is_refused_and_nothing_written(tmp_path: Path) -> None:
     out = tmp_path / "run"
-    with pytest.raises(ValueError, match=r"differ from the run's: scale \(folder 0.5, run 0.2\)"):
-        train(_config(MLP, scale=0.2), out, False, init_from=MLP)
+    with pytest.raises(
+        ValueError, match=r"differ from the run's: residual.scale \(folder 0.5, run 0.2\)"
+    ):
+        train(_config(MLP, {"scale": 0.2}), out, False, init_from=MLP)
     assert not out.exists()
     with pytest.raises(ValueError, match=r"neighbour_slots \(folder 6, run 4\)"):
-        train(_config(MLP, neighbour_slots=4), out, False, init_from=MLP)
+        train(_config(MLP, {"neighbour_slots": 4}), out, False, init_from=MLP)
     with pytest.raises(ValueError, match="algo"):
         train(_config(MLP, algo="sac"), out, False, init_from=MLP)
     with pytest.raises(ValueError, match="not an agent folder"):
@@ -65,8 +72,9 @@ def test_a_folder_of_another_recipe_is_refused_and_nothing_written(tmp_path: Pat
 def test_cpf_train_init_from_on_mpc_records_the_folder_and_resumes_exactly(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    common = ["--scenarios", "bench_saturation", "--base", "mpc", "--fleets", "1"]
-    common += ["--set", "scale=0.5", "neighbour_slots=6", "n_steps=8", "batch_size=40"]
+    common = ["--scenarios", "bench_saturation", "--base-policy", "mpc", "--fleets", "1"]
+    common += ["--set", "residual.scale=0.5", "residual.neighbour_slots=6", "n_steps=8"]
+    common += ["--set", "batch_size=40"]
     common += ["n_epochs=1", "checkpoint_every=40", "--eval-every", "0", "--quiet"]
     whole, parts = tmp_path / "whole", tmp_path / "parts"
     start = ["--init-from", str(MLP)]

@@ -18,6 +18,7 @@ from agents.algorithms import build_model
 from agents.history_env import HistoryVecEnv
 from agents.loading import TrainedPolicy
 from cpf_env import FleetSim, scenarios
+from cpf_env.envs.residual import ResidualConfig
 from cpf_env.model.graph import Graph
 
 H = 3
@@ -32,7 +33,7 @@ CONFIG = TrainConfig(
     net_arch=(16,),
     encoder="deepsets",
     history=H,
-    neighbour_slots=6,
+    residual=ResidualConfig(neighbour_slots=6),
     shared_slot_statistics=True,
     torch_threads=1,
 )
@@ -102,8 +103,8 @@ def _compare_with_sb3(
     base = FleetVecEnv(
         config.home_scenario,
         num_fleets=2,
-        base_policy=config.base,
-        residual=config.residual_config(),
+        base_policy=config.base_policy,
+        residual=config.residual,
         max_steps=max_steps,  # staggered: fleet 1 restarts after max_steps / 2 steps
     )
     env = HistoryVecEnv(base, config.history)

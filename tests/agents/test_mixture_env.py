@@ -125,7 +125,7 @@ def test_mixture_refuses_what_it_cannot_mix() -> None:
 def test_train_config_mixture_fields() -> None:
     config = TrainConfig(scenario=list(SUITE))
     assert config.scenarios == SUITE and config.home_scenario == "bench_mild"
-    assert config.neighbour_slots == 4  # the suite's largest degree (bench_switching)
+    assert config.residual.neighbour_slots == 4  # the suite's largest degree (bench_switching)
     assert TrainConfig(scenario=["bench_mild"]).scenario == "bench_mild"
     assert TrainConfig.from_json(config.to_json()) == config
     with pytest.raises(ValueError, match="distinct names"):
@@ -144,7 +144,9 @@ def test_train_config_mixture_fields() -> None:
 
 def test_a_mixture_agent_runs_on_every_fleet_size_and_supported_graph(tmp_path: Path) -> None:
     """Trained on three scenarios with 6 slots: runs on the suite, the shift split, n = 3 .. 10."""
-    config = TrainConfig(scenario=MIX, neighbour_slots=6, timesteps=640, seed=0, **TINY)  # type: ignore[arg-type]
+    config = TrainConfig(
+        scenario=MIX, residual=ResidualConfig(neighbour_slots=6), timesteps=640, seed=0, **TINY
+    )  # type: ignore[arg-type]
     folder = train(config, tmp_path / "mix", progress=False)
     targets = [scenarios.get(name) for name in SUITE]
     targets += [split_scenario(name, "shift") for name in SUITE]

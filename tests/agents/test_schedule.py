@@ -17,7 +17,7 @@ from cpf_commands.train import train_main
 
 TINY = {"fleets": 2, "n_steps": 16, "batch_size": 80, "n_epochs": 1, "net_arch": (16, 16)}
 #: cpf-train flags of a tiny run (160 vessel-steps per rollout).
-ARGV = ["--scenarios", "bench_mild", "--fleets", "2", "--eval-seeds", "2",
+ARGV = ["--scenarios", "bench_mild", "--fleets", "2", "--eval-num-seeds", "2",
         "--set", "n_steps=16", "batch_size=80", "n_epochs=1"]  # fmt: skip
 
 
@@ -30,7 +30,7 @@ def test_evaluations_are_the_numbers_cpf_bench_prints_and_best_is_the_lowest(
 ) -> None:
     config = TrainConfig(scenario="bench_mild", timesteps=480, seed=2, learning_rate=0.05,
                          **TINY)  # type: ignore[arg-type]  # fmt: skip
-    evaluate = TestSplitEvaluator(["bench_mild"], seeds=2, steps=30)
+    evaluate = TestSplitEvaluator(["bench_mild"], num_seeds=2, steps=30)
     folder = train(config, tmp_path / "run", False, evaluate=evaluate,
                    schedule=RunSchedule(eval_every=160))  # fmt: skip
     rows = _rows(folder)
@@ -56,7 +56,7 @@ def test_evaluations_are_the_numbers_cpf_bench_prints_and_best_is_the_lowest(
 
 def test_evaluation_needs_a_positive_number_of_seeds() -> None:
     with pytest.raises(ValueError, match="seeds must be an integer >= 1"):
-        TestSplitEvaluator(["bench_mild"], seeds=0)
+        TestSplitEvaluator(["bench_mild"], num_seeds=0)
     with pytest.raises(ValueError, match="every must be an integer >= 0"):
         RunSchedule(eval_every=-1)
 
@@ -74,7 +74,7 @@ def test_cpf_train_prints_the_rounding_and_the_bar_shows_the_evaluation_cost(
     assert "episodic_cost" not in captured.err
     assert (out / "best" / "manifest.json").is_file() and len(_rows(out)) == 2
     run = json.loads((out / "run.json").read_text())
-    assert run["evaluation"] == {"split": "test", "scenarios": ["bench_mild"], "seeds": 2,
+    assert run["evaluation"] == {"split": "test", "scenarios": ["bench_mild"], "num_seeds": 2,
                                  "steps": None}  # fmt: skip
     assert run["device"] == "cpu"  # the default, recorded beside the configuration
 
@@ -102,7 +102,7 @@ def test_cpf_train_help_lists_the_new_options(capsys: pytest.CaptureFixture[str]
     with pytest.raises(SystemExit):
         train_main(["--help"])
     text = capsys.readouterr().out
-    for flag in ("--eval-every", "--eval-seeds", "--set", "--resume", "--tensorboard-log",
+    for flag in ("--eval-every", "--eval-num-seeds", "--set", "--resume", "--tensorboard-log",
                  "--device"):  # fmt: skip
         assert flag in text
 

@@ -58,8 +58,8 @@ def test_an_env_restores_in_place_and_steps_as_the_original() -> None:
         resets += int(a[2].any())
     assert resets >= 2  # fleets restarted from their generators after the restore
     with pytest.raises(SnapshotError, match="resume with the code and configuration"):
-        restore(make_env(TrainConfig(scenario="bench_lossy_links", fleets=2, base="dsc")), tree,
-                "env", arrays)  # fmt: skip
+        other = TrainConfig(scenario="bench_lossy_links", fleets=2, base_policy="dsc")
+        restore(make_env(other), tree, "env", arrays)
 
 
 def test_an_object_of_an_unknown_library_is_refused_with_its_path() -> None:

@@ -31,7 +31,7 @@ def test_train_and_load_round_trip(tmp_path: Path, algo: str, base: str) -> None
     config = TrainConfig(
         algo=algo,
         scenario="bench_mild",
-        base=base,
+        base_policy=base,
         timesteps=320,
         seed=1,
         **TINY,  # type: ignore[arg-type]
@@ -124,7 +124,7 @@ def test_cpf_train_command(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -
         assert message in capsys.readouterr().err
     assert sorted(p.name for p in tmp_path.iterdir()) == [".cli.lock", "cli"]  # nothing created
     with pytest.raises(SystemExit):
-        train_main(["--out", str(out), "--set", "scale=0"])
+        train_main(["--out", str(out), "--set", "residual.scale=0"])
     assert "residual scale" in capsys.readouterr().err
 
 
@@ -182,7 +182,10 @@ def test_a_trained_policy_acts_the_same_whatever_the_torch_threads() -> None:
         ("net_arch", (64, 0), "net_arch must list layer sizes"),
         ("buffer_size", 0, "buffer_size must be an integer >= 1"),
         ("normalize_observations", "yes", "normalize_observations must be true or false"),
-        ("scale", -0.1, "scale"),
+        ("residual", {"scale": -0.1}, "residual scale"),
+        ("residual", {"pace": 1.0}, r"residual has unknown field\(s\) \['pace'\]"),
+        ("residual", 0.2, "residual must be a ResidualConfig or a table"),
+        ("base_policy", "pid", "base_policy must be one of"),
         ("fleets", 0, "fleets must be an integer >= 1"),
         ("seed", -1, "seed must be an integer in"),
         ("seed", 2**32, "seed must be an integer in"),

@@ -75,11 +75,11 @@ def test_iqm_over_seeds_matches_the_hand_calculation(
 
 
 def test_the_base_line_of_an_analytic_policy_is_the_benchmark_number(tmp_path: Path) -> None:
-    evaluation = {"split": "test", "scenarios": ["bench_mild"], "seeds": 2, "steps": 20}
+    evaluation = {"split": "test", "scenarios": ["bench_mild"], "num_seeds": 2, "steps": 20}
     folders = _write_runs(tmp_path / "runs", base="none", evaluation=evaluation)
     with pytest.raises(SystemExit):  # from scratch: no base at 0 steps to compare with
         curves_main([*folders, "--out", str(tmp_path / "c")])
-    assert curves_main([*folders, "--out", str(tmp_path / "c"), "--base", "dsc"]) == 0
+    assert curves_main([*folders, "--out", str(tmp_path / "c"), "--base-policy", "dsc"]) == 0
     cells = run_bench(["dsc"], ["bench_mild"], num_seeds=2, steps=20, split="test")
     expected = float(np.mean(cells[0].metrics["cost"]))
     assert _curves(tmp_path / "c")["vessel_steps"][0]["base_cost"] == expected
@@ -136,11 +136,11 @@ def test_cpf_curves_reads_cpf_distill_runs(
     for seed in (0, 1):
         out, log = tmp_path / f"agent_s{seed}", tmp_path / f"run_s{seed}"
         argv = ["--config", str(config), "--seed", str(seed), "--out", str(out), "--log", str(log)]
-        assert distill_main([*argv, "--eval-seeds", "1"]) == 0
+        assert distill_main([*argv, "--eval-num-seeds", "1"]) == 0
         logs.append(str(log))
     record = json.loads((tmp_path / "run_s0" / "run.json").read_text())
     assert record["evaluation"] == {
-        "split": "test", "scenarios": ["bench_mild"], "seeds": 1, "steps": 20
+        "split": "test", "scenarios": ["bench_mild"], "num_seeds": 1, "steps": 20
     }  # fmt: skip
     rows = list(csv.DictReader((tmp_path / "run_s0" / "evaluations.csv").open()))
     assert list(rows[0]) == ["vessel_steps", "wall_clock_seconds", "evaluation_seconds",
@@ -149,7 +149,7 @@ def test_cpf_curves_reads_cpf_distill_runs(
     capsys.readouterr()
     assert curves_main([*logs, "--out", str(tmp_path / "c")]) == 0  # the base: row 0
     assert "2 runs; base policy cost" in capsys.readouterr().out
-    assert curves_main([*logs, "--out", str(tmp_path / "d"), "--base", "nn_dsc"]) == 0
+    assert curves_main([*logs, "--out", str(tmp_path / "d"), "--base-policy", "nn_dsc"]) == 0
     by_row, by_name = _curves(tmp_path / "c"), _curves(tmp_path / "d")
     assert [r["x"] for r in by_row["vessel_steps"]] == [0, 100, 200]
     # Row 0 of a student is exactly its base, nn_dsc, benched on the runs' settings.

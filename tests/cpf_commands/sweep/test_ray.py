@@ -36,13 +36,13 @@ AGENT = ROOT / "tests" / "fixtures" / "agents" / "residual_ppo_lossy_links"
 def test_two_seeds_by_two_scenarios_then_a_resume(tmp_path, capsys) -> None:
     out = tmp_path / "sweep"
     argv = ["--scenarios", "bench_mild", "bench_lossy_links", "--seeds", "0", "1"]
-    argv += ["--set", *TINY, "--eval-seeds", "2", "--eval-steps", "50", "--out", str(out)]
+    argv += ["--set", *TINY, "--eval-num-seeds", "2", "--eval-steps", "50", "--out", str(out)]
     assert sweep_main(argv) == 0  # Tune's status output on
     printed = capsys.readouterr().out
     assert "4/4 trials done" in printed and "| bench_lossy_links | 2/2 |" in printed
     assert "Trial status" in printed  # what --quiet must hide below
     spec = SweepSpec.from_settings(
-        ["bench_mild", "bench_lossy_links"], [0, 1], TINY, eval_seeds=2, eval_steps=50
+        ["bench_mild", "bench_lossy_links"], [0, 1], TINY, eval_num_seeds=2, eval_steps=50
     )
     models = {}
     evaluation = json.loads(next(out.glob(f"trials/*/{EVALUATION_FILE}")).read_text())
@@ -71,7 +71,7 @@ def test_an_interrupted_sweep_resumes_keeping_finished_trials(tmp_path) -> None:
     out = tmp_path / "sweep"
     argv = [sys.executable, "-c", "from cpf_commands.sweep.cli import sweep_main; sweep_main()"]
     argv += ["--scenarios", "bench_mild", "--seeds", "0", "1", "2", "--quiet"]
-    argv += ["--set", "timesteps=30000", "fleets=8", "--eval-seeds", "1", "--eval-steps", "20"]
+    argv += ["--set", "timesteps=30000", "fleets=8", "--eval-num-seeds", "1", "--eval-steps", "20"]
     argv += ["--cpus-per-trial", "2", "--out", str(out)]  # one trial at a time
     process = subprocess.Popen(argv, start_new_session=True, stdout=subprocess.DEVNULL)
     first = out / "trials" / "bench_mild-seed0" / EVALUATION_FILE
@@ -88,7 +88,7 @@ def test_an_interrupted_sweep_resumes_keeping_finished_trials(tmp_path) -> None:
         ["bench_mild"],
         [0, 1, 2],
         ["timesteps=30000", "fleets=8"],
-        eval_seeds=1,
+        eval_num_seeds=1,
         eval_steps=20,
         cpus_per_trial=2,
     )
@@ -131,7 +131,7 @@ def test_a_trial_trains_exactly_as_train_does(tmp_path) -> None:
     from agents import train
 
     fixed = {"timesteps": 3000, "fleets": 4, "n_steps": 16}
-    spec = SweepSpec(("bench_mild",), (3, 4), fixed=fixed, eval_seeds=0, cpus_per_trial=2)
+    spec = SweepSpec(("bench_mild",), (3, 4), fixed=fixed, eval_num_seeds=0, cpus_per_trial=2)
     run_sweep(spec, tmp_path / "sweep", quiet=True)  # one trial at a time
     results = tmp_path.glob("sweep/tune/run1/bench_mild-seed*/result.json")
     pids = {json.loads(path.read_text().splitlines()[-1])["pid"] for path in results}

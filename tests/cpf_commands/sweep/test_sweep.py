@@ -43,12 +43,12 @@ from cpf_env.sim.precompile import KERNEL_MODULES, kernels_of_package, precompil
     ("text", "expected"),
     [
         ("timesteps=20000", ("timesteps", (20000,))),
-        ("scale=0.1,0.2", ("scale", (0.1, 0.2))),
-        ("mode=force,force_and_rate", ("mode", ("force", "force_and_rate"))),
-        ("hide_residual_from_base=false", ("hide_residual_from_base", (False,))),
+        ("residual.scale=0.1,0.2", ("residual.scale", (0.1, 0.2))),
+        ("residual.mode=force,force_and_rate", ("residual.mode", ("force", "force_and_rate"))),
+        ("residual.hide_residual_from_base=false", ("residual.hide_residual_from_base", (False,))),
         ("reward_form=none,log", ("reward_form", (None, "log"))),
         ("torch_threads=2", ("torch_threads", (2,))),
-        ('extras=[[],["base_action"]]', ("extras", ((), ("base_action",)))),
+        ('residual.extras=[[],["base_action"]]', ("residual.extras", ((), ("base_action",)))),
         ("net_arch=[[64,64],[128]]", ("net_arch", ((64, 64), (128,)))),
     ],
 )  # fmt: skip
@@ -66,8 +66,8 @@ def test_settings_are_parsed_to_the_field_types(text: str, expected: tuple) -> N
         ("scenario=wang2014", "set scenario with --scenarios"),
         ("timesteps=many", "'many' is not a valid int"),
         ("timesteps=1.5", "'1.5' is not a valid int"),
-        ("hide_residual_from_base=maybe", "not a valid bool"),
-        ("extras=[oops", "is not a JSON list"),
+        ("residual.hide_residual_from_base=maybe", "not a valid bool"),
+        ("residual.extras=[oops", "is not a JSON list"),
     ],
 )
 def test_bad_settings_say_what_is_wrong(text: str, match: str) -> None:
@@ -80,16 +80,16 @@ def test_bad_settings_say_what_is_wrong(text: str, match: str) -> None:
 
 def test_every_combination_is_one_trial_with_its_own_folder_name() -> None:
     spec = SweepSpec.from_settings(
-        ["bench_mild", "bench_saturation"], [0, 1], ["timesteps=100", "scale=0.1,0.2"]
+        ["bench_mild", "bench_saturation"], [0, 1], ["timesteps=100", "residual.scale=0.1,0.2"]
     )
     trials = list(spec.trials())
     assert len(trials) == 2 * 2 * 2
     names = [trial_name(params, spec) for params in trials]
     assert len(set(names)) == len(names)
-    assert names[0] == "bench_mild-seed0-scale0.1"
-    assert spec.fixed == {"timesteps": 100} and spec.grid == {"scale": (0.1, 0.2)}
+    assert names[0] == "bench_mild-seed0-residual.scale0.1"
+    assert spec.fixed == {"timesteps": 100} and spec.grid == {"residual.scale": (0.1, 0.2)}
     config = spec.config(trials[-1])
-    assert (config.scenario, config.seed, config.scale, config.timesteps) == (
+    assert (config.scenario, config.seed, config.residual.scale, config.timesteps) == (
         "bench_saturation",
         1,
         0.2,
@@ -100,13 +100,18 @@ def test_every_combination_is_one_trial_with_its_own_folder_name() -> None:
 @pytest.mark.parametrize(
     ("scenarios", "seeds", "settings", "match"),
     [
-        (["bench_mild"], [0], ["scale=-1"], "scale"),
+        (["bench_mild"], [0], ["residual.scale=-1"], "scale"),
         (["no_such"], [0], [], "unknown scenario 'no_such'"),
         (["bench_mild"], [0, 0], [], "seeds repeat"),
         (["bench_mild"], [], [], "at least one scenario and one seed"),
-        (["bench_mild"], [0], ["scale=0.1", "scale=0.2"], "given twice"),
+        (["bench_mild"], [0], ["residual.scale=0.1", "residual.scale=0.2"], "given twice"),
         (["bench_mild"], [0], ["fleets=0"], "fleets must be an integer >= 1"),
-        (["bench_mild"], [0], ["scale=0.1,0.10"], r"scale: values repeat \(\[0.1, 0.1\]\)"),
+        (
+            ["bench_mild"],
+            [0],
+            ["residual.scale=0.1,0.10"],
+            r"scale: values repeat \(\[0.1, 0.1\]\)",
+        ),
         (["bench_mild"], [0], ["net_arch=64,64"], r"values repeat.*net_arch=\[\[64,64\]\]"),
         (["bench_mild"], [-1], [], "seed must be an integer in"),
     ],
@@ -134,13 +139,14 @@ def test_a_sweep_built_in_python_is_checked_too(arguments: dict, match: str) -> 
 
 
 def test_a_folder_keeps_its_sweep_and_refuses_another(tmp_path) -> None:
-    spec = SweepSpec(("bench_mild",), (0, 1), {"scale": (0.1, 0.2)}, {"timesteps": 100})
+    spec = SweepSpec(("bench_mild",), (0, 1), {"residual.scale": (0.1, 0.2)}, {"timesteps": 100})
     assert spec.check_folder(tmp_path / "new") is False
     assert not (tmp_path / "new").exists()  # checking writes nothing
     spec.save(tmp_path)
     assert json.loads((tmp_path / "sweep.json").read_text())["seeds"] == [0, 1]
     assert spec.check_folder(tmp_path) is True  # the same sweep: a resume
-    other = SweepSpec(("bench_mild",), (0, 1, 2), {"scale": (0.1, 0.2)}, {"timesteps": 100})
+    grid = {"residual.scale": (0.1, 0.2)}
+    other = SweepSpec(("bench_mild",), (0, 1, 2), grid, {"timesteps": 100})
     with pytest.raises(ValueError, match=r"differs in seeds \(saved \[0, 1\], now \[0, 1, 2\]\)"):
         other.check_folder(tmp_path)
     threads = SweepSpec(("bench_mild",), (0, 1), spec.grid, spec.fixed, cpus_per_trial=2)
@@ -156,11 +162,12 @@ def test_a_folder_keeps_its_sweep_and_refuses_another(tmp_path) -> None:
 
 
 def test_the_order_of_set_does_not_change_the_sweep(tmp_path) -> None:
-    first = SweepSpec.from_settings(["bench_mild"], [0], ["scale=0.1,0.2", "n_epochs=2,4"])
-    second = SweepSpec.from_settings(["bench_mild"], [0], ["n_epochs=2,4", "scale=0.1,0.2"])
+    settings = ["residual.scale=0.1,0.2", "n_epochs=2,4"]
+    first = SweepSpec.from_settings(["bench_mild"], [0], settings)
+    second = SweepSpec.from_settings(["bench_mild"], [0], settings[::-1])
     names = [trial_name(params, first) for params in first.trials()]
     assert names == [trial_name(params, second) for params in second.trials()]
-    assert names[0] == "bench_mild-seed0-n_epochs2-scale0.1"
+    assert names[0] == "bench_mild-seed0-n_epochs2-residual.scale0.1"
     first.save(tmp_path)
     assert second.check_folder(tmp_path) is True
 
@@ -180,15 +187,16 @@ def _finished(out, spec: SweepSpec, params: dict, ratio: float, reference="nn_ds
 
 
 def test_the_summary_has_every_trial_and_each_setting_over_seeds(tmp_path) -> None:
-    spec = SweepSpec(("bench_mild",), (0, 1, 2), {"scale": (0.1, 0.2)}, {"timesteps": 100})
+    spec = SweepSpec(("bench_mild",), (0, 1, 2), {"residual.scale": (0.1, 0.2)}, {"timesteps": 100})
     for seed, scale, ratio in ((0, 0.1, 0.9), (1, 0.1, 1.1), (2, 0.1, 0.8), (0, 0.2, 0.5)):
-        _finished(tmp_path, spec, {"scenario": "bench_mild", "seed": seed, "scale": scale}, ratio)
-    errors = {"bench_mild-seed1-scale0.2": "RuntimeError: diverged"}
+        params = {"scenario": "bench_mild", "seed": seed, "residual.scale": scale}
+        _finished(tmp_path, spec, params, ratio)
+    errors = {"bench_mild-seed1-residual.scale0.2": "RuntimeError: diverged"}
     rows = summary_rows(spec, tmp_path, errors)
     status = {row["trial"]: row["status"] for row in rows}
     assert len(rows) == 6
-    assert status["bench_mild-seed1-scale0.2"] == "error: RuntimeError: diverged"
-    assert status["bench_mild-seed2-scale0.2"] == "not finished"
+    assert status["bench_mild-seed1-residual.scale0.2"] == "error: RuntimeError: diverged"
+    assert status["bench_mild-seed2-residual.scale0.2"] == "not finished"
     assert sum(value == "done" for value in status.values()) == 4
     text = summary_markdown(spec, rows, "cpf-sweep ...")
     assert "| bench_mild | 0.1 | 3/3 | 0.9333 | 0.8000 | 1.1000 | 2/3 |" in text
@@ -213,11 +221,13 @@ def test_a_trial_counts_only_if_it_finished_with_this_configuration(tmp_path) ->
 
 def test_the_summary_names_each_base_and_shows_none_settings(tmp_path) -> None:
     spec = SweepSpec(
-        ("bench_mild",), (0,), {"base": ("nn_dsc", "backstepping"), "reward_form": (None, "log")}
+        ("bench_mild",),
+        (0,),
+        {"base_policy": ("nn_dsc", "backstepping"), "reward_form": (None, "log")},
     )
     for base in ("nn_dsc", "backstepping"):
         for form in (None, "log"):
-            params = {"scenario": "bench_mild", "seed": 0, "base": base, "reward_form": form}
+            params = {"scenario": "bench_mild", "seed": 0, "base_policy": base, "reward_form": form}
             _finished(tmp_path, spec, params, 0.5, reference=base)
     text = summary_markdown(spec, summary_rows(spec, tmp_path, {}), "cpf-sweep ...")
     assert "(here: backstepping, nn_dsc)" in text
@@ -335,9 +345,9 @@ def test_a_trial_to_run_again_starts_from_an_empty_folder(tmp_path, monkeypatch)
     monkeypatch.setitem(sys.modules, "ray.tune", tune)
     fixed = {"timesteps": 64, "fleets": 2, "n_steps": 16, "batch_size": 160}
     fixed["normalize_observations"] = False
-    spec = SweepSpec(("bench_mild",), (0,), fixed=fixed, eval_seeds=0)
+    spec = SweepSpec(("bench_mild",), (0,), fixed=fixed, eval_num_seeds=0)
     params = next(spec.trials())
-    stale = SweepSpec(("bench_mild",), (0,), fixed={**fixed, "timesteps": 32}, eval_seeds=0)
+    stale = SweepSpec(("bench_mild",), (0,), fixed={**fixed, "timesteps": 32}, eval_num_seeds=0)
     folder = tmp_path / "trials" / _finished(tmp_path, stale, params, 0.5)
     (folder / "vecnormalize.pkl").write_text("statistics of the earlier agent")
     assert trial_state(folder, spec.config(params))[0] == "stale"
