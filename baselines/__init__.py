@@ -17,6 +17,11 @@ name                        policy
                             training seeds (``baselines.mpc_tuned``)
 ==========================  ===========================================================
 
+For hulls without a sway force (``UNDERACTUATED``, deployable, outside the
+default benchmark set): ``ilos``, integral line-of-sight guidance with surge
+and heading control and the cooperative law's path variable (Børhaug, Pavlov
+& Pettersen 2008; ``baselines.ilos``).
+
 Privileged references, not deployable (``PRIVILEGED``): ``nn_dsc_global_v0``,
 ``nn_dsc`` told v0's schedule on every vessel (no estimator; an ablation
 of the speed estimator, which a vessel cut off from the leader cannot
@@ -47,6 +52,7 @@ from typing import Any
 from baselines.backstepping import BacksteppingPolicy
 from baselines.delay_compensated import BacksteppingDelayCompensated, NNDSCDelayCompensated
 from baselines.gains import BacksteppingGains, CooperativeGains, NNDSCGains
+from baselines.ilos import ILOSGains, ILOSPolicy
 from baselines.mpc import MPCPolicy, MPCPrivileged, OraclePolicy, RecedingHorizonGains
 from baselines.mpc_told import MPCToldDynamics, MPCToldLinks, MPCToldV0
 from baselines.mpc_tuned import MPCTuned
@@ -61,6 +67,7 @@ __all__ = [
     "HEADROOM_REFERENCE",
     "POLICIES",
     "PRIVILEGED",
+    "UNDERACTUATED",
     "AnalyticPolicy",
     "BacksteppingDelayCompensated",
     "BacksteppingGains",
@@ -69,6 +76,8 @@ __all__ = [
     "CooperativeGains",
     "DSCPolicy",
     "GlobalSpeedPolicy",
+    "ILOSGains",
+    "ILOSPolicy",
     "MPCPolicy",
     "MPCPrivileged",
     "MPCToldDynamics",
@@ -101,6 +110,11 @@ POLICIES: dict[str, type[FleetPolicy]] = {
     )
 }
 
+#: Deployable designs for hulls without a sway force (local observation only): they
+#: command no sway force on any hull. Outside cpf-bench's default set, which the
+#: fully actuated suite scores: there ``ilos`` loses to ``nn_dsc`` on every scenario.
+UNDERACTUATED: dict[str, type[FleetPolicy]] = {ILOSPolicy.name: ILOSPolicy}
+
 #: Privileged references by name: not deployable, they read what no local observation
 #: holds (the simulator, or the scenario's v0 schedule).
 PRIVILEGED: dict[str, type[FleetPolicy]] = {
@@ -116,8 +130,8 @@ PRIVILEGED: dict[str, type[FleetPolicy]] = {
         BacksteppingPrivileged,
     )
 }
-#: Every policy class by name: ``POLICIES``, then ``PRIVILEGED``.
-ALL_POLICIES: dict[str, type[FleetPolicy]] = {**POLICIES, **PRIVILEGED}
+#: Every policy class by name: ``POLICIES``, ``UNDERACTUATED``, then ``PRIVILEGED``.
+ALL_POLICIES: dict[str, type[FleetPolicy]] = {**POLICIES, **UNDERACTUATED, **PRIVILEGED}
 #: The headroom bound the benchmark's normalized score is measured against.
 HEADROOM_REFERENCE = OraclePolicy.name
 
@@ -126,7 +140,7 @@ def make_policy(name: str, env: object, **options: Any) -> FleetPolicy:
     """Build the policy ``name`` for the scenario of ``env``.
 
     Args:
-        name: A key of ``POLICIES`` or of ``PRIVILEGED``.
+        name: A key of ``POLICIES``, ``UNDERACTUATED`` or ``PRIVILEGED``.
         env: A ``CooperativePathFollowingEnv``, a ``FleetSim``, any object with a
             ``.scenario``, a ``Scenario`` or a scenario name (a privileged
             reference built without a simulator must be bound to one before acting).

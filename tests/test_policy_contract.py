@@ -19,7 +19,7 @@ def test_the_contract_has_one_name() -> None:
     assert not hasattr(residual, "BasePolicy") and not hasattr(policies, "BenchPolicy")
 
 
-@pytest.mark.parametrize("name", sorted(baselines.POLICIES))
+@pytest.mark.parametrize("name", sorted({**baselines.POLICIES, **baselines.UNDERACTUATED}))
 def test_every_baseline_meets_the_contract(name: str) -> None:
     scenario = scenarios.get("wang2014")
     policy = baselines.make_policy(name, scenario)
