@@ -300,7 +300,7 @@ class ResidualController:
                 f"{type(self.base).__name__} has none; drop the extra or use an analytic policy."
             )
         tau_min, tau_max = scenario.tau_limits
-        self._tau_scale = np.maximum(np.abs(tau_min), np.abs(tau_max))  # (n, 3)
+        self._tau_scale = scenario.tau_scale  # (n, 3); 1 on an axis without an actuator
         self._near_max = tau_max - LIMIT_TOLERANCE * self._tau_scale
         self._near_min = tau_min + LIMIT_TOLERANCE * self._tau_scale
         self._theta_dot_max = float(scenario.theta_dot_max)

@@ -24,6 +24,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from cpf_env.model.actuators import Thrusters
 from cpf_env.model.disturbances import Disturbances
 from cpf_env.model.graph import Graph, SwitchingTopology, as_switching
 from cpf_env.model.links import LinkImpairments
@@ -158,6 +159,8 @@ class Scenario:
         tau_min: Lower force limits, same shape; None means -tau_max.
         disturbances: Unmodeled dynamics, current, waves, wind.
         links: Packet loss and delay on every link.
+        thrusters: Lag and slew-rate limit of the applied force
+            (``cpf_env.model.actuators``); the default is an instant thruster.
         dt: Control period (s).
         substeps: RK4 plant steps per control period.
         max_steps: Episode length (control steps) before truncation.
@@ -180,6 +183,7 @@ class Scenario:
     tau_min: Vector3 | tuple[Vector3, ...] | None = None
     disturbances: Disturbances = field(default_factory=Disturbances)
     links: LinkImpairments = field(default_factory=LinkImpairments)
+    thrusters: Thrusters = field(default_factory=Thrusters)
     dt: float = 0.05
     substeps: int = 5
     max_steps: int = 3000
@@ -210,14 +214,22 @@ class Scenario:
         tau_min = _as_rows(
             "tau_min", -np.array(tau_max) if self.tau_min is None else self.tau_min, n, 3
         )
-        if not (np.all(np.array(tau_max) > 0.0) and np.all(np.array(tau_min) < 0.0)):
+        upper, lower = np.array(tau_max), np.array(tau_min)
+        unactuated = (upper == 0.0) & (lower == 0.0)  # an axis without an actuator
+        if not np.all(((upper > 0.0) & (lower < 0.0)) | unactuated):
             raise ValueError(
-                "saturation limits must satisfy tau_min < 0 < tau_max on every axis "
-                f"(got tau_min={tau_min}, tau_max={tau_max}); give magnitudes in N, N, N m."
+                "saturation limits must satisfy tau_min < 0 < tau_max on every actuated axis, "
+                "or tau_min = tau_max = 0 on an axis without an actuator (an underactuated "
+                f"hull: sway 0); got tau_min={tau_min}, tau_max={tau_max}. Give magnitudes in "
+                "N, N, N m."
             )
         object.__setattr__(self, "tau_max", tau_max)
         object.__setattr__(self, "tau_min", tau_min)
         self._check_numbers()
+        if not isinstance(self.thrusters, Thrusters):
+            raise ValueError(
+                f"thrusters must be a cpf_env.model.actuators.Thrusters, got {self.thrusters!r}."
+            )
         if self.links.delay_steps >= self.max_steps:
             raise ValueError(
                 f"links.delay_steps = {self.links.delay_steps} is not shorter than the episode "
@@ -274,6 +286,17 @@ class Scenario:
     def tau_limits(self) -> tuple[np.ndarray, np.ndarray]:
         """(tau_min, tau_max) as arrays of shape (n, 3) in N, N, N m."""
         return np.array(self.tau_min), np.array(self.tau_max)
+
+    @property
+    def tau_scale(self) -> np.ndarray:
+        """Per-axis force scale max(|tau_min|, |tau_max|) (n, 3), in N, N, N m.
+
+        What the reward's effort term, the residual's range and the normalized
+        forces divide by; 1 on an axis without an actuator, whose force is always 0.
+        """
+        tau_min, tau_max = self.tau_limits
+        scale = np.maximum(np.abs(tau_min), np.abs(tau_max))
+        return np.where(scale > 0.0, scale, 1.0)
 
     @property
     def switching(self) -> SwitchingTopology:

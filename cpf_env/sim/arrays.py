@@ -43,7 +43,7 @@ class FleetArrays(NamedTuple):
     theta: np.ndarray  # (B, n) path variables
     theta_dot: np.ndarray  # (B, n) last commanded (clipped) path-variable rate
     tau_command: np.ndarray  # (B, n, 3) last force command (N, N, N m)
-    tau_applied: np.ndarray  # (B, n, 3) last saturated force
+    tau_applied: np.ndarray  # (B, n, 3) force applied over the last step (the thrusters' state)
     message: np.ndarray  # (B, n, m) last message sent (clipped)
     waves: np.ndarray  # (B, n, 3) wave force, earth frame (N, N, N m)
     wind: np.ndarray  # (B, n, 3) wind force, earth frame
@@ -68,7 +68,10 @@ class KernelConstants(NamedTuple):
 
     tau_min: np.ndarray  # (n, 3)
     tau_max: np.ndarray  # (n, 3)
-    tau_scale: np.ndarray  # (n, 3) max(|tau_min|, |tau_max|)
+    tau_scale: np.ndarray  # (n, 3) Scenario.tau_scale: max(|tau_min|, |tau_max|), 1 if both 0
+    thruster_decay: float  # exp(-dt / T) of the thrusters' lag, 0 for instant thrusters
+    thruster_slew: np.ndarray  # (3,) largest change of the applied force per step, inf: none
+    instant_thrusters: bool  # the applied force is the saturated command
     theta_dot_max: float
     message_max: float
     path_kinds: np.ndarray  # (n,) int64

@@ -126,7 +126,10 @@ def _constants(scenario: Scenario) -> arrays.KernelConstants:
     return arrays.KernelConstants(
         tau_min=_floats(tau_min),
         tau_max=_floats(tau_max),
-        tau_scale=_floats(np.maximum(np.abs(tau_min), np.abs(tau_max))),
+        tau_scale=_floats(scenario.tau_scale),
+        thruster_decay=float(scenario.thrusters.decay(scenario.dt)),
+        thruster_slew=_floats(scenario.thrusters.slews(scenario.dt)),
+        instant_thrusters=bool(scenario.thrusters.instant),
         theta_dot_max=float(scenario.theta_dot_max),
         message_max=float(scenario.message_max),
         path_kinds=_ints(kinds),

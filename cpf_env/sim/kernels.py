@@ -2,8 +2,10 @@
 
 One call advances B fleets x n vessels by one control period:
 
-1. saturate the force command per axis and clip the path-variable rate and
-   the message (``docs/model.md``, "Input saturation");
+1. saturate the force command per axis (and, with thruster dynamics, let the
+   applied force follow it with a lag and a slew limit: ``cpf_env.model.actuators``),
+   and clip the path-variable rate and the message (``docs/model.md``, "Input
+   saturation");
 2. integrate the plant (``cpf_env.model.plant``) with ``substeps`` RK4 steps, the
    command and the environmental forces held over the control period
    (``docs/model.md``, "Time discretization");
@@ -167,11 +169,18 @@ def plant_accelerations(
 
 @numba.njit(cache=True, inline="always")
 def _apply_action(a: FleetArrays, c: KernelConstants, actions: np.ndarray, b: int, i: int) -> None:
-    """Store the command, saturate it per axis and clip rate and message."""
+    """Store the command, saturate it per axis (through the thrusters) and clip rate and message."""
     for k in range(3):
         command = actions[b, i, k]
         a.tau_command[b, i, k] = command
-        a.tau_applied[b, i, k] = _clip(command, c.tau_min[i, k], c.tau_max[i, k])
+        target = _clip(command, c.tau_min[i, k], c.tau_max[i, k])
+        if c.instant_thrusters:
+            a.tau_applied[b, i, k] = target
+        else:  # cpf_env.model.actuators: the exact lag step, then the slew limit
+            last = a.tau_applied[b, i, k]
+            lagged = c.thruster_decay * last + (1.0 - c.thruster_decay) * target
+            slew = c.thruster_slew[k]
+            a.tau_applied[b, i, k] = last + _clip(lagged - last, -slew, slew)
     a.theta_dot[b, i] = _clip(actions[b, i, 3], -c.theta_dot_max, c.theta_dot_max)
     for q in range(a.message.shape[2]):
         a.message[b, i, q] = _clip(actions[b, i, 4 + q], -c.message_max, c.message_max)
