@@ -36,7 +36,7 @@ class TestSplitEvaluator:
     Args:
         scenarios: Registered scenario names.
         num_seeds: Episodes per scenario (paired evaluation seeds, as ``cpf-bench --num-seeds``).
-        steps: Horizon override (``cpf-bench --steps``); None: each scenario's own.
+        max_steps: Horizon override (``cpf-bench --max-steps``); None: each scenario's own.
 
     Attributes:
         settings: The arguments, JSON-ready (``train`` records them in ``run.json``).
@@ -51,18 +51,18 @@ class TestSplitEvaluator:
         self,
         scenarios: Sequence[str],
         num_seeds: int = DEFAULT_EVAL_NUM_SEEDS,
-        steps: int | None = None,
+        max_steps: int | None = None,
     ) -> None:
         if isinstance(num_seeds, bool) or int(num_seeds) != num_seeds or num_seeds < 1:
             raise ValueError(f"num_seeds must be an integer >= 1, got {num_seeds!r}.")
         if not scenarios:
             raise ValueError("give at least one evaluation scenario.")
-        self.scenarios, self.num_seeds, self.steps = tuple(scenarios), int(num_seeds), steps
+        self.scenarios, self.num_seeds, self.max_steps = tuple(scenarios), int(num_seeds), max_steps
         self.settings = {
             "split": "test",
             "scenarios": list(self.scenarios),
             "num_seeds": self.num_seeds,
-            "steps": steps,
+            "max_steps": max_steps,
         }
 
     def __call__(self, folder: Path) -> dict[str, float]:
@@ -71,7 +71,7 @@ class TestSplitEvaluator:
             {"agent": lambda task: load_policy(Path(folder), task)},
             self.scenarios,
             num_seeds=self.num_seeds,
-            steps=self.steps,
+            max_steps=self.max_steps,
             split="test",
         )
         return {cell.scenario: float(np.mean(cell.metrics["cost"])) for cell in result.cells}

@@ -134,7 +134,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--supersuit-fleets", type=int, default=64, help="fleets, SuperSuit")
     parser.add_argument("--torch-threads", type=int, default=1, help="torch intra-op threads")
     parser.add_argument(
-        "--epochs", type=int, default=None, help="PPO epochs (default: TrainConfig)"
+        "--n-epochs", type=int, default=None, help="PPO epochs (default: TrainConfig)"
     )
     parser.add_argument(
         "--batch-size", type=int, default=None, help="minibatch (default: TrainConfig)"
@@ -167,7 +167,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         print("SuperSuit not installed (pip install supersuit): its route is skipped.")
     print(f"{'route':36s} {'fleets':>7s} {'vessel-steps/s':>15s}")
     for name, (factory, fleets, seed) in routes.items():
-        rate = timed_ppo(factory, args.rollouts, seed, args.epochs, args.batch_size)
+        rate = timed_ppo(factory, args.rollouts, seed, args.n_epochs, args.batch_size)
         print(f"{name:36s} {fleets:7d} {rate:15,.0f}", flush=True)
     return 0
 

@@ -65,7 +65,7 @@ def _code_digest(policy: str) -> str:
     return code_digest((ALL_POLICIES[policy].__module__, *RUNNERS))
 
 
-def cell_key(policy: str, task: Scenario, steps: int | None) -> str:
+def cell_key(policy: str, task: Scenario, max_steps: int | None) -> str:
     """The content key (SHA-256, hex) of a policy's episodes on a scenario (module docstring).
 
     Raises:
@@ -73,7 +73,7 @@ def cell_key(policy: str, task: Scenario, steps: int | None) -> str:
     """
     if policy not in CACHED_POLICIES:
         raise ValueError(f"only {', '.join(CACHED_POLICIES)} are cached, not {policy!r}.")
-    horizon = task.max_steps if steps is None else int(steps)
+    horizon = task.max_steps if max_steps is None else int(max_steps)
     digest = hashlib.sha256()
     for part in (policy, repr(task), str(horizon), _code_digest(policy)):
         digest.update(part.encode() + b"\0")
@@ -99,7 +99,7 @@ def load_cell(
     policy: str,
     task: Scenario,
     seeds: Sequence[int],
-    steps: int | None,
+    max_steps: int | None,
     directory: Path | None = None,
 ) -> dict[str, NDArray[np.float64]] | None:
     """The cached metrics (name -> (S,)) of a cell, or None unless every seed is cached.
@@ -107,7 +107,7 @@ def load_cell(
     ``directory`` defaults to ``CACHE_DIRECTORY``.
     """
     directory = CACHE_DIRECTORY if directory is None else directory
-    key = cell_key(policy, task, steps)
+    key = cell_key(policy, task, max_steps)
     episodes = _read(_path(directory, policy, task, key), key)
     if not seeds or any(str(int(seed)) not in episodes for seed in seeds):
         return None
@@ -122,7 +122,7 @@ def store_cell(
     policy: str,
     task: Scenario,
     seeds: Sequence[int],
-    steps: int | None,
+    max_steps: int | None,
     metrics: dict[str, NDArray[np.float64]],
     directory: Path | None = None,
 ) -> Path | None:
@@ -134,7 +134,7 @@ def store_cell(
     if not directory.parent.is_dir():
         return None
     directory.mkdir(exist_ok=True)
-    key = cell_key(policy, task, steps)
+    key = cell_key(policy, task, max_steps)
     path = _path(directory, policy, task, key)
     episodes = _read(path, key)
     for k, seed in enumerate(seeds):
@@ -143,7 +143,7 @@ def store_cell(
         "key": key,
         "policy": policy,
         "scenario": task.name,
-        "steps": task.max_steps if steps is None else int(steps),
+        "steps": task.max_steps if max_steps is None else int(max_steps),
         "episodes": dict(sorted(episodes.items(), key=lambda item: int(item[0]))),
     }
     atomic.write_text(path, json.dumps(record, indent=1) + "\n")

@@ -26,7 +26,7 @@ def run_episodes(
     policy: FleetPolicy,
     scenario: Scenario,
     seeds: Sequence[int],
-    steps: int | None = None,
+    max_steps: int | None = None,
     progress: tqdm | None = None,
 ) -> dict[str, NDArray[np.float64]]:
     """Run S episodes of ``policy`` on ``scenario`` in one batch and measure each.
@@ -35,10 +35,10 @@ def run_episodes(
         policy: A policy built for ``scenario`` (reset here).
         scenario: The task.
         seeds: Reset seed of each fleet, length S.
-        steps: Horizon in control steps (default: the scenario's ``max_steps``).
+        max_steps: Horizon in control steps (default: the scenario's ``max_steps``).
         progress: A progress bar advanced by one per step, or None.
 
     Returns:
         Metric name (``METRICS``) -> values, shape (S,).
     """
-    return rollout(policy, scenario, seeds, steps=steps, progress=progress)
+    return rollout(policy, scenario, seeds, max_steps=max_steps, progress=progress)

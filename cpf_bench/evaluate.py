@@ -25,7 +25,7 @@ A policy is given as:
 
 Example:
     >>> from cpf_bench import evaluate
-    >>> result = evaluate(["nn_dsc", "dsc"], ["bench_mild"], num_seeds=2, steps=20)
+    >>> result = evaluate(["nn_dsc", "dsc"], ["bench_mild"], num_seeds=2, max_steps=20)
     >>> cell = result.cell("nn_dsc", "bench_mild")
     >>> cell.seeds, cell.metrics["cost"].shape
     ((10000, 10001), (2,))
@@ -165,11 +165,11 @@ def run_cell(
     spec: PolicySpec,
     task: Scenario,
     seeds: tuple[int, ...],
-    steps: int | None,
+    max_steps: int | None,
     resolve: Resolver | None = None,
 ) -> CellResult:
     """One (policy, scenario) cell on its own: build the policy, run its episodes, measure them."""
-    metrics = run_episodes(build_policy(spec, task, resolve), task, seeds, steps=steps)
+    metrics = run_episodes(build_policy(spec, task, resolve), task, seeds, max_steps=max_steps)
     return CellResult(label, task.name, seeds, is_deterministic(task), metrics)
 
 
@@ -178,7 +178,7 @@ def evaluate(
     scenarios: Sequence[str | Scenario],
     num_seeds: int = 10,
     seed: int = EVALUATION_SEED,
-    steps: int | None = None,
+    max_steps: int | None = None,
     split: str = "test",
     progress: bool = False,
     resolve: Resolver | None = None,
@@ -193,7 +193,7 @@ def evaluate(
         num_seeds: Episodes per (policy, scenario) (one on a deterministic scenario).
         seed: Episode k is reset with seed ``seed + k`` (default: the first
             evaluation seed, ``cpf_env.scenarios.splits.EVALUATION_SEED``).
-        steps: Horizon override in control steps (default: each scenario's ``max_steps``).
+        max_steps: Horizon override in control steps (default: each scenario's ``max_steps``).
         split: ``"test"`` (the scenarios as named) or ``"shift"`` (each suite
             scenario's ``_shift`` variant, outside its training ranges).
         progress: Show a progress bar over steps (stderr).
@@ -211,8 +211,8 @@ def evaluate(
     """
     if isinstance(num_seeds, bool) or int(num_seeds) != num_seeds or num_seeds < 1:
         raise ValueError(f"num_seeds must be an integer >= 1, got {num_seeds!r}.")
-    if steps is not None and int(steps) < 1:
-        raise ValueError(f"steps must be >= 1, got {steps}.")
+    if max_steps is not None and int(max_steps) < 1:
+        raise ValueError(f"max_steps must be >= 1, got {max_steps}.")
     if split not in SPLITS:
         raise ValueError(f"unknown split {split!r}; choose one of {list(SPLITS)}.")
     if not scenarios:
@@ -230,17 +230,17 @@ def evaluate(
         for task in tasks
         if (label, task.name) in built
     ]
-    found = _cached(jobs, steps)
+    found = _cached(jobs, max_steps)
     missing = [job for job in jobs if (job[0], job[2].name) not in found]
     if not missing:
         ran = []
     elif run_cells is not None:
-        ran = run_cells(missing, steps)
+        ran = run_cells(missing, max_steps)
     else:
-        ran = _run_here(missing, built, steps, progress)
+        ran = _run_here(missing, built, max_steps, progress)
     for job, cell in zip(missing, ran, strict=True):
-        if _cacheable(job) and steps in (None, job[2].max_steps):  # whole episodes only
-            cache.store_cell(job[0], job[2], job[3], steps, cell.metrics)
+        if _cacheable(job) and max_steps in (None, job[2].max_steps):  # whole episodes only
+            cache.store_cell(job[0], job[2], job[3], max_steps, cell.metrics)
         found[(job[0], job[2].name)] = cell
     return Evaluation([found[(label, task.name)] for label, _, task, _ in jobs], skipped)
 
@@ -271,7 +271,7 @@ def _build(
 def _run_here(
     jobs: Sequence[Job],
     built: dict[tuple[str, str], FleetPolicy],
-    steps: int | None,
+    max_steps: int | None,
     progress: bool,
 ) -> list[CellResult]:
     """The cells in this process, one batch per scenario, with a progress bar over steps.
@@ -281,14 +281,16 @@ def _run_here(
     groups: dict[str, list[Job]] = {}
     for job in jobs:
         groups.setdefault(job[2].name, []).append(job)
-    total = sum(group[0][2].max_steps if steps is None else int(steps) for group in groups.values())
+    total = sum(
+        group[0][2].max_steps if max_steps is None else int(max_steps) for group in groups.values()
+    )
     results: dict[tuple[str, str], CellResult] = {}
     with tqdm(total=total, disable=not progress, unit="step", desc="cpf-bench") as bar:
         for name, group in groups.items():
             bar.set_postfix_str(f"{len(group)} policies on {name}")
             task, seeds = group[0][2], group[0][3]
             policies = [built[(label, name)] for label, *_ in group]
-            measured = rollout_group(policies, task, seeds, steps=steps, progress=bar)
+            measured = rollout_group(policies, task, seeds, max_steps=max_steps, progress=bar)
             for (label, *_), metrics in zip(group, measured, strict=True):
                 results[(label, name)] = CellResult(
                     label, name, seeds, is_deterministic(task), metrics
@@ -301,13 +303,13 @@ def _cacheable(job: Job) -> bool:
     return isinstance(job[1], str) and job[1] in cache.CACHED_POLICIES and job[0] == job[1]
 
 
-def _cached(jobs: Sequence[Job], steps: int | None) -> dict[tuple[str, str], CellResult]:
+def _cached(jobs: Sequence[Job], max_steps: int | None) -> dict[tuple[str, str], CellResult]:
     """The cells found in the content-keyed cache, by (label, scenario name)."""
     found = {}
     for label, spec, task, seeds in jobs:
         if not _cacheable((label, spec, task, seeds)):
             continue
-        metrics = cache.load_cell(label, task, seeds, steps)
+        metrics = cache.load_cell(label, task, seeds, max_steps)
         if metrics is not None:
             found[(label, task.name)] = CellResult(
                 label, task.name, seeds, is_deterministic(task), metrics

@@ -64,7 +64,7 @@ def rollout(
     policy: FleetPolicy,
     scenario: Scenario,
     seeds: Sequence[int | None],
-    steps: int | None = None,
+    max_steps: int | None = None,
     progress: tqdm | None = None,
     observer: StepObserver | None = None,
     policy_seed: int | None = None,
@@ -75,7 +75,7 @@ def rollout(
         policy: A policy built for ``scenario`` (reset here, with ``policy_seed``).
         scenario: The task.
         seeds: Reset seed of each fleet, length S.
-        steps: Horizon in control steps (default: the scenario's ``max_steps``).
+        max_steps: Horizon in control steps (default: the scenario's ``max_steps``).
         progress: A progress bar advanced by one per step, or None.
         observer: Called before and after every step, or None.
         policy_seed: Seed passed to ``policy.reset``.
@@ -88,14 +88,14 @@ def rollout(
     Raises:
         ValueError: A horizon below one step.
     """
-    return rollout_group([policy], scenario, seeds, steps, progress, observer, policy_seed)[0]
+    return rollout_group([policy], scenario, seeds, max_steps, progress, observer, policy_seed)[0]
 
 
 def rollout_group(
     policies: Sequence[FleetPolicy],
     scenario: Scenario,
     seeds: Sequence[int | None],
-    steps: int | None = None,
+    max_steps: int | None = None,
     progress: tqdm | None = None,
     observer: StepObserver | None = None,
     policy_seed: int | None = None,
@@ -106,7 +106,7 @@ def rollout_group(
         policies: Policies built for ``scenario`` (each reset here, with ``policy_seed``).
         scenario: The task.
         seeds: Reset seed of each policy's fleets, length S (the same for every policy).
-        steps: Horizon in control steps (default: the scenario's ``max_steps``).
+        max_steps: Horizon in control steps (default: the scenario's ``max_steps``).
         progress: A progress bar advanced by one per step, or None.
         observer: Called before and after every step (one policy only), or None.
         policy_seed: Seed passed to each ``policy.reset``.
@@ -119,9 +119,9 @@ def rollout_group(
     Raises:
         ValueError: A horizon below one step, no policy, or an observer with several.
     """
-    horizon = scenario.max_steps if steps is None else int(steps)
+    horizon = scenario.max_steps if max_steps is None else int(max_steps)
     if horizon < 1:
-        raise ValueError(f"steps must be >= 1, got {steps}.")
+        raise ValueError(f"max_steps must be >= 1, got {max_steps}.")
     if not policies or (observer is not None and len(policies) > 1):
         raise ValueError("rollout_group needs at least one policy, and one only with an observer.")
     compiled = [observer is None and ClosedLoop.supports(policy) for policy in policies]

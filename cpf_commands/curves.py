@@ -244,13 +244,13 @@ def _base_cost(folders: Sequence[Path], runs: Sequence[RunCurve], base: str | No
     configs = [config_from_record(record["config"]) for record in records]
     if base is not None:
         evaluation = records[0].get("evaluation") or {}
-        # "seeds": a run written before the count was named num_seeds
+        # "seeds", "steps": a run written before they were named num_seeds, max_steps
         num_seeds = evaluation.get("num_seeds", evaluation.get("seeds", DEFAULT_EVAL_NUM_SEEDS))
         cells = run_bench(
             [base],
             evaluation.get("scenarios") or list(configs[0].scenarios),
             num_seeds=int(num_seeds),
-            steps=evaluation.get("steps"),
+            max_steps=evaluation.get("max_steps", evaluation.get("steps")),
             split="test",
         )
         return float(np.mean([np.mean(cell.metrics["cost"]) for cell in cells]))

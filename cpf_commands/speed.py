@@ -14,7 +14,7 @@ Measures, after a warm-up that triggers numba compilation:
 * one whole episode of the scenario with the policy (B = 1), in seconds: for
   ``wang2014``, the paper's 150 s simulation, stepped from Python and as one
   compiled call (``ClosedLoop.run(max_steps)``);
-* with ``--bench-seeds N``: the wall time of ``cpf-bench``'s default evaluation
+* with ``--bench-num-seeds N``: the wall time of ``cpf-bench``'s default evaluation
   (its default policies on the benchmark suite, N paired seeds, no files written);
 * with ``--contention B``: ``FleetSim.step`` and ``FleetVecEnv.step`` at batch B
   alone and then next to one busy competitor process (a Python loop spinning on
@@ -157,10 +157,10 @@ def measure(
     fleets: Sequence[int] = (1, 1024),
     policy: str = "nn_dsc",
     min_seconds: float = 2.0,
-    episode_steps: int | None = None,
+    max_steps: int | None = None,
     progress: bool = False,
     contention: Sequence[int] = (),
-    bench_seeds: int = 0,
+    bench_num_seeds: int = 0,
 ) -> list[dict[str, object]]:
     """Measure throughputs; returns one row per (component, B).
 
@@ -169,19 +169,19 @@ def measure(
         fleets: Batch sizes B to time.
         policy: Baseline name of the policy.
         min_seconds: Timing per measurement (s).
-        episode_steps: Length of the timed whole episode (default: the scenario's
+        max_steps: Length of the timed whole episode (default: the scenario's
             ``max_steps``).
         progress: Show a progress bar (stderr), one tick per measurement.
         contention: Batch sizes at which ``FleetSim.step`` and ``FleetVecEnv.step``
             are timed alone and next to ``busy_competitor()``.
-        bench_seeds: If > 0, time ``cpf-bench``'s default evaluation with this many seeds.
+        bench_num_seeds: If > 0, time ``cpf-bench``'s default evaluation with this many seeds.
     """
     from baselines import make_policy
     from baselines.closed_loop import ClosedLoop
 
     rows: list[dict[str, object]] = []
     bar = tqdm(
-        total=5 * len(fleets) + 3 + 4 * len(contention) + (bench_seeds > 0),
+        total=5 * len(fleets) + 3 + 4 * len(contention) + (bench_num_seeds > 0),
         disable=not progress,
         desc="cpf-speed",
     )
@@ -261,15 +261,15 @@ def measure(
                     bar.set_postfix_str(f"{component}, B = {batch}, {label}")
                     add(f"{component}, {label}", batch, n, _rate(contended, min_seconds))
                     bar.update()
-    if bench_seeds > 0:
+    if bench_num_seeds > 0:
         bar.set_postfix_str("cpf-bench default run")
-        seconds, episodes = _bench_seconds(bench_seeds)
+        seconds, episodes = _bench_seconds(bench_num_seeds)
         add(f"cpf-bench default ({episodes} episodes)", 1, 0, episodes / seconds)
         rows[-1]["seconds"] = seconds
         bar.update()
     for compiled in (False, True):
         bar.set_postfix_str("whole episode" + (", compiled" if compiled else ""))
-        seconds, steps, n = _episode_seconds(scenario, policy, episode_steps, compiled)
+        seconds, steps, n = _episode_seconds(scenario, policy, max_steps, compiled)
         how = "ClosedLoop.run" if compiled else "stepped"
         add(f"{scenario} episode ({steps} steps), {policy}, {how}", 1, n, steps / seconds)
         rows[-1]["seconds"] = seconds
@@ -314,7 +314,7 @@ def speed_main(argv: Sequence[str] | None = None) -> int:
         "--seconds", type=float, default=2.0, help="timing per measurement in s (default: 2)"
     )
     parser.add_argument(
-        "--episode-steps",
+        "--max-steps",
         type=int,
         default=None,
         metavar="N",
@@ -330,7 +330,7 @@ def speed_main(argv: Sequence[str] | None = None) -> int:
         "to one busy competitor process (e.g. --contention 256)",
     )
     parser.add_argument(
-        "--bench-seeds",
+        "--bench-num-seeds",
         type=int,
         default=0,
         metavar="N",
@@ -345,10 +345,10 @@ def speed_main(argv: Sequence[str] | None = None) -> int:
         args.fleets,
         args.policy,
         args.seconds,
-        episode_steps=args.episode_steps,
+        max_steps=args.max_steps,
         progress=not args.quiet,
         contention=args.contention,
-        bench_seeds=args.bench_seeds,
+        bench_num_seeds=args.bench_num_seeds,
     )
     if args.json:
         print(json.dumps(rows, indent=2))

@@ -263,8 +263,9 @@ def _resumed(
     if "timesteps" in given:
         config = dataclasses.replace(config, timesteps=args.timesteps)
     seeds = int((evaluation or {}).get("num_seeds", DEFAULT_EVAL_NUM_SEEDS))
-    steps = (evaluation or {}).get("steps")
-    return config, schedule, seeds, steps
+    # "steps": a run written before the horizon was named max_steps
+    max_steps = (evaluation or {}).get("max_steps", (evaluation or {}).get("steps"))
+    return config, schedule, seeds, max_steps
 
 
 def _hyperparameters(config: TrainConfig, schedule: RunSchedule, seeds: int) -> str:
@@ -291,16 +292,16 @@ def train_main(argv: Sequence[str] | None = None) -> int:
     given = _given(parser, argv)
     try:
         if args.resume:
-            config, schedule, seeds, steps = _resumed(args, given)
+            config, schedule, seeds, max_steps = _resumed(args, given)
         else:
             config, schedule, seeds = _resolve(args, given)
-            steps = None
+            max_steps = None
         for name in config.scenarios:
             check_training(name, range(config.seed, config.seed + config.fleets))
         torch_device(args.device)
     except ValueError as error:
         parser.error(str(error))
-    evaluate = TestSplitEvaluator(config.scenarios, seeds, steps)
+    evaluate = TestSplitEvaluator(config.scenarios, seeds, max_steps)
     out = Path(args.out)
     replacing = args.force and not args.resume and out.is_dir() and any(out.iterdir())
     try:

@@ -9,7 +9,7 @@ same paired seeds; the table printed is the run's ``summary.md``.
 Usage::
 
     python examples/compare_policies.py [--scenarios bench_mild bench_saturation]
-        [--num-seeds 5] [--steps N] [--out outputs/compare_policies]
+        [--num-seeds 5] [--max-steps N] [--out outputs/compare_policies]
 """
 
 from __future__ import annotations
@@ -45,7 +45,7 @@ def main(argv: Sequence[str] | None = None) -> list[CellResult]:
         choices=scenarios.list_scenarios(),
     )
     parser.add_argument("--num-seeds", type=int, default=5)
-    parser.add_argument("--steps", type=int, default=None)
+    parser.add_argument("--max-steps", type=int, default=None)
     parser.add_argument("--out", default="outputs/compare_policies")
     args = parser.parse_args(argv)
     policies = {"nn_dsc": "nn_dsc", "backstepping": "backstepping", "nn_dsc_soft": soft_nn_dsc}
@@ -53,7 +53,7 @@ def main(argv: Sequence[str] | None = None) -> list[CellResult]:
         policies,
         args.scenarios,
         num_seeds=args.num_seeds,
-        steps=args.steps,
+        max_steps=args.max_steps,
         out=args.out,
         command=shlex.join(
             ["python", "examples/compare_policies.py", *(sys.argv[1:] if argv is None else argv)]

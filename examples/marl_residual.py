@@ -24,7 +24,7 @@ asymmetric actor-critic; the saved actor is as local as ever.
 
 Every ``--eval-every`` iterations the actor plays one episode on each of
 ``--eval-fleets`` fixed training seeds (0, 1, ...; unstaggered, deterministic
-action, ``--eval-steps`` long: default the scenario's own length, as
+action, ``--eval-max-steps`` long: default the scenario's own length, as
 ``cpf-bench`` plays it) against the base policy alone on the same seeds
 (``agents.marl.fixed_seeds.FixedSeedEvaluation``): the training returns mostly
 measure the episodes' random starts, these differences measure the actor.
@@ -209,7 +209,7 @@ def main() -> None:
         "--eval-fleets", type=int, default=32, help="fixed training seeds (0 ..), 0: none"
     )
     parser.add_argument(
-        "--eval-steps", type=int, default=None, help="evaluation episode length (scenario's)"
+        "--eval-max-steps", type=int, default=None, help="evaluation episode length (scenario's)"
     )
     parser.add_argument(
         "--keep-best",
@@ -297,7 +297,7 @@ def train(args: argparse.Namespace, scratch: str) -> None:
             task.config,
             args.eval_fleets,
             statistics=experiment.test_env.base_env.input_statistics,
-            max_steps=args.eval_steps,
+            max_steps=args.eval_max_steps,
         )
         base, at_start = curve.evaluation.base, curve.evaluation.evaluate(experiment.policy)
         if args.keep_best:

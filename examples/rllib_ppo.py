@@ -124,9 +124,9 @@ def build_config(
     env_runners: int = 0,
     envs_per_runner: int = 1,
     seed: int = 0,
-    train_batch: int = 2000,
-    minibatch: int = 1000,
-    epochs: int = 5,
+    train_batch_size_per_learner: int = 2000,
+    minibatch_size: int = 1000,
+    num_epochs: int = 5,
     hidden: Sequence[int] = (64, 64),
 ) -> PPOConfig:
     """PPO on the new API stack, one shared RLModule for all vessels of ``scenario``.
@@ -139,11 +139,11 @@ def build_config(
         env_runners: Remote EnvRunner actors; 0 samples in the driver process.
         envs_per_runner: Envs stepped together (vectorized) by each EnvRunner.
         seed: Seeds RLlib (module initialization, env resets, sampling).
-        train_batch: Env steps per iteration (``train_batch_size_per_learner``);
-            each gives n vessel samples to the shared module.
-        minibatch: SGD minibatch, in module (vessel) samples; RLlib requires it to
-            be at most ``train_batch``.
-        epochs: Passes over each train batch.
+        train_batch_size_per_learner: Env steps per iteration; each gives n
+            vessel samples to the shared module.
+        minibatch_size: SGD minibatch, in module (vessel) samples; RLlib requires
+            it to be at most ``train_batch_size_per_learner``.
+        num_epochs: Passes over each train batch.
         hidden: Hidden layer widths of the policy and value networks.
 
     Returns:
@@ -162,7 +162,9 @@ def build_config(
         .multi_agent(policies={SHARED_MODULE}, policy_mapping_fn=map_to_shared)
         .rl_module(rl_module_spec=MultiRLModuleSpec(rl_module_specs={SHARED_MODULE: module}))
         .training(
-            train_batch_size_per_learner=train_batch, minibatch_size=minibatch, num_epochs=epochs
+            train_batch_size_per_learner=train_batch_size_per_learner,
+            minibatch_size=minibatch_size,
+            num_epochs=num_epochs,
         )
         .learners(num_learners=0)
         .debugging(seed=seed)
@@ -312,15 +314,18 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--seed", type=int, default=0, help="RLlib seed")
     parser.add_argument("--max-steps", type=positive_int, default=500, help="episode length, steps")
     parser.add_argument(
-        "--train-batch", type=positive_int, default=2000, help="env steps per iteration"
+        "--train-batch-size-per-learner",
+        type=positive_int,
+        default=2000,
+        help="env steps per iteration",
     )
     parser.add_argument(
-        "--minibatch",
+        "--minibatch-size",
         type=positive_int,
         default=1000,
-        help="SGD minibatch, vessel steps (<= --train-batch)",
+        help="SGD minibatch, vessel steps (<= --train-batch-size-per-learner)",
     )
-    parser.add_argument("--epochs", type=positive_int, default=5, help="passes over each batch")
+    parser.add_argument("--num-epochs", type=positive_int, default=5, help="passes over each batch")
     parser.add_argument("--info-level", default="none", choices=INFO_LEVELS, help="per-step infos")
     parser.add_argument(
         "--num-cpus", type=positive_int, default=None, help="CPUs for Ray (default: all)"
@@ -337,10 +342,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.env_runners < 0:
         parser.error(f"--env-runners must be >= 0, got {args.env_runners}")
-    if args.minibatch > args.train_batch:
+    if args.minibatch_size > args.train_batch_size_per_learner:
         parser.error(
-            f"--minibatch {args.minibatch} is larger than --train-batch {args.train_batch}; "
-            "RLlib needs minibatch <= train batch: lower --minibatch or raise --train-batch."
+            f"--minibatch-size {args.minibatch_size} is larger than "
+            f"--train-batch-size-per-learner {args.train_batch_size_per_learner}; RLlib needs "
+            "the minibatch within the train batch: lower --minibatch-size or raise "
+            "--train-batch-size-per-learner."
         )
     import torch
 
@@ -352,9 +359,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         env_runners=args.env_runners,
         envs_per_runner=args.envs_per_runner,
         seed=args.seed,
-        train_batch=args.train_batch,
-        minibatch=args.minibatch,
-        epochs=args.epochs,
+        train_batch_size_per_learner=args.train_batch_size_per_learner,
+        minibatch_size=args.minibatch_size,
+        num_epochs=args.num_epochs,
     )
     started_ray = not ray.is_initialized()  # a caller's Ray session is used and left running
     if started_ray:
@@ -388,7 +395,7 @@ def report_measurements(
     n = cpf_env.scenarios.get(args.scenario).n
     warm = rates[1:] or rates
     end_to_end = float(np.mean(warm))
-    sampling = sampling_rate(algo, 3 * args.train_batch)
+    sampling = sampling_rate(algo, 3 * args.train_batch_size_per_learner)
     alone = env_alone_rate(config.env_config, seconds=2.0)
     runners = f"{args.env_runners} runners x {args.envs_per_runner} envs"
     print(f"\nthroughput ({args.scenario}, {runners}, info_level={args.info_level}):")

@@ -19,7 +19,7 @@ compensate), both with random starts so seeds matter.
 Usage::
 
     python examples/train_residual_ppo.py train --timesteps 1500000
-    python examples/train_residual_ppo.py evaluate --num-seeds 20
+    python examples/train_residual_ppo.py evaluate --eval-num-seeds 20
 """
 
 from __future__ import annotations
@@ -90,8 +90,17 @@ def train_runs(
     return folders
 
 
-def evaluate(runs: Path, results: Path, seeds: int, scenarios: Sequence[str]) -> None:
-    """Bench the analytic policies and the trained runs on unseen seeds, two rewards."""
+def evaluate(
+    runs: Path,
+    results: Path,
+    num_seeds: int,
+    scenarios: Sequence[str],
+    max_steps: int | None = None,
+) -> None:
+    """Bench the analytic policies and the trained runs on unseen seeds, two rewards.
+
+    ``max_steps`` shortens the episodes (None: each scenario's own length).
+    """
     from cpf_commands.bench.run import run_bench
     from cpf_env import scenarios as registry
     from cpf_env.scenarios.reward_weights import RewardWeights
@@ -106,10 +115,17 @@ def evaluate(runs: Path, results: Path, seeds: int, scenarios: Sequence[str]) ->
         )
         for variant, label in ((task, "training_reward"), (quadratic, "quadratic_reward")):
             out = results / f"{scenario}_{label}"
-            command = _evaluate_command(runs, results, seeds)
-            run_bench(policies, [variant], num_seeds=seeds, out=out, command=command)  # type: ignore[arg-type]
+            command = _evaluate_command(runs, results, num_seeds, max_steps)
+            run_bench(
+                policies,  # type: ignore[arg-type]
+                [variant],
+                num_seeds=num_seeds,
+                max_steps=max_steps,
+                out=out,
+                command=command,
+            )
             print(f"wrote {out}/summary.md", flush=True)
-    (results / "summary.md").write_text(report(results, scenarios, seeds, runs))
+    (results / "summary.md").write_text(report(results, scenarios, num_seeds, runs, max_steps))
     meta = {
         "runs": {
             p.name: json.loads((p / "config.json").read_text())
@@ -139,25 +155,31 @@ _COLUMNS = (
 )
 
 
-def _evaluate_command(runs: Path, results: Path, seeds: int) -> str:
+def _evaluate_command(runs: Path, results: Path, num_seeds: int, max_steps: int | None) -> str:
     """The command line of the evaluate phase with these folders."""
     return (
         f"python examples/train_residual_ppo.py evaluate --runs {runs} --results {results} "
-        f"--num-seeds {seeds}"
+        f"--eval-num-seeds {num_seeds}" + (f" --eval-max-steps {max_steps}" if max_steps else "")
     )
 
 
-def report(results: Path, scenarios: Sequence[str], seeds: int, runs: Path) -> str:
+def report(
+    results: Path,
+    scenarios: Sequence[str],
+    num_seeds: int,
+    runs: Path,
+    max_steps: int | None = None,
+) -> str:
     """A markdown table per scenario from the bench's summary.csv files: mean [95 % CI]."""
     import csv
 
     lines = [
         "# Residual RL: trained agents against the analytic policies",
         "",
-        f"Regenerate: `{_evaluate_command(runs, results, seeds)}` (after the `train` phase; "
-        "the training commands are in `results/README.md`). Every policy runs the same "
-        "evaluation seeds (10,000 and up, never used in training). Mean over episodes with "
-        "its 95 % stratified-bootstrap interval; "
+        f"Regenerate: `{_evaluate_command(runs, results, num_seeds, max_steps)}` (after the "
+        "`train` phase; the training commands are in `results/README.md`). Every policy runs "
+        "the same evaluation seeds (10,000 and up, never used in training). Mean over episodes "
+        "with its 95 % stratified-bootstrap interval; "
         "`P(cost < nn_dsc)`: probability of a lower cost than nn_dsc on the same seed. One row "
         "per training run (`_s<seed>`: training seed). Full tables: the `*/summary.md` files.",
     ]
@@ -168,7 +190,7 @@ def report(results: Path, scenarios: Sequence[str], seeds: int, runs: Path) -> s
                 for row in csv.DictReader(handle):
                     rows[(row["policy"], variant, row["metric"])] = row
         policies = list(dict.fromkeys(policy for policy, _, _ in rows))
-        lines += ["", f"## {scenario} ({seeds} evaluation episodes)", ""]
+        lines += ["", f"## {scenario} ({num_seeds} evaluation episodes)", ""]
         lines.append("| policy | " + " | ".join(c[2] for c in _COLUMNS) + " |")
         lines.append("|---" * (len(_COLUMNS) + 1) + "|")
         for policy in policies:
@@ -210,9 +232,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         "--results", default="runs/residual_rl_evaluation", help="evaluation output"
     )
     parser.add_argument("--timesteps", type=int, default=1_500_000, help="per training run")
-    parser.add_argument("--train-seeds", type=int, nargs="+", default=[0, 1, 2], help="seeds")
+    parser.add_argument("--num-seeds", type=int, default=3, help="training seeds per agent")
+    parser.add_argument("--seed", type=int, default=0, help="first training seed")
     parser.add_argument("--fleets", type=int, default=64, help="fleets per training run")
-    parser.add_argument("--num-seeds", type=int, default=20, help="evaluation episodes")
+    parser.add_argument("--eval-num-seeds", type=int, default=20, help="evaluation episodes")
+    parser.add_argument(
+        "--eval-max-steps", type=int, default=None, help="evaluation episode length (scenario's)"
+    )
     parser.add_argument("--scenarios", nargs="+", default=list(SCENARIOS), help="scenarios")
     parser.add_argument(
         "--agents",
@@ -224,11 +250,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     runs, results = Path(args.runs), Path(args.results)
     if args.phase == "train":
-        train_runs(runs, args.timesteps, args.train_seeds, args.fleets, args.scenarios, args.agents)
+        seeds = range(args.seed, args.seed + args.num_seeds)
+        train_runs(runs, args.timesteps, seeds, args.fleets, args.scenarios, args.agents)
     elif args.phase == "evaluate":
-        evaluate(runs, results, args.num_seeds, args.scenarios)
+        evaluate(runs, results, args.eval_num_seeds, args.scenarios, args.eval_max_steps)
     else:
-        (results / "summary.md").write_text(report(results, args.scenarios, args.num_seeds, runs))
+        (results / "summary.md").write_text(
+            report(results, args.scenarios, args.eval_num_seeds, runs, args.eval_max_steps)
+        )
     return 0
 
 

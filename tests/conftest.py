@@ -160,7 +160,7 @@ def short_run():
     """6 s of wang2014 with nn_dsc."""
     from cpf_commands.run.experiment import run_episode
 
-    return run_episode("wang2014", "nn_dsc", seed=0, steps=120)
+    return run_episode("wang2014", "nn_dsc", seed=0, max_steps=120)
 
 
 @pytest.fixture(scope="session")
@@ -168,4 +168,6 @@ def fine_run():
     """60 s of the reproduction configuration (wang2014_fine, leakage=plain)."""
     from cpf_commands.run.experiment import run_episode
 
-    return run_episode("wang2014_fine", "nn_dsc", steps=6000, policy_options={"leakage": "plain"})
+    return run_episode(
+        "wang2014_fine", "nn_dsc", max_steps=6000, policy_options={"leakage": "plain"}
+    )

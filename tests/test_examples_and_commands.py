@@ -23,7 +23,7 @@ def _load_example(name: str):
 
 
 def test_speed_measure_reports_every_component():
-    rows = measure("wang2014", fleets=(2,), min_seconds=0.01, episode_steps=20)
+    rows = measure("wang2014", fleets=(2,), min_seconds=0.01, max_steps=20)
     components = {row["component"] for row in rows}
     assert components == {
         "FleetSim.step",
@@ -48,7 +48,7 @@ def test_speed_contention_rows_and_the_competitor_is_gone():
     with busy_competitor() as competitor:
         assert competitor.poll() is None  # spinning
     assert competitor.poll() is not None  # ended with the block
-    rows = measure("wang2014", fleets=(), min_seconds=0.01, episode_steps=5, contention=(2,))
+    rows = measure("wang2014", fleets=(), min_seconds=0.01, max_steps=5, contention=(2,))
     labels = [row["component"] for row in rows if row["B"] == 2]
     assert labels == [
         "FleetSim.step, alone",
@@ -70,7 +70,7 @@ def test_speed_times_the_default_bench(monkeypatch):
         return [types.SimpleNamespace(seeds=(0,) * num_seeds) for _ in range(3)]
 
     monkeypatch.setattr(bench_run, "run_bench", fake_run_bench)
-    rows = measure("wang2014", fleets=(), min_seconds=0.01, episode_steps=5, bench_seeds=4)
+    rows = measure("wang2014", fleets=(), min_seconds=0.01, max_steps=5, bench_num_seeds=4)
     ((policies, scenarios, seeds, out, figures),) = calls
     assert seeds == 4 and out is None and not figures and "nn_dsc" in policies
     assert scenarios[0] == "bench_mild"
@@ -80,7 +80,7 @@ def test_speed_times_the_default_bench(monkeypatch):
 
 
 def test_speed_command_prints_json(capsys):
-    argv = ["--fleets", "1", "--seconds", "0.01", "--episode-steps", "5", "--json", "--quiet"]
+    argv = ["--fleets", "1", "--seconds", "0.01", "--max-steps", "5", "--json", "--quiet"]
     assert speed_main(argv) == 0
     rows = json.loads(capsys.readouterr().out)
     assert {row["B"] for row in rows} == {1}
@@ -113,7 +113,7 @@ def test_compare_policies_example_runs_the_bench_with_a_custom_policy(tmp_path, 
         "bench_mild",
         "--num-seeds",
         "2",
-        "--steps",
+        "--max-steps",
         "20",
         "--out",
         str(tmp_path),
@@ -123,3 +123,22 @@ def test_compare_policies_example_runs_the_bench_with_a_custom_policy(tmp_path, 
     assert cells[0].seeds == cells[2].seeds
     assert cells[0].metrics["cost"].tolist() != cells[2].metrics["cost"].tolist()
     assert "| nn_dsc_soft |" in capsys.readouterr().out
+
+
+def test_train_residual_ppo_example_trains_evaluates_and_reports(tmp_path, capsys):
+    """Its three phases on a tiny budget: a run folder, both rewards' benches, the summary."""
+    example = _load_example("train_residual_ppo")
+    runs, results = tmp_path / "runs", tmp_path / "results"
+    common = ["--runs", str(runs), "--results", str(results), "--scenarios", "bench_lossy_links"]
+    train = ["train", *common, "--timesteps", "2000", "--fleets", "2", "--num-seeds", "1"]
+    assert example.main([*train, "--seed", "3", "--agents", "residual_ppo"]) == 0
+    run = runs / "residual_ppo_bench_lossy_links_s3"
+    assert (run / "config.json").is_file() and (run / "manifest.json").is_file()
+    evaluate = ["evaluate", *common, "--eval-num-seeds", "2", "--eval-max-steps", "40"]
+    assert example.main(evaluate) == 0
+    for label in ("training_reward", "quadratic_reward"):
+        rows = (results / f"bench_lossy_links_{label}" / "episodes.csv").read_text().splitlines()
+        assert len(rows) == 1 + 3 * 2  # nn_dsc, backstepping and the run, two seeds each
+    summary = (results / "summary.md").read_text()
+    assert "--eval-num-seeds 2 --eval-max-steps 40" in summary and run.name in summary
+    capsys.readouterr()

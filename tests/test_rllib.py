@@ -34,7 +34,13 @@ def _load_example():
 
 example = _load_example()
 
-TINY = {"max_steps": 50, "train_batch": 200, "minibatch": 200, "epochs": 2, "hidden": (16,)}
+TINY = {
+    "max_steps": 50,
+    "train_batch_size_per_learner": 200,
+    "minibatch_size": 200,
+    "num_epochs": 2,
+    "hidden": (16,),
+}
 
 
 @pytest.fixture(scope="module")
@@ -98,7 +104,7 @@ def test_one_iteration_trains_the_shared_module(trained):
     learner = result["learners"][example.SHARED_MODULE]
     assert math.isfinite(learner["total_loss"]) and math.isfinite(learner["policy_loss"])
     runners = result["env_runners"]
-    assert runners["num_env_steps_sampled"] >= TINY["train_batch"]
+    assert runners["num_env_steps_sampled"] >= TINY["train_batch_size_per_learner"]
     assert runners["num_episodes"] >= 1 and runners["episode_len_mean"] == TINY["max_steps"]
     assert math.isfinite(runners["episode_return_mean"])
     after = algo.get_module(example.SHARED_MODULE).state_dict()
@@ -142,7 +148,8 @@ def test_greedy_actions_are_rllibs_deterministic_actions(trained):
 
 def test_example_main_with_a_remote_runner_measures_and_checkpoints(local_ray, tmp_path, capsys):
     argv = ["--scenario", "lossy_links", "--iterations", "1", "--env-runners", "1"]
-    argv += ["--max-steps", "50", "--train-batch", "100", "--minibatch", "100", "--epochs", "1"]
+    argv += ["--max-steps", "50", "--train-batch-size-per-learner", "100"]
+    argv += ["--minibatch-size", "100", "--num-epochs", "1"]
     assert example.main([*argv, "--measure", "--out", str(tmp_path)]) == 0
     out = capsys.readouterr().out
     assert "RLlib sampling only" in out and "wrapped env alone" in out

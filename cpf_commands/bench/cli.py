@@ -93,7 +93,7 @@ def _parser() -> argparse.ArgumentParser:
         help=f"seed of episode 0; episode k uses seed + k (default: {BASE_SEED})",
     )
     parser.add_argument(
-        "--steps",
+        "--max-steps",
         type=int,
         default=None,
         help="horizon in control steps, for quick runs (default: each scenario's max_steps)",
@@ -157,8 +157,8 @@ def _command(args: argparse.Namespace) -> str:
         parts += ["--cost-margin", repr(args.cost_margin)]
     if args.seed != BASE_SEED:
         parts += ["--seed", str(args.seed)]
-    if args.steps is not None:
-        parts += ["--steps", str(args.steps)]
+    if args.max_steps is not None:
+        parts += ["--max-steps", str(args.max_steps)]
     return shlex.join(parts)
 
 
@@ -178,7 +178,7 @@ def _memory_needed(args: argparse.Namespace) -> tuple[int, int]:
     for name in args.scenarios:
         scenario = make_scenario(name)
         seeds = 1 if is_deterministic(scenario) else args.num_seeds
-        horizon = args.steps or scenario.max_steps
+        horizon = args.max_steps or scenario.max_steps
         batches.append(
             seeds * (horizon * SERIES_BYTES_PER_STEP + scenario.n * STATE_BYTES_PER_VESSEL)
         )
@@ -205,8 +205,8 @@ def _claim_output(args: argparse.Namespace) -> atomic.FolderLock:
             f"{max(batch, summary) / 2**30:.1f} GiB of memory ({batch / 2**30:.1f} GiB for the "
             f"largest batch, every policy's fleets on a scenario at once; "
             f"{summary / 2**30:.1f} GiB for the summary's bootstrap intervals), but "
-            f"{available / 2**30:.1f} GiB are available; lower --num-seeds or --steps, or bench "
-            "fewer policies at a time."
+            f"{available / 2**30:.1f} GiB are available; lower --num-seeds or --max-steps, or "
+            "bench fewer policies at a time."
         )
     if args.marl_eval is not None:
         atomic.check_writable(args.marl_eval)
@@ -249,7 +249,7 @@ def bench_main(argv: Sequence[str] | None = None) -> int:
             args.scenarios,
             num_seeds=args.num_seeds,
             seed=args.seed,
-            steps=args.steps,
+            max_steps=args.max_steps,
             out=args.out,
             command=_command(args),
             progress=not args.quiet,

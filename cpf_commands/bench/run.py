@@ -11,7 +11,7 @@ Ray task: the same numbers), and ``write_outputs`` fills the output folder with
 
 Example:
     >>> from cpf_commands.bench.run import run_bench
-    >>> cells = run_bench(["nn_dsc"], ["bench_mild"], num_seeds=2, steps=20, out=None)
+    >>> cells = run_bench(["nn_dsc"], ["bench_mild"], num_seeds=2, max_steps=20, out=None)
     >>> cells[0].seeds, cells[0].metrics["cost"].shape
     ((10000, 10001), (2,))
 """
@@ -155,7 +155,7 @@ def _absolute(spec: PolicySpec) -> PolicySpec:
 
 
 def _run_on_ray(
-    jobs: Sequence[Job], steps: int | None, address: str | None, progress: bool
+    jobs: Sequence[Job], max_steps: int | None, address: str | None, progress: bool
 ) -> list[CellResult]:
     """The cells as Ray tasks (one CPU each), on local Ray or the cluster at ``address``.
 
@@ -168,7 +168,7 @@ def _run_on_ray(
     try:
         remote = ray.remote(num_cpus=1)(run_cell)
         futures = [
-            remote.remote(label, _absolute(spec), task, seeds, steps, resolve_policy)
+            remote.remote(label, _absolute(spec), task, seeds, max_steps, resolve_policy)
             for label, spec, task, seeds in jobs
         ]
         pending = list(futures)
@@ -191,7 +191,7 @@ def run_bench(
     scenarios: Sequence[str | Scenario],
     num_seeds: int = 10,
     seed: int = BASE_SEED,
-    steps: int | None = None,
+    max_steps: int | None = None,
     out: str | Path | None = None,
     command: str = "",
     progress: bool = False,
@@ -210,7 +210,7 @@ def run_bench(
         scenarios: Registered scenario names or ``Scenario`` objects.
         num_seeds: Episodes per (policy, scenario) (one on a deterministic scenario).
         seed: Episode k is reset with seed ``seed + k``.
-        steps: Horizon override (default: each scenario's ``max_steps``).
+        max_steps: Horizon override (default: each scenario's ``max_steps``).
         out: Output folder; None writes nothing.
         command: The command line recorded in summary.md.
         progress: Show a progress bar (stderr).
@@ -251,11 +251,11 @@ def run_bench(
         scenarios,
         num_seeds=num_seeds,
         seed=seed,
-        steps=steps,
+        max_steps=max_steps,
         split=split,
         progress=progress,
         resolve=resolve_policy,
-        run_cells=(lambda jobs, steps: _run_on_ray(jobs, steps, address, progress))
+        run_cells=(lambda jobs, max_steps: _run_on_ray(jobs, max_steps, address, progress))
         if distribute
         else None,
     )

@@ -72,7 +72,7 @@ def _run_parser(prog: str = "cpf-run") -> argparse.ArgumentParser:
         help="seed of the environment and the policy, an integer >= 0 (default: 0)",
     )
     parser.add_argument(
-        "--steps",
+        "--max-steps",
         type=positive_int,
         default=None,
         help="control steps, >= 1 (default: the scenario's episode length)",
@@ -165,7 +165,7 @@ def _video_recorder(args: argparse.Namespace) -> VideoRecorder:
 
     check_video_path(args.video)
     scenario = make_scenario(args.scenario)
-    horizon = scenario.max_steps if args.steps is None else args.steps
+    horizon = scenario.max_steps if args.max_steps is None else args.max_steps
     return VideoRecorder(scenario, args.video_every or frame_period(horizon))
 
 
@@ -192,7 +192,7 @@ def run_main(argv: Sequence[str] | None = None, prog: str = "cpf-run") -> int:
             args.scenario,
             args.policy,
             seed=args.seed,
-            steps=args.steps,
+            max_steps=args.max_steps,
             out=args.out,
             figures=not args.no_figures,
             progress=not args.quiet,

@@ -17,7 +17,7 @@ f).
 
 Example:
     >>> from cpf_commands.run.experiment import run_episode
-    >>> trajectory = run_episode("wang2014", "nn_dsc", seed=0, steps=100)
+    >>> trajectory = run_episode("wang2014", "nn_dsc", seed=0, max_steps=100)
     >>> trajectory.eta.shape
     (100, 5, 3)
 """
@@ -45,7 +45,7 @@ def run_episode(
     scenario: str | Scenario = "wang2014",
     policy: str = "nn_dsc",
     seed: int | None = 0,
-    steps: int | None = None,
+    max_steps: int | None = None,
     policy_options: dict[str, Any] | None = None,
     progress: bool = False,
     observer: StepObserver | None = None,
@@ -56,7 +56,7 @@ def run_episode(
         scenario: Scenario name or object.
         policy: A baseline name or a ``cpf-train --out`` folder (``resolve_policy``).
         seed: Reset seed of the environment and the policy.
-        steps: Control steps to run (default: the scenario's ``max_steps``);
+        max_steps: Control steps to run (default: the scenario's ``max_steps``);
             the run stops early if the episode terminates.
         policy_options: Gains of a baseline (e.g. ``K2=(30, 30, 5)``).
         progress: Show a progress bar.
@@ -71,12 +71,12 @@ def run_episode(
     resolved = make_scenario(scenario)
     controller = resolve_policy(policy, resolved, **(policy_options or {}))
     recorder = _TrajectoryRecorder(observer)
-    horizon = resolved.max_steps if steps is None else int(steps)
+    horizon = resolved.max_steps if max_steps is None else int(max_steps)
     if horizon < 1:
-        raise ValueError(f"steps must be >= 1, got {steps}.")
+        raise ValueError(f"max_steps must be >= 1, got {max_steps}.")
     with tqdm(total=horizon, disable=not progress, desc=f"{resolved.name}/{policy}") as bar:
         metrics = rollout(
-            controller, resolved, [seed], steps, bar, observer=recorder, policy_seed=seed
+            controller, resolved, [seed], max_steps, bar, observer=recorder, policy_seed=seed
         )
     stacked = {name: np.stack(values) for name, values in recorder.series.items()}
     theta = stacked["theta"]

@@ -116,15 +116,15 @@ def default_leakage(scenario: str) -> str:
     return "plain" if scenario in FINE_SCENARIOS else NNDSCGains().leakage
 
 
-def judging_gap(scenario: Scenario, steps: int) -> str | None:
-    """Why the paper's claims are not judged on a run of ``steps`` (asked for), or None.
+def judging_gap(scenario: Scenario, max_steps: int) -> str | None:
+    """Why the paper's claims are not judged on a run of ``max_steps`` (asked for), or None.
 
     The claims are the paper's statements about its whole simulation (the
     scenario's episode, 150 s): measured over the last quarter of a shorter
     run, they would judge an earlier window, still in the transient on a
     short one, against thresholds meant for the end of the paper's run.
     """
-    needed, ran = scenario.max_steps * scenario.dt, steps * scenario.dt
+    needed, ran = scenario.max_steps * scenario.dt, max_steps * scenario.dt
     if ran >= needed:
         return None
     return f"the run is shorter than the claim needs ({ran:.4g} s < {needed:.4g} s)"
@@ -363,7 +363,7 @@ def reproduce(
     scenario: str | Scenario = "wang2014_fine",
     policy: str = "nn_dsc",
     seed: int = 0,
-    steps: int | None = None,
+    max_steps: int | None = None,
     out: str | Path | None = "outputs",
     figures: bool = True,
     progress: bool = False,
@@ -377,7 +377,7 @@ def reproduce(
         scenario: Scenario name or object.
         policy: A baseline name or a ``cpf-train --out`` folder (``resolve_policy``).
         seed: Seed of environment and policy.
-        steps: Control steps (default: the scenario's episode length).
+        max_steps: Control steps (default: the scenario's episode length).
         out: Output directory; its subdirectory ``<scenario>_<policy>`` (``run_folder``)
             is checked and locked before the episode runs and written whole at the
             end (``cpf_env.infra.atomic.staged_folder``). None writes nothing.
@@ -406,14 +406,16 @@ def reproduce(
     resolved = make_scenario(scenario)
     options = policy_options(policy, resolved.name, leakage)
     if out is None:
-        return _reproduce(resolved, policy, options, seed, steps, progress, observer, None, False)
+        return _reproduce(
+            resolved, policy, options, seed, max_steps, progress, observer, None, False
+        )
     directory = run_folder(out, resolved.name, policy)
-    horizon = resolved.max_steps if steps is None else max(int(steps), 1)
+    horizon = resolved.max_steps if max_steps is None else max(int(max_steps), 1)
     needed = horizon * resolved.n * OUTPUT_BYTES_PER_VESSEL_STEP + figures * FIGURE_BYTES
     lock = claim_output_folder(directory, RUN_FILES, force, "cpf-run", needed_bytes=needed)
     try:
         return _reproduce(
-            resolved, policy, options, seed, steps, progress, observer, directory, figures
+            resolved, policy, options, seed, max_steps, progress, observer, directory, figures
         )
     finally:
         lock.release()
@@ -436,7 +438,7 @@ def _reproduce(
     policy: str,
     options: dict[str, Any],
     seed: int,
-    steps: int | None,
+    max_steps: int | None,
     progress: bool,
     observer: StepObserver | None,
     directory: Path | None,
@@ -449,7 +451,7 @@ def _reproduce(
         resolved,
         policy,
         seed=seed,
-        steps=steps,
+        max_steps=max_steps,
         policy_options=options,
         progress=progress,
         observer=observer,
@@ -461,7 +463,7 @@ def _reproduce(
         gains = NNDSCGains.from_options(options) if "leakage" in options else None
         estimator = not getattr(policy_type, "global_speed", False)
         claims = evaluate_claims(trajectory, metrics, gains, estimator)
-        gap = judging_gap(resolved, resolved.max_steps if steps is None else steps)
+        gap = judging_gap(resolved, resolved.max_steps if max_steps is None else max_steps)
         if gap is not None:
             claims = [replace(claim, holds=None) for claim in claims]
             metrics["claims_not_judged"] = gap

@@ -18,7 +18,8 @@ Folder layout::
 
 Example::
 
-    cpf-sweep --scenarios bench_mild bench_saturation --seeds 0 1 --set timesteps=20000 --out sweep
+    cpf-sweep --scenarios bench_mild bench_saturation --num-seeds 2 --set timesteps=20000 \
+        --out sweep
 """
 
 from __future__ import annotations
@@ -59,7 +60,12 @@ def _parser() -> argparse.ArgumentParser:
         formatter_class=argparse.ArgumentDefaultsHelpFormatter,
     )
     add_scenarios_argument(parser, "scenarios to train on (registered names)", required=True)
-    parser.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2], help="training seeds")
+    parser.add_argument(
+        "--num-seeds", type=positive_int, default=3, help="training seeds per scenario and setting"
+    )
+    parser.add_argument(
+        "--seed", type=int, default=0, help="first training seed (seeds SEED .. SEED + N - 1)"
+    )
     parser.add_argument(
         "--set",
         nargs="+",
@@ -91,7 +97,7 @@ def _parser() -> argparse.ArgumentParser:
         help="paired evaluation episodes per trial (0: none)",
     )
     parser.add_argument(
-        "--eval-steps",
+        "--eval-max-steps",
         type=positive_int,
         default=None,
         help="evaluation horizon in control steps (None: the scenario's max_steps)",
@@ -298,10 +304,10 @@ def sweep_main(argv: Sequence[str] | None = None) -> int:
     try:
         spec = SweepSpec.from_settings(
             args.scenarios,
-            args.seeds,
+            range(args.seed, args.seed + args.num_seeds),
             args.settings,
             eval_num_seeds=args.eval_num_seeds,
-            eval_steps=args.eval_steps,
+            eval_max_steps=args.eval_max_steps,
             cpus_per_trial=args.cpus_per_trial,
         )
     except ValueError as error:

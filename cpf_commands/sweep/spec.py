@@ -39,7 +39,8 @@ from cpf_env.infra import atomic
 __all__ = ["SweepSpec", "parse_setting", "trial_name"]
 
 #: TrainConfig fields a sweep sets through its own flags, not ``--set``.
-_OWN_FLAGS = ("scenario", "seed")
+#: TrainConfig fields the sweep's own options set, and those options.
+_OWN_FLAGS = {"scenario": "--scenarios", "seed": "--seed and --num-seeds"}
 
 
 def _field_types() -> dict[str, Any]:
@@ -89,7 +90,7 @@ def parse_setting(text: str) -> tuple[str, tuple[Any, ...]]:
     if not sep or not name:
         raise ValueError(f"--set takes FIELD=VALUE or FIELD=V1,V2; got {text!r}.")
     if name in _OWN_FLAGS:
-        raise ValueError(f"set {name} with --{name}s, not --set.")
+        raise ValueError(f"set {name} with {_OWN_FLAGS[name]}, not --set.")
     if name not in types:
         choices = sorted(set(types) - set(_OWN_FLAGS))
         raise ValueError(f"--set: unknown TrainConfig field {name!r}; fields are {choices}.")
@@ -122,7 +123,7 @@ class SweepSpec:
         fixed: TrainConfig field -> the value it keeps in every trial.
         eval_num_seeds: Evaluation episodes per trial (paired with the base policy);
             0 skips the evaluation.
-        eval_steps: Evaluation horizon (None: each scenario's ``max_steps``).
+        eval_max_steps: Evaluation horizon (None: each scenario's ``max_steps``).
         cpus_per_trial: CPUs each trial reserves, and its torch threads unless
             ``torch_threads`` is set. Part of the sweep because the thread
             count changes floating-point results: a resume with another count
@@ -134,7 +135,7 @@ class SweepSpec:
     grid: dict[str, tuple[Any, ...]] = field(default_factory=dict)
     fixed: dict[str, Any] = field(default_factory=dict)
     eval_num_seeds: int = 5
-    eval_steps: int | None = None
+    eval_max_steps: int | None = None
     cpus_per_trial: int = 1
 
     def __post_init__(self) -> None:

@@ -54,15 +54,15 @@ class _TuneReport(BaseCallback):
 
 
 def evaluate_agent(
-    folder: Path, config: TrainConfig, seeds: int, steps: int | None
+    folder: Path, config: TrainConfig, num_seeds: int, max_steps: int | None
 ) -> dict[str, Any]:
     """The trained agent in ``folder`` against its base policy on paired seeds.
 
     Args:
         folder: A trained agent's folder.
         config: Its training configuration.
-        seeds: Evaluation episodes (seeds ``BASE_SEED + k``, as ``cpf-bench`` uses).
-        steps: Horizon (None: the scenario's ``max_steps``).
+        num_seeds: Evaluation episodes (seeds ``BASE_SEED + k``, as ``cpf-bench`` uses).
+        max_steps: Horizon (None: the scenario's ``max_steps``).
 
     Returns:
         ``reference`` (the base policy; ``nn_dsc`` for an agent trained from
@@ -77,7 +77,7 @@ def evaluate_agent(
     """
     reference = "nn_dsc" if config.base_policy == "none" else config.base_policy
     policies: dict[str, str | Path] = {"agent": folder, reference: reference}
-    cells = run_bench(policies, list(config.scenarios), num_seeds=seeds, steps=steps)
+    cells = run_bench(policies, list(config.scenarios), num_seeds=num_seeds, max_steps=max_steps)
     rows = summarize(cells, reference)
     by_metric = {row["metric"]: row for row in rows if row["policy"] == "agent"}
     base = {row["metric"]: row for row in rows if row["policy"] == reference}
@@ -122,7 +122,7 @@ def run_trial(params: dict[str, Any], spec: SweepSpec, out: str) -> None:
     }
     if spec.eval_num_seeds:
         start = time.perf_counter()
-        result |= evaluate_agent(folder, config, spec.eval_num_seeds, spec.eval_steps)
+        result |= evaluate_agent(folder, config, spec.eval_num_seeds, spec.eval_max_steps)
         result["eval_seconds"] = time.perf_counter() - start
     write_evaluation(folder, result)
     tune.report(result)

@@ -53,7 +53,7 @@ def main(argv: list[str] | None = None) -> list[CellResult]:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--split", choices=("test", "shift"), default="test")
     parser.add_argument("--num-seeds", type=int, default=20, help="episodes per cell (default 20)")
-    parser.add_argument("--steps", type=int, default=None,
+    parser.add_argument("--max-steps", type=int, default=None,
                         help="episode length in control steps (default: scenario's)")  # fmt: skip
     parser.add_argument("--scenarios", nargs="+", default=list_suite(), metavar="NAME",
                         help="suite scenarios (default: all seven)")  # fmt: skip
@@ -64,7 +64,7 @@ def main(argv: list[str] | None = None) -> list[CellResult]:
         policies[label] = partial(baselines.make_policy, name, **MPCTuned.DEFAULTS)
     given = sys.argv[1:] if argv is None else argv
     command = shlex.join(["python", "studies/headroom/headroom_tuned.py", *given])
-    cells = run_bench(policies, args.scenarios, num_seeds=args.num_seeds, steps=args.steps,
+    cells = run_bench(policies, args.scenarios, num_seeds=args.num_seeds, max_steps=args.max_steps,
                       out=args.out, command=command, figures=False, reference="mpc_tuned",
                       split=args.split)  # fmt: skip
     print("| policy | scenario | mean cost |")

@@ -17,7 +17,7 @@ def test_headroom_tuned_tells_mpc_tuned_not_mpc(tmp_path: Path) -> None:
         "bench_mild",
         "--num-seeds",
         "1",
-        "--steps",
+        "--max-steps",
         "40",
         "--out",
         str(tmp_path),

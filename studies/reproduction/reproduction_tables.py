@@ -15,7 +15,7 @@ change: path error over the last quarter, settling time, saturated steps.
 Usage::
 
     python studies/reproduction/reproduction_tables.py claims
-    python studies/reproduction/reproduction_tables.py ablation [--steps N]
+    python studies/reproduction/reproduction_tables.py ablation [--max-steps N]
 """
 
 from __future__ import annotations
@@ -84,11 +84,13 @@ CLAIM_ROWS = {
 }
 
 
-def claims_table(steps: int | None = None) -> str:
+def claims_table(max_steps: int | None = None) -> str:
     """Markdown table: one row per claim, one column per (scenario, leakage) reading."""
     columns = []
     for scenario, leakage in READINGS:
-        _metrics, claims = reproduce(scenario, "nn_dsc", steps=steps, out=None, leakage=leakage)
+        _metrics, claims = reproduce(
+            scenario, "nn_dsc", max_steps=max_steps, out=None, leakage=leakage
+        )
         columns.append({claim.number: claim for claim in claims})
     header = " | ".join(f"`{s}`, `leakage={law}`" for s, law in READINGS)
     lines = [f"| claim (last quarter) | {header} |", "|---" * (len(READINGS) + 1) + "|"]
@@ -97,7 +99,7 @@ def claims_table(steps: int | None = None) -> str:
     return "\n".join(lines)
 
 
-def ablation_rows(steps: int | None = None) -> list[tuple[object, ...]]:
+def ablation_rows(max_steps: int | None = None) -> list[tuple[object, ...]]:
     """(scenario, leakage, policy, path error max, path error integral, settling, saturated).
 
     ``nn_dsc`` comes first for each scenario; saturated is the fraction of
@@ -107,7 +109,7 @@ def ablation_rows(steps: int | None = None) -> list[tuple[object, ...]]:
     for scenario in ABLATION_SCENARIOS:
         for policy in ABLATION_POLICIES:
             options = policy_options(policy, scenario, None)
-            trajectory = run_episode(scenario, policy, steps=steps, policy_options=options)
+            trajectory = run_episode(scenario, policy, max_steps=max_steps, policy_options=options)
             metrics = episode_metrics(trajectory)
             dt = scenarios.get(scenario).dt
             integral = float(trajectory.errors[..., 0].mean(axis=1).sum() * dt)
@@ -131,9 +133,9 @@ def _settle(value: object) -> str:
     return "never" if value is None else f"{value:.1f} s"
 
 
-def ablation_table(steps: int | None = None) -> str:
+def ablation_table(max_steps: int | None = None) -> str:
     """Markdown: a summary (what removing each part changes, per scenario), then every run."""
-    rows = ablation_rows(steps)
+    rows = ablation_rows(max_steps)
     summary = [
         "| scenario (leakage) | part removed | path error max, last quarter | "
         "settled < 5 cm from | steps saturated |",
@@ -167,9 +169,11 @@ def main(argv: Sequence[str] | None = None) -> str:
     """Print the requested table and return it."""
     parser = argparse.ArgumentParser(prog="reproduction_tables.py", description=__doc__)
     parser.add_argument("table", choices=("claims", "ablation"))
-    parser.add_argument("--steps", type=int, default=None, help="steps per run (default: full)")
+    parser.add_argument("--max-steps", type=int, default=None, help="steps per run (default: full)")
     args = parser.parse_args(argv)
-    table = claims_table(args.steps) if args.table == "claims" else ablation_table(args.steps)
+    table = (
+        claims_table(args.max_steps) if args.table == "claims" else ablation_table(args.max_steps)
+    )
     print(table)
     return table
 

@@ -7,9 +7,9 @@ from conftest import ROOT, load_script
 
 def test_reproduction_tables() -> None:
     tables = load_script(ROOT / "studies" / "reproduction" / "reproduction_tables.py")
-    claims = tables.main(["claims", "--steps", "20"]).splitlines()
+    claims = tables.main(["claims", "--max-steps", "20"]).splitlines()
     assert len(claims) == 2 + 5 and "formula:" in claims[3]
-    rows = tables.ablation_rows(steps=10)
+    rows = tables.ablation_rows(max_steps=10)
     assert [(r[0], r[2]) for r in rows] == [
         (s, p) for s in tables.ABLATION_SCENARIOS for p in tables.ABLATION_POLICIES
     ]

@@ -1,7 +1,7 @@
 r"""What a residual student holds, and how its output jumps when the graph switches.
 
     python studies/student/residual_at_switches.py FOLDER
-    python studies/student/residual_at_switches.py FOLDER --scenario bench_switching --seeds 10000
+    python studies/student/residual_at_switches.py FOLDER --scenario bench_switching --num-seeds 1
 
 ``FOLDER``: an agent folder, e.g. ``runs/student/agents/student_mpc_tuned_yield_s0``.
 
@@ -46,7 +46,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("folder", help="an agent folder")
     parser.add_argument("--scenario", default="bench_switching_shift")
-    parser.add_argument("--seeds", type=int, nargs="+", default=[10000, 10001])
+    parser.add_argument("--num-seeds", type=int, default=2, help="episodes")
+    parser.add_argument("--seed", type=int, default=10000, help="first episode's seed")
     parser.add_argument(
         "--max-steps", type=int, default=None, help="episode length (default: the scenario's)"
     )
@@ -59,7 +60,8 @@ def main() -> None:
         )
     policy = load_policy(args.folder, scenario=scenario)
     observer = _Residuals()
-    metrics = rollout(policy, scenario, args.seeds, observer=observer)
+    seeds = list(range(args.seed, args.seed + args.num_seeds))
+    metrics = rollout(policy, scenario, seeds, observer=observer)
     residual = np.stack(observer.steps)  # (T, B, n, 3)
     steps = residual.shape[0]
     window = np.arange(steps) >= steps - max(1, round(WINDOW_FRACTION * steps))
@@ -68,7 +70,7 @@ def main() -> None:
     change = np.abs(np.diff(residual[..., 2], axis=0))  # step t - 1 -> t, (T - 1, B, n)
     at_switch, between = (window & switching)[1:], (window & ~switching)[1:]
     mean = residual[window].mean(axis=(0, 1, 2))
-    print(f"{policy.name} on {scenario.name}, seeds {args.seeds}, final {window.sum()} steps:")
+    print(f"{policy.name} on {scenario.name}, seeds {seeds}, final {window.sum()} steps:")
     print(f"  mean residual: surge {mean[0]:+.3f} N, sway {mean[1]:+.3f} N, yaw {mean[2]:+.3f} N m")
     print(
         f"  mean |change| of the yaw residual: {change[at_switch].mean():.4f} N m on a switch, "

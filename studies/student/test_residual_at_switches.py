@@ -21,7 +21,7 @@ def test_the_yaw_residual_jumps_on_the_switch_steps_and_the_heading_is_the_rollo
 ) -> None:
     pytest.importorskip("torch")
     script = ROOT / "studies/student/residual_at_switches.py"
-    argv = [str(script), str(STUDENT), "--max-steps", "400", "--seeds", "10000"]
+    argv = [str(script), str(STUDENT), "--max-steps", "400", "--num-seeds", "1"]
     monkeypatch.setattr(sys, "argv", argv)
     runpy.run_path(str(script), run_name="__main__")
     out = capsys.readouterr().out

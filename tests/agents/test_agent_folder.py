@@ -61,10 +61,11 @@ def test_a_malicious_sb3_save_runs_no_code_on_any_route(
         load_policy(folder)
     with pytest.raises(SystemExit):
         bench_main(["--policies", "nn_dsc", str(folder), "--scenarios", "bench_lossy_links",
-                    "--num-seeds", "1", "--steps", "2", "--out", str(tmp_path / "b")])  # fmt: skip
+                    "--num-seeds", "1", "--max-steps", "2",
+                    "--out", str(tmp_path / "b")])  # fmt: skip
     assert "plain SB3 save" in capsys.readouterr().err
     with pytest.raises(SystemExit):
-        run_main(["--scenario", "bench_lossy_links", "--policy", str(folder), "--steps", "2",
+        run_main(["--scenario", "bench_lossy_links", "--policy", str(folder), "--max-steps", "2",
                   "--out", str(tmp_path / "r"), "--quiet", "--no-figures"])  # fmt: skip
     assert "plain SB3 save" in capsys.readouterr().err
     assert not marker.exists()

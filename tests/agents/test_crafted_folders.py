@@ -155,12 +155,12 @@ def test_a_fifo_manifest_blocks_neither_cpf_run_nor_cpf_bench(
     (folder / "manifest.json").unlink()
     os.mkfifo(folder / "manifest.json")
     with pytest.raises(SystemExit):
-        run_main(["--policy", str(folder), "--steps", "2", "--out", str(tmp_path / "r"),
+        run_main(["--policy", str(folder), "--max-steps", "2", "--out", str(tmp_path / "r"),
                   "--quiet", "--no-figures"])  # fmt: skip
     assert "FIFO" in capsys.readouterr().err
     with pytest.raises(SystemExit):
         bench_main(["--policies", str(folder), "--scenarios", "bench_lossy_links", "--num-seeds",
-                    "1", "--steps", "2", "--out", str(tmp_path / "b")])  # fmt: skip
+                    "1", "--max-steps", "2", "--out", str(tmp_path / "b")])  # fmt: skip
     assert "FIFO" in capsys.readouterr().err
 
 
@@ -338,7 +338,7 @@ def test_marl_task_overrides_make_the_default_scenario_and_a_named_one_leaves_th
     assert load_policy(folder).scenario.max_path_error == 3.5
     assert load_policy(MARL).scenario.max_path_error == 10.0
     assert load_policy(folder, scenario="bench_lossy_links").scenario.max_path_error == 10.0
-    argv = ["--policy", str(folder), "--steps", "2", "--out", str(tmp_path / "r"), "--quiet",
+    argv = ["--policy", str(folder), "--max-steps", "2", "--out", str(tmp_path / "r"), "--quiet",
             "--no-figures"]  # fmt: skip
     with pytest.raises(SystemExit) as caught:
         run_main(argv)
@@ -434,7 +434,7 @@ def test_cpf_run_refuses_an_empty_folder_with_one_line(
 ) -> None:
     (tmp_path / "empty").mkdir()
     with pytest.raises(SystemExit) as caught:
-        run_main(["--policy", str(tmp_path / "empty"), "--steps", "2", "--out",
+        run_main(["--policy", str(tmp_path / "empty"), "--max-steps", "2", "--out",
                   str(tmp_path / "r"), "--quiet", "--no-figures"])  # fmt: skip
     assert caught.value.code == 2
     error = capsys.readouterr().err.strip().splitlines()[-1]
@@ -447,7 +447,7 @@ def test_cpf_run_runs_the_marl_folders_cpf_bench_runs(
 ) -> None:
     for algorithm in ("mappo", "ippo"):
         folder = ROOT / f"tests/fixtures/agents/{algorithm}_lossy_links"
-        assert run_main(["--policy", str(folder), "--steps", "2", "--out",
+        assert run_main(["--policy", str(folder), "--max-steps", "2", "--out",
                          str(tmp_path / algorithm), "--quiet", "--no-figures"]) == 0  # fmt: skip
         assert "bench_lossy_links with" in capsys.readouterr().out
         assert (tmp_path / algorithm / f"bench_lossy_links_{folder.name}/metrics.json").is_file()

@@ -587,7 +587,7 @@ def test_distill_refuses_a_device_it_does_not_have(tmp_path: Path) -> None:
 
 
 def test_evaluation_rows_are_cpf_trains_and_leave_the_student_unchanged(tmp_path: Path) -> None:
-    evaluate = TestSplitEvaluator(["bench_current_waves"], num_seeds=1, steps=20)
+    evaluate = TestSplitEvaluator(["bench_current_waves"], num_seeds=1, max_steps=20)
     evaluated = distill(_config(), TINY, tmp_path / "a", evaluate=evaluate)
     plain = distill(_config(), TINY, tmp_path / "b")
     assert plain.evaluations == () and plain.losses == evaluated.losses
@@ -604,10 +604,10 @@ def test_evaluation_rows_are_cpf_trains_and_leave_the_student_unchanged(tmp_path
     seconds = [row["wall_clock_seconds"] for row in rows]
     assert seconds == sorted(seconds) and seconds[-1] <= evaluated.seconds + 5e-4  # rounded
     # Row 0 is the base itself; the last row is the student written to the folder.
-    base = run_bench(["nn_dsc"], ["bench_current_waves"], num_seeds=1, steps=20, split="test")
+    base = run_bench(["nn_dsc"], ["bench_current_waves"], num_seeds=1, max_steps=20, split="test")
     assert rows[0]["mean_cost"] == float(np.mean(base[0].metrics["cost"]))
     final = run_bench(
-        {"s": tmp_path / "a"}, ["bench_current_waves"], num_seeds=1, steps=20, reference="s",
+        {"s": tmp_path / "a"}, ["bench_current_waves"], num_seeds=1, max_steps=20, reference="s",
         split="test",
     )  # fmt: skip
     assert rows[-1]["mean_cost"] == float(np.mean(final[0].metrics["cost"]))

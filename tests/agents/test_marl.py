@@ -250,7 +250,7 @@ def test_two_mappo_iterations_on_the_pettingzoo_route_with_distinct_worker_seeds
 def test_the_training_example_writes_a_curve_and_a_policy(tmp_path: Path, actor: list[str]) -> None:
     out = tmp_path / "run"
     command = [sys.executable, str(SCRIPT), "--iterations", "1", "--out", str(out),
-               "--eval-fleets", "2", "--eval-steps", "20", *actor]  # fmt: skip
+               "--eval-fleets", "2", "--eval-max-steps", "20", *actor]  # fmt: skip
     env = {**os.environ, "NUMBA_NUM_THREADS": "1"}
     result = subprocess.run(command, capture_output=True, text=True, env=env, cwd=tmp_path)
     assert result.returncode == 0, result.stderr[-2000:]
@@ -426,7 +426,7 @@ def test_keeping_the_best_puts_the_noted_actor_back() -> None:
 def test_the_training_example_keeps_the_best_evaluated_actor(tmp_path: Path) -> None:
     env = {**os.environ, "NUMBA_NUM_THREADS": "1"}
     common = [sys.executable, str(SCRIPT), "--iterations", "3", "--eval-every", "1",
-              "--eval-fleets", "2", "--eval-steps", "20"]  # fmt: skip
+              "--eval-fleets", "2", "--eval-max-steps", "20"]  # fmt: skip
     folders = {}
     for name, extra in (("last", []), ("best", ["--keep-best"])):
         folders[name] = tmp_path / name

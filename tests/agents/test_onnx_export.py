@@ -71,7 +71,7 @@ def test_bench_runs_the_onnx_policy_within_the_torch_policys_interval(exported: 
         {"torch": AGENT, "onnx": exported, "nn_dsc": "nn_dsc"},
         ["bench_lossy_links"],
         num_seeds=4,
-        steps=200,
+        max_steps=200,
     )
     torch_cost = cells[0].metrics["cost"]
     onnx_cost = cells[1].metrics["cost"]

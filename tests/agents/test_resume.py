@@ -37,7 +37,7 @@ def _config(algo: str) -> TrainConfig:
 
 
 def _evaluator() -> TestSplitEvaluator:
-    return TestSplitEvaluator(["bench_mild"], num_seeds=2, steps=20)
+    return TestSplitEvaluator(["bench_mild"], num_seeds=2, max_steps=20)
 
 
 class _KillAt(BaseCallback):
@@ -250,7 +250,7 @@ def test_a_killed_mixture_run_resumes_to_the_same_files(tmp_path: Path) -> None:
         **{**TINY, "batch_size": 120},  # type: ignore[arg-type]
     )  # 2 fleets: 5 + 10 slots, 240 vessel-steps per rollout
     schedule = RunSchedule(eval_every=240, checkpoint_every=480)
-    evaluate = TestSplitEvaluator(config.scenarios, num_seeds=1, steps=20)
+    evaluate = TestSplitEvaluator(config.scenarios, num_seeds=1, max_steps=20)
     whole = train(config, tmp_path / "whole", False, evaluate=evaluate, schedule=schedule)
     parts = tmp_path / "parts"
     with pytest.raises(RuntimeError, match="killed"):

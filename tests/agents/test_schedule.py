@@ -30,7 +30,7 @@ def test_evaluations_are_the_numbers_cpf_bench_prints_and_best_is_the_lowest(
 ) -> None:
     config = TrainConfig(scenario="bench_mild", timesteps=480, seed=2, learning_rate=0.05,
                          **TINY)  # type: ignore[arg-type]  # fmt: skip
-    evaluate = TestSplitEvaluator(["bench_mild"], num_seeds=2, steps=30)
+    evaluate = TestSplitEvaluator(["bench_mild"], num_seeds=2, max_steps=30)
     folder = train(config, tmp_path / "run", False, evaluate=evaluate,
                    schedule=RunSchedule(eval_every=160))  # fmt: skip
     rows = _rows(folder)
@@ -44,7 +44,7 @@ def test_evaluations_are_the_numbers_cpf_bench_prints_and_best_is_the_lowest(
     load_policy(folder / "best")  # a complete agent folder
     bench = tmp_path / "bench"
     argv = ["--policies", str(folder / "best"), "--scenarios", "bench_mild", "--split", "test",
-            "--num-seeds", "2", "--steps", "30", "--out", str(bench), "--quiet",
+            "--num-seeds", "2", "--max-steps", "30", "--out", str(bench), "--quiet",
             "--no-figures"]  # fmt: skip
     assert bench_main(argv) == 0
     summary = list(csv.DictReader((bench / "summary.csv").open()))
@@ -75,7 +75,7 @@ def test_cpf_train_prints_the_rounding_and_the_bar_shows_the_evaluation_cost(
     assert (out / "best" / "manifest.json").is_file() and len(_rows(out)) == 2
     run = json.loads((out / "run.json").read_text())
     assert run["evaluation"] == {"split": "test", "scenarios": ["bench_mild"], "num_seeds": 2,
-                                 "steps": None}  # fmt: skip
+                                 "max_steps": None}  # fmt: skip
     assert run["device"] == "cpu"  # the default, recorded beside the configuration
 
 

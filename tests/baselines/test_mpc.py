@@ -92,11 +92,11 @@ def test_both_members_respect_the_force_and_rate_limits():
 
 def test_a_fleet_plans_the_same_whatever_its_row_in_the_batch():
     scenario = scenarios.get("bench_mild")
-    alone = rollout(MPCPolicy(scenario, **SHORT), scenario, [10001], steps=30)
-    paired = rollout(MPCPolicy(scenario, **SHORT), scenario, [10000, 10001], steps=30)
+    alone = rollout(MPCPolicy(scenario, **SHORT), scenario, [10001], max_steps=30)
+    paired = rollout(MPCPolicy(scenario, **SHORT), scenario, [10000, 10001], max_steps=30)
     assert alone["cost"][0] == paired["cost"][1]
-    again = rollout(OraclePolicy(scenario, **SHORT), scenario, [10001], steps=30)
-    both = rollout(OraclePolicy(scenario, **SHORT), scenario, [10000, 10001], steps=30)
+    again = rollout(OraclePolicy(scenario, **SHORT), scenario, [10001], max_steps=30)
+    both = rollout(OraclePolicy(scenario, **SHORT), scenario, [10000, 10001], max_steps=30)
     assert again["cost"][0] == both["cost"][1]
 
 
@@ -107,7 +107,7 @@ def test_telling_mpc_what_it_lacks_moves_its_cost_toward_the_oracle():
     seeds, steps = [10000, 10001], 200
     options = {"horizon": 0.5, "tail": 0.5, "knot": 10, "samples": 4}
     costs = {
-        name: rollout(cls(scenario, **options), scenario, seeds, steps=steps)["cost"].mean()
+        name: rollout(cls(scenario, **options), scenario, seeds, max_steps=steps)["cost"].mean()
         for name, cls in (("mpc", MPCPolicy), ("told", MPCPrivileged), ("oracle", OraclePolicy))
     }
     assert costs["told"] < costs["mpc"]

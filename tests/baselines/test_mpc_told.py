@@ -94,6 +94,6 @@ def test_told_links_is_mpc_on_links_that_are_already_ideal():
     """Without loss and delay the ideal-link observations are the observations: mpc_told_links
     then acts as mpc bit for bit (it is told nothing more)."""
     scenario = scenarios.get("bench_mild")
-    told = rollout(MPCToldLinks(scenario, **SHORT), scenario, [10000, 10001], steps=40)
-    plain = rollout(MPCPolicy(scenario, **SHORT), scenario, [10000, 10001], steps=40)
+    told = rollout(MPCToldLinks(scenario, **SHORT), scenario, [10000, 10001], max_steps=40)
+    plain = rollout(MPCPolicy(scenario, **SHORT), scenario, [10000, 10001], max_steps=40)
     np.testing.assert_array_equal(told["cost"], plain["cost"])

@@ -33,8 +33,8 @@ def test_without_the_rate_limit_at_mpcs_gains_it_is_mpc_bit_for_bit():
     scenario = scenarios.get("bench_lossy_links")
     seeds = [10000, 10001]
     unlimited = MPCTuned(scenario, speed_rate=np.inf, k5=1.0, k6=1.0, **SHORT)
-    tuned = rollout(unlimited, scenario, seeds, steps=60)
-    plain = rollout(MPCPolicy(scenario, **SHORT), scenario, seeds, steps=60)
+    tuned = rollout(unlimited, scenario, seeds, max_steps=60)
+    plain = rollout(MPCPolicy(scenario, **SHORT), scenario, seeds, max_steps=60)
     for metric in ("cost", "cross_track_error_rms", "formation_error_rms"):
         np.testing.assert_array_equal(tuned[metric], plain[metric])
 

@@ -265,7 +265,7 @@ def test_nn_matters_on_unknown_force_fine():
     errors = {}
     for name in ("dsc", "nn_dsc"):
         trajectory = run_episode(
-            "unknown_force_fine", name, steps=4000, policy_options={"leakage": "plain"}
+            "unknown_force_fine", name, max_steps=4000, policy_options={"leakage": "plain"}
         )
         errors[name] = max(episode_metrics(trajectory)["path_error_max"])
     assert errors["dsc"] > 0.01 and errors["nn_dsc"] < 0.002
@@ -282,7 +282,7 @@ def test_aux_matters_on_saturation_fine():
     settled = {}
     for name in ("nn_dsc", "nn_dsc_no_aux"):
         trajectory = run_episode(
-            "saturation_fine", name, steps=4000, policy_options={"leakage": "plain"}
+            "saturation_fine", name, max_steps=4000, policy_options={"leakage": "plain"}
         )
         settled[name] = settling_time(trajectory)
     assert settled["nn_dsc"] < 20.0

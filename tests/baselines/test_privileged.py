@@ -143,10 +143,10 @@ def test_a_group_rollout_gives_each_policy_its_own_runs_numbers_bit_for_bit():
     scenario = make_scenario("bench_lossy_links")
     names = ("nn_dsc", "nn_dsc_privileged", "backstepping_delay_comp")
     grouped = rollout_group(
-        [baselines.make_policy(name, scenario) for name in names], scenario, [7, 8], steps=120
+        [baselines.make_policy(name, scenario) for name in names], scenario, [7, 8], max_steps=120
     )
     for name, metrics in zip(names, grouped, strict=True):
-        alone = rollout(baselines.make_policy(name, scenario), scenario, [7, 8], steps=120)
+        alone = rollout(baselines.make_policy(name, scenario), scenario, [7, 8], max_steps=120)
         assert metrics.keys() == alone.keys()
         for metric, values in alone.items():
             np.testing.assert_array_equal(metrics[metric], values, err_msg=f"{name} {metric}")

@@ -52,7 +52,7 @@ def test_the_bench_reuses_a_matching_cell_and_recomputes_otherwise(tmp_path, mon
     assert again[1].metrics["cost"].tolist() == first[1].metrics["cost"].tolist()
     other = evaluate(["mpc"], [task.replace(max_steps=11)], num_seeds=2).cells  # another key
     assert other[0].metrics["cost"].min() > 0
-    evaluate(["mpc"], [task], num_seeds=3, steps=5)  # a quick look is not kept
+    evaluate(["mpc"], [task], num_seeds=3, max_steps=5)  # a quick look is not kept
     assert cache.load_cell("mpc", task, (10000, 10001, 10002), 5) is None
 
 

@@ -18,8 +18,8 @@ def test_evaluate_gives_the_bench_its_numbers_for_names_objects_and_factories() 
         "object": make_policy("dsc", mild),
         "factory": lambda task: make_policy("backstepping", task),
     }
-    result = evaluate(policies, ["bench_mild"], num_seeds=3, steps=200)
-    cells = run_bench(["nn_dsc", "dsc", "backstepping"], ["bench_mild"], num_seeds=3, steps=200)
+    result = evaluate(policies, ["bench_mild"], num_seeds=3, max_steps=200)
+    cells = run_bench(["nn_dsc", "dsc", "backstepping"], ["bench_mild"], num_seeds=3, max_steps=200)
     for label, cell in zip(policies, cells, strict=True):
         mine = result.cell(label, "bench_mild")
         assert mine.seeds == (10000, 10001, 10002) == cell.seeds
@@ -29,17 +29,17 @@ def test_evaluate_gives_the_bench_its_numbers_for_names_objects_and_factories() 
 
 
 def test_seeds_split_and_skips() -> None:
-    result = evaluate(["nn_dsc"], ["bench_mild"], num_seeds=2, seed=5, steps=5, split="shift")
+    result = evaluate(["nn_dsc"], ["bench_mild"], num_seeds=2, seed=5, max_steps=5, split="shift")
     (cell,) = result.cells
     assert cell.seeds == (5, 6) and cell.scenario == "bench_mild_shift"
-    assert evaluate(["nn_dsc"], ["wang2014"], num_seeds=4, steps=5).cells[0].seeds == (10000,)
+    assert evaluate(["nn_dsc"], ["wang2014"], num_seeds=4, max_steps=5).cells[0].seeds == (10000,)
 
     def picky(task):
         if task.name == "bench_switching":
             raise ValueError("not this one")
         return make_policy("nn_dsc", task)
 
-    result = evaluate({"picky": picky}, ["bench_mild", "bench_switching"], num_seeds=1, steps=2)
+    result = evaluate({"picky": picky}, ["bench_mild", "bench_switching"], num_seeds=1, max_steps=2)
     assert [c.scenario for c in result.cells] == ["bench_mild"]
     assert result.skipped == {("picky", "bench_switching"): "not this one"}
     with pytest.raises(KeyError, match="no cell"):
@@ -51,7 +51,7 @@ def test_seeds_split_and_skips() -> None:
     [
         ({"num_seeds": 0}, "num_seeds must be an integer >= 1"),
         ({"num_seeds": 2.5}, "num_seeds must be an integer >= 1"),
-        ({"steps": 0}, "steps must be >= 1"),
+        ({"max_steps": 0}, "max_steps must be >= 1"),
         ({"split": "train"}, "unknown split 'train'"),
         ({"scenarios": []}, "at least one scenario"),
         ({"policies": []}, "at least one policy"),
@@ -59,6 +59,6 @@ def test_seeds_split_and_skips() -> None:
     ],
 )
 def test_bad_arguments_say_what_to_change(kwargs: dict, message: str) -> None:
-    arguments = {"policies": ["nn_dsc"], "scenarios": ["bench_mild"], "steps": 2, **kwargs}
+    arguments = {"policies": ["nn_dsc"], "scenarios": ["bench_mild"], "max_steps": 2, **kwargs}
     with pytest.raises(ValueError, match=message):
         evaluate(**arguments)

@@ -31,10 +31,12 @@ class InPython:
         self.policy.reset(seed)
 
 
-def _both_paths(names, task, seeds, steps):
-    compiled = rollout_group([baselines.make_policy(n, task) for n in names], task, seeds, steps)
+def _both_paths(names, task, seeds, max_steps):
+    compiled = rollout_group(
+        [baselines.make_policy(n, task) for n in names], task, seeds, max_steps
+    )
     stepped = rollout_group(
-        [InPython(baselines.make_policy(n, task)) for n in names], task, seeds, steps
+        [InPython(baselines.make_policy(n, task)) for n in names], task, seeds, max_steps
     )
     return compiled, stepped
 
@@ -50,19 +52,19 @@ def _assert_equal(compiled, stepped):
 def test_compiled_and_python_rollouts_give_the_same_metrics(scenario):
     names = ["nn_dsc", "backstepping_delay_comp", "nn_dsc_privileged"]
     task = scenarios.get(scenario)
-    _assert_equal(*_both_paths(names, task, [0, 1, 2], steps=150))  # chunks of 64, 64, 22
+    _assert_equal(*_both_paths(names, task, [0, 1, 2], max_steps=150))  # chunks of 64, 64, 22
 
 
 def test_fleets_that_leave_their_path_are_masked_alike_on_both_paths():
     task = scenarios.get("bench_mild").replace(name="tight", max_path_error=3.0)
-    compiled, stepped = _both_paths(["nn_dsc", "dsc"], task, list(range(6)), steps=100)
+    compiled, stepped = _both_paths(["nn_dsc", "dsc"], task, list(range(6)), max_steps=100)
     assert 0 < compiled[0]["terminated"].sum() < 6
     _assert_equal(compiled, stepped)
 
 
 def test_a_rollout_in_which_every_fleet_fails_stops_alike_on_both_paths():
     task = scenarios.get("bench_mild").replace(name="tight", max_path_error=1.0)
-    compiled, stepped = _both_paths(["nn_dsc"], task, [0, 1], steps=200)
+    compiled, stepped = _both_paths(["nn_dsc"], task, [0, 1], max_steps=200)
     assert compiled[0]["terminated"].all()
     _assert_equal(compiled, stepped)
 

@@ -83,12 +83,14 @@ def test_suite_cost_difference_is_relative_and_stratified():
 
 def test_reference_must_be_one_of_the_policies():
     with pytest.raises(ValueError, match="--reference backstepping is not among"):
-        run_bench(["nn_dsc", "dsc"], ["bench_mild"], num_seeds=1, steps=2, reference="backstepping")
+        run_bench(
+            ["nn_dsc", "dsc"], ["bench_mild"], num_seeds=1, max_steps=2, reference="backstepping"
+        )
 
 
 def test_terminal_prints_the_verdict_against_any_reference(tmp_path, capsys):
     argv = ["--policies", "backstepping", "dsc", "--scenarios", "bench_mild", "--num-seeds", "3"]
-    argv += ["--steps", "20", "--reference", "backstepping", "--out", str(tmp_path), "--quiet"]
+    argv += ["--max-steps", "20", "--reference", "backstepping", "--out", str(tmp_path), "--quiet"]
     assert bench_main([*argv, "--no-figures"]) == 0
     out = capsys.readouterr().out
     assert "verdict: against backstepping" in out.replace("\n", " ")
@@ -102,11 +104,15 @@ def test_terminal_prints_the_verdict_against_any_reference(tmp_path, capsys):
 
 def test_shift_split_runs_the_shifted_scenarios():
     cells = run_bench(
-        ["nn_dsc"], ["bench_lossy_links", "bench_large_fleet"], num_seeds=2, steps=5, split="shift"
+        ["nn_dsc"],
+        ["bench_lossy_links", "bench_large_fleet"],
+        num_seeds=2,
+        max_steps=5,
+        split="shift",
     )
     assert [c.scenario for c in cells] == ["bench_lossy_links_shift", "bench_large_fleet_shift"]
     with pytest.raises(ValueError, match="no held-out splits"):
-        run_bench(["nn_dsc"], ["wang2014"], num_seeds=1, steps=2, split="shift")
+        run_bench(["nn_dsc"], ["wang2014"], num_seeds=1, max_steps=2, split="shift")
 
 
 def test_marl_eval_export_has_the_nested_layout(tmp_path):
@@ -114,7 +120,7 @@ def test_marl_eval_export_has_the_nested_layout(tmp_path):
 
     out = tmp_path / "marl.json"
     argv = ["--policies", "nn_dsc", "dsc", "--scenarios", "bench_mild", "--num-seeds", "2"]
-    argv += ["--steps", "5", "--out", str(tmp_path / "b"), "--quiet", "--no-figures"]
+    argv += ["--max-steps", "5", "--out", str(tmp_path / "b"), "--quiet", "--no-figures"]
     assert bench_main([*argv, "--marl-eval", str(out)]) == 0
     data = json.loads(out.read_text())
     runs = data["cpf_env"]["bench_mild"]["dsc"]

@@ -38,7 +38,7 @@ def test_a_policy_listed_twice_is_refused_as_a_duplicate(capsys, tmp_path):
     assert "policy 'nn_dsc' is listed twice; duplicates are not allowed" in line
     assert "mapping" not in line and not (tmp_path / "b").exists()
     with pytest.raises(ValueError, match="listed twice; duplicates are not allowed"):
-        run_bench(["dsc", "dsc"], ["bench_mild"], num_seeds=1, steps=2)
+        run_bench(["dsc", "dsc"], ["bench_mild"], num_seeds=1, max_steps=2)
 
 
 def test_a_non_positive_max_steps_says_so_not_something_about_dt():

@@ -75,12 +75,17 @@ def test_iqm_over_seeds_matches_the_hand_calculation(
 
 
 def test_the_base_line_of_an_analytic_policy_is_the_benchmark_number(tmp_path: Path) -> None:
-    evaluation = {"split": "test", "scenarios": ["bench_mild"], "num_seeds": 2, "steps": 20}
+    evaluation = {
+        "split": "test",
+        "scenarios": ["bench_mild"],
+        "num_seeds": 2,
+        "steps": 20,
+    }  # as written before max_steps
     folders = _write_runs(tmp_path / "runs", base="none", evaluation=evaluation)
     with pytest.raises(SystemExit):  # from scratch: no base at 0 steps to compare with
         curves_main([*folders, "--out", str(tmp_path / "c")])
     assert curves_main([*folders, "--out", str(tmp_path / "c"), "--base-policy", "dsc"]) == 0
-    cells = run_bench(["dsc"], ["bench_mild"], num_seeds=2, steps=20, split="test")
+    cells = run_bench(["dsc"], ["bench_mild"], num_seeds=2, max_steps=20, split="test")
     expected = float(np.mean(cells[0].metrics["cost"]))
     assert _curves(tmp_path / "c")["vessel_steps"][0]["base_cost"] == expected
 
@@ -128,7 +133,7 @@ def test_cpf_curves_reads_cpf_distill_runs(
 ) -> None:
     # Evaluation episodes of 20 steps (cpf-distill evaluates whole episodes), to keep it fast.
     monkeypatch.setattr(
-        distill_command, "TestSplitEvaluator", functools.partial(TestSplitEvaluator, steps=20)
+        distill_command, "TestSplitEvaluator", functools.partial(TestSplitEvaluator, max_steps=20)
     )
     config = tmp_path / "student.toml"
     config.write_text(STUDENT_TOML)
@@ -140,7 +145,7 @@ def test_cpf_curves_reads_cpf_distill_runs(
         logs.append(str(log))
     record = json.loads((tmp_path / "run_s0" / "run.json").read_text())
     assert record["evaluation"] == {
-        "split": "test", "scenarios": ["bench_mild"], "num_seeds": 1, "steps": 20
+        "split": "test", "scenarios": ["bench_mild"], "num_seeds": 1, "max_steps": 20
     }  # fmt: skip
     rows = list(csv.DictReader((tmp_path / "run_s0" / "evaluations.csv").open()))
     assert list(rows[0]) == ["vessel_steps", "wall_clock_seconds", "evaluation_seconds",

@@ -37,7 +37,7 @@ def test_a_bench_killed_at_any_stage_leaves_old_or_new_and_the_next_run_sees_it(
 ) -> None:
     """Every stage, the two renames of the swap included: the next run without --force is
     refused (the recovery runs before the --force check) and finds old or new results whole."""
-    old_run, new_run = [*QUICK, "--steps", "3"], [*QUICK, "--steps", "4"]
+    old_run, new_run = [*QUICK, "--max-steps", "3"], [*QUICK, "--max-steps", "4"]
     assert bench_main([*new_run, "--out", str(tmp_path / "new")]) == 0
     assert bench_main([*old_run, "--out", str(tmp_path / "old")]) == 0
     new, old = _results(tmp_path / "new"), _results(tmp_path / "old")
@@ -63,11 +63,11 @@ def test_a_bench_killed_between_the_two_renames_is_restored_before_the_force_che
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     out = tmp_path / "out"
-    assert bench_main([*QUICK, "--steps", "3", "--out", str(out)]) == 0
+    assert bench_main([*QUICK, "--max-steps", "3", "--out", str(out)]) == 0
     before = _results(out)
     out.rename(tmp_path / ".out.old-1764660000000000000-42")  # killed after the first rename
     assert "already holds cpf-bench results; pass --force" in _refused(
-        [*QUICK, "--steps", "4", "--out", str(out)], capsys
+        [*QUICK, "--max-steps", "4", "--out", str(out)], capsys
     )
     assert _results(out) == before and _leftovers(tmp_path, "out") == []
 
@@ -118,7 +118,7 @@ def test_a_full_disk_while_writing_keeps_the_old_results(
 ) -> None:
     with small_disk(tmp_path, monkeypatch) as full_disk:
         out = full_disk.root / "out"
-        assert bench_main([*QUICK, "--steps", "3", "--out", str(out)]) == 0
+        assert bench_main([*QUICK, "--max-steps", "3", "--out", str(out)]) == 0
         before = _results(out)
         real = cli.run_bench
 
@@ -127,7 +127,7 @@ def test_a_full_disk_while_writing_keeps_the_old_results(
             return real(*args, **kwargs)
 
         monkeypatch.setattr(cli, "run_bench", then_fill)
-        err = _refused([*QUICK, "--steps", "4", "--out", str(out), "--force"], capsys)
+        err = _refused([*QUICK, "--max-steps", "4", "--out", str(out), "--force"], capsys)
         assert "could not write the results" in err and "No space left" in err
         assert _results(out) == before
         assert full_disk.entries() == [".out.lock", "out"]

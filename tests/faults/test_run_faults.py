@@ -16,7 +16,7 @@ from cpf_commands.run.cli import run_main
 from cpf_commands.run.reproduce import reproduce
 from cpf_env.infra import atomic
 
-QUICK = ["--scenario", "wang2014", "--steps", "3", "--quiet", "--no-figures"]
+QUICK = ["--scenario", "wang2014", "--max-steps", "3", "--quiet", "--no-figures"]
 FOLDER = "wang2014_nn_dsc"
 
 
@@ -33,7 +33,7 @@ def _results(folder: Path) -> dict[str, bytes]:
 
 def _write(out: Path, seed: int, force: bool = False) -> None:
     replace = {"force": True} if force else {}
-    reproduce("wang2014", "nn_dsc", seed=seed, steps=3, out=out, figures=False, **replace)
+    reproduce("wang2014", "nn_dsc", seed=seed, max_steps=3, out=out, figures=False, **replace)
 
 
 def test_an_existing_output_needs_force(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

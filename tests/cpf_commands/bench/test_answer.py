@@ -113,7 +113,16 @@ def _read_summary(folder: Path) -> dict[tuple[str, str], float]:
 def test_cpf_bench_prints_its_answer_and_writes_one_html_report(tmp_path, capsys):
     out = tmp_path / "bench"
     argv = ["--policies", "nn_dsc", "backstepping", "dsc", "--scenarios", "bench_mild"]
-    argv += ["bench_lossy_links", "--num-seeds", "2", "--steps", "15", "--quiet", "--out", str(out)]
+    argv += [
+        "bench_lossy_links",
+        "--num-seeds",
+        "2",
+        "--max-steps",
+        "15",
+        "--quiet",
+        "--out",
+        str(out),
+    ]
     assert bench_main(argv) == 0
     printed = capsys.readouterr().out
     assert "cost difference" not in printed  # not the 49 rows of differences any more

@@ -99,7 +99,7 @@ def test_is_deterministic(name, deterministic):
 def test_a_deterministic_scenario_gives_the_same_episode_for_every_seed():
     """What is_deterministic promises, checked on the simulator."""
     scenario = scenarios.get("saturation_heavy")
-    metrics = run_episodes(make_policy("nn_dsc", scenario), scenario, [1, 2, 3], steps=40)
+    metrics = run_episodes(make_policy("nn_dsc", scenario), scenario, [1, 2, 3], max_steps=40)
     for name in METRICS:
         np.testing.assert_array_equal(metrics[name], metrics[name][0], err_msg=name)
 
@@ -109,16 +109,16 @@ def test_a_deterministic_scenario_gives_the_same_episode_for_every_seed():
 
 def test_batched_episode_equals_single_episode_bit_for_bit():
     scenario = scenarios.get("bench_lossy_links")
-    both = run_episodes(make_policy("nn_dsc", scenario), scenario, [5, 6], steps=60)
-    alone = run_episodes(make_policy("nn_dsc", scenario), scenario, [6], steps=60)
+    both = run_episodes(make_policy("nn_dsc", scenario), scenario, [5, 6], max_steps=60)
+    alone = run_episodes(make_policy("nn_dsc", scenario), scenario, [6], max_steps=60)
     for name in METRICS:
         np.testing.assert_array_equal(both[name][1:], alone[name], err_msg=name)
 
 
 def test_episode_metrics_agree_with_the_recorded_trajectory():
     scenario = scenarios.get("bench_mild")
-    metrics = run_episodes(make_policy("dsc", scenario), scenario, [3], steps=80)
-    trajectory = run_episode(scenario, "dsc", seed=3, steps=80)
+    metrics = run_episodes(make_policy("dsc", scenario), scenario, [3], max_steps=80)
+    trajectory = run_episode(scenario, "dsc", seed=3, max_steps=80)
     assert metrics["return"][0] == pytest.approx(trajectory.reward.mean(axis=1).sum(), rel=1e-12)
     assert metrics["path_error_max"][0] == pytest.approx(
         max(trajectory.errors[1:, :, 0].max(), metrics["path_error_max"][0]), rel=1e-12
@@ -136,7 +136,7 @@ def test_episode_metrics_agree_with_the_recorded_trajectory():
 
 def test_cost_split_by_reward_term_adds_up():
     scenario = scenarios.get("bench_current_waves")
-    metrics = run_episodes(make_policy("nn_dsc", scenario), scenario, [0, 1], steps=50)
+    metrics = run_episodes(make_policy("nn_dsc", scenario), scenario, [0, 1], max_steps=50)
     for suffix in ("", "_window"):
         terms = sum(metrics[f"cost_{term}{suffix}"] for term in ("position", "heading", "sync"))
         terms = terms + metrics[f"cost_speed{suffix}"] + metrics[f"cost_effort{suffix}"]
@@ -146,7 +146,7 @@ def test_cost_split_by_reward_term_adds_up():
 
 def test_a_failing_policy_is_masked_after_it_leaves_the_path():
     scenario = _tight()
-    metrics = run_episodes(OffPath(scenario), scenario, [0], steps=300)
+    metrics = run_episodes(OffPath(scenario), scenario, [0], max_steps=300)
     assert metrics["terminated"][0] == 1.0
     assert 1 < metrics["steps"][0] < 300
     assert metrics["path_error_max"][0] > scenario.max_path_error
@@ -157,8 +157,8 @@ def test_a_failing_policy_is_masked_after_it_leaves_the_path():
 
 def test_terminating_on_the_last_step_is_a_failure():
     scenario = _tight()
-    steps = int(run_episodes(OffPath(scenario), scenario, [0], steps=300)["steps"][0])
-    metrics = run_episodes(OffPath(scenario), scenario, [0], steps=steps)
+    steps = int(run_episodes(OffPath(scenario), scenario, [0], max_steps=300)["steps"][0])
+    metrics = run_episodes(OffPath(scenario), scenario, [0], max_steps=steps)
     assert metrics["terminated"][0] == 1.0 and metrics["steps"][0] == steps
 
 
@@ -170,21 +170,21 @@ def test_seeds_are_paired_across_policies():
         label: Recorder(make_policy(name, "bench_mild"), label)
         for label, name in (("a", "nn_dsc"), ("b", "backstepping"))
     }
-    cells = run_bench(recorders, ["bench_mild"], num_seeds=3, steps=5)
+    cells = run_bench(recorders, ["bench_mild"], num_seeds=3, max_steps=5)
     assert cells[0].seeds == cells[1].seeds == (BASE_SEED, BASE_SEED + 1, BASE_SEED + 2)
     np.testing.assert_array_equal(recorders["a"].first, recorders["b"].first)
     assert not np.array_equal(recorders["a"].first[0], recorders["a"].first[1])
 
 
 def test_a_deterministic_scenario_runs_one_episode():
-    (cell,) = run_bench(["nn_dsc"], ["wang2014"], num_seeds=5, steps=5)
+    (cell,) = run_bench(["nn_dsc"], ["wang2014"], num_seeds=5, max_steps=5)
     assert cell.deterministic and cell.seeds == (BASE_SEED,)
     assert cell.metrics["cost"].shape == (1,)
 
 
 def test_identical_arguments_give_identical_files(tmp_path):
     argv = ["--policies", "nn_dsc", "backstepping", "--scenarios", "bench_mild", "wang2014"]
-    argv += ["--num-seeds", "3", "--steps", "15", "--quiet"]
+    argv += ["--num-seeds", "3", "--max-steps", "15", "--quiet"]
     for run in ("one", "two"):
         assert bench_main([*argv, "--out", str(tmp_path / run)]) == 0
     names = sorted(path.name for path in (tmp_path / "one").iterdir())
@@ -205,7 +205,7 @@ def test_identical_arguments_give_identical_files(tmp_path):
 
 def test_failures_are_counted_not_dropped(tmp_path):
     policies = {"nn_dsc": "nn_dsc", "off_path": OffPath}
-    cells = run_bench(policies, [_tight()], num_seeds=2, steps=250, out=tmp_path, figures=False)
+    cells = run_bench(policies, [_tight()], num_seeds=2, max_steps=250, out=tmp_path, figures=False)
     assert cells[1].metrics["terminated"].tolist() == [1.0]  # deterministic: one episode
     with open(tmp_path / "summary.csv") as file:
         rows = {(r["policy"], r["metric"]): r for r in csv.DictReader(file)}
@@ -225,7 +225,9 @@ def test_failures_are_counted_not_dropped(tmp_path):
 
 
 def test_summary_has_the_required_columns_and_reference_scores():
-    cells = run_bench(["nn_dsc", "dsc"], ["bench_mild", "bench_switching"], num_seeds=4, steps=30)
+    cells = run_bench(
+        ["nn_dsc", "dsc"], ["bench_mild", "bench_switching"], num_seeds=4, max_steps=30
+    )
     rows = bench_report.summarize(cells)
     assert set(bench_report.SUMMARY_COLUMNS) >= {
         "policy", "scenario", "metric", "mean", "iqm", "ci_low", "ci_high",
@@ -268,7 +270,7 @@ def _picky(scenario):
 def test_a_policy_that_does_not_fit_a_scenario_skips_it_and_says_so(tmp_path):
     policies = {"nn_dsc": "nn_dsc", "picky": _picky}
     names = ["bench_mild", "bench_switching"]
-    cells = run_bench(policies, names, num_seeds=2, steps=5, out=tmp_path, figures=False)
+    cells = run_bench(policies, names, num_seeds=2, max_steps=5, out=tmp_path, figures=False)
     assert [(c.policy, c.scenario) for c in cells] == [
         ("nn_dsc", "bench_mild"),
         ("nn_dsc", "bench_switching"),
@@ -280,15 +282,15 @@ def test_a_policy_that_does_not_fit_a_scenario_skips_it_and_says_so(tmp_path):
         rows = list(csv.DictReader(file))
     assert {r["policy"] for r in rows if r["scenario"] == "all"} == {"nn_dsc"}
     with pytest.raises(ValueError, match="do not fit"):
-        run_bench({"picky": _picky}, ["bench_switching"], num_seeds=1, steps=2)
+        run_bench({"picky": _picky}, ["bench_switching"], num_seeds=1, max_steps=2)
 
 
 def test_two_policies_with_one_label_are_refused():
     with pytest.raises(ValueError, match="'nn_dsc' is listed twice; duplicates are not allowed"):
-        run_bench(["nn_dsc", "nn_dsc"], ["bench_mild"], num_seeds=1, steps=2)
+        run_bench(["nn_dsc", "nn_dsc"], ["bench_mild"], num_seeds=1, max_steps=2)
     scenario = scenarios.get("bench_mild")
     with pytest.raises(ValueError, match="two policies are labelled 'off_path'"):
-        run_bench([OffPath(scenario), OffPath(scenario)], [scenario], num_seeds=1, steps=2)
+        run_bench([OffPath(scenario), OffPath(scenario)], [scenario], num_seeds=1, max_steps=2)
 
 
 # --- one resolver for every command ---------------------------------------------------------
@@ -333,7 +335,7 @@ def trained_agent(tmp_path, monkeypatch):
 
 def test_a_trained_agent_goes_through_the_bench_like_a_baseline(trained_agent):
     folder, calls = trained_agent
-    cells = run_bench(["nn_dsc", str(folder)], ["bench_mild"], num_seeds=2, steps=20)
+    cells = run_bench(["nn_dsc", str(folder)], ["bench_mild"], num_seeds=2, max_steps=20)
     assert calls == [(folder, "bench_mild")]
     assert cells[1].policy == str(folder)
     for name in METRICS:  # the stand-in is nn_dsc: same seeds, same code, same numbers
@@ -342,7 +344,7 @@ def test_a_trained_agent_goes_through_the_bench_like_a_baseline(trained_agent):
 
 def test_cpf_run_takes_a_trained_agent_path(trained_agent, tmp_path, capsys):
     folder, calls = trained_agent
-    argv = ["--policy", str(folder), "--scenario", "wang2014", "--steps", "10"]
+    argv = ["--policy", str(folder), "--scenario", "wang2014", "--max-steps", "10"]
     argv += ["--out", str(tmp_path / "out")]
     assert run_main([*argv, "--no-figures", "--quiet"]) == 0
     assert calls == [(folder, "wang2014")]
@@ -395,7 +397,7 @@ def test_bench_ray_sends_each_cell_to_ray_with_agent_folders_made_absolute(
     monkeypatch.setattr(bench_run, "start_ray", start_ray)
     monkeypatch.chdir(folder.parent)  # the agent is given relative to here
     argv = ["--policies", "nn_dsc", folder.name, "--scenarios", "bench_mild", "bench_saturation"]
-    argv += ["--num-seeds", "2", "--steps", "20", "--no-figures", "--quiet"]
+    argv += ["--num-seeds", "2", "--max-steps", "20", "--no-figures", "--quiet"]
     assert bench_main([*argv, "--out", "here"]) == 0
     assert not started
     assert bench_main([*argv, "--out", "cluster", "--address", "10.0.0.7:6379"]) == 0
@@ -471,6 +473,6 @@ def test_layering_no_import_runs_back_up(package):
 def test_the_terminal_says_when_cells_did_not_run(tmp_path, capsys):
     agent = str(ROOT / "tests/fixtures/agents/residual_ppo_lossy_links")
     argv = ["--policies", "nn_dsc", agent, "--scenarios", "bench_lossy_links", "bench_switching"]
-    argv += ["--num-seeds", "2", "--steps", "5", "--out", str(tmp_path / "b"), "--quiet"]
+    argv += ["--num-seeds", "2", "--max-steps", "5", "--out", str(tmp_path / "b"), "--quiet"]
     assert bench_main([*argv, "--no-figures"]) == 0
     assert "1 of 4 (policy, scenario) cells did not run" in capsys.readouterr().out

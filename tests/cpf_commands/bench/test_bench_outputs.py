@@ -14,7 +14,7 @@ from cpf_commands.bench import cli
 from cpf_commands.bench.cli import bench_main
 from cpf_env.infra import atomic
 
-QUICK = ["--policies", "nn_dsc", "--scenarios", "wang2014", "--num-seeds", "1", "--steps", "3",
+QUICK = ["--policies", "nn_dsc", "--scenarios", "wang2014", "--num-seeds", "1", "--max-steps", "3",
          "--quiet"]  # fmt: skip
 
 

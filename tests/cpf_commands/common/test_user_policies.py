@@ -70,7 +70,7 @@ def _same_costs(cells, first: int, second: int) -> None:
 
 def test_a_factory_of_your_own_benches_exactly_like_the_baseline_it_wraps(user_module):
     policies = ["backstepping", f"{user_module}:mine"]
-    cells = run_bench(policies, ["bench_mild"], num_seeds=2, steps=20)
+    cells = run_bench(policies, ["bench_mild"], num_seeds=2, max_steps=20)
     assert [c.policy for c in cells] == ["backstepping", "my_factories:mine"]
     _same_costs(cells, 0, 1)
 
@@ -78,7 +78,7 @@ def test_a_factory_of_your_own_benches_exactly_like_the_baseline_it_wraps(user_m
 def test_an_installed_policy_benches_by_name_and_only_named_code_is_imported(installed):
     assert policy_argument("mine_installed") == "mine_installed"  # checked without importing
     assert "my_factories" not in sys.modules
-    cells = run_bench(["backstepping", "mine_installed"], ["bench_mild"], num_seeds=2, steps=20)
+    cells = run_bench(["backstepping", "mine_installed"], ["bench_mild"], num_seeds=2, max_steps=20)
     assert cells[1].policy == "mine_installed"
     _same_costs(cells, 0, 1)
     assert "never_imported" not in sys.modules
@@ -91,7 +91,9 @@ def test_cpf_bench_labels_user_policies_by_their_spec_and_benches_the_template(
     specs = ["my_policy:ProportionalPolicy", "my_policy:tuned_backstepping"]
     out = tmp_path / "bench"
     argv = ["--policies", "nn_dsc", *specs, "--scenarios", "bench_mild", "--num-seeds", "2"]
-    assert bench_main([*argv, "--steps", "20", "--quiet", "--no-figures", "--out", str(out)]) == 0
+    assert (
+        bench_main([*argv, "--max-steps", "20", "--quiet", "--no-figures", "--out", str(out)]) == 0
+    )
     with open(out / "summary.csv") as handle:
         labels = {row["policy"] for row in csv.DictReader(handle)}
     assert labels == {"nn_dsc", *specs}
@@ -102,7 +104,7 @@ def test_cpf_bench_labels_user_policies_by_their_spec_and_benches_the_template(
 def test_cpf_run_takes_a_user_policy_and_writes_a_folder_without_colon(
     user_module, tmp_path, capsys
 ):
-    argv = ["--policy", f"{user_module}:mine", "--scenario", "bench_mild", "--steps", "10"]
+    argv = ["--policy", f"{user_module}:mine", "--scenario", "bench_mild", "--max-steps", "10"]
     assert run_main([*argv, "--no-figures", "--quiet", "--out", str(tmp_path)]) == 0
     assert "bench_mild with my_factories:mine" in capsys.readouterr().out
     assert not any(":" in p.name for p in tmp_path.iterdir())

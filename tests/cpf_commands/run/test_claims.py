@@ -60,7 +60,7 @@ def test_claim_4_fails_for_a_policy_commanding_more_than_nn_dsc(factor):
     """10x (and even 2x) nn_dsc's force: the applied force is still clipped within the
     limits, but the command never leaves saturation (chatter) and the 10x peak is 160."""
     trajectory = run_episode(
-        "wang2014_fine", lambda scenario: _Overcommanding(scenario, factor), steps=2000
+        "wang2014_fine", lambda scenario: _Overcommanding(scenario, factor), max_steps=2000
     )
     claim = evaluate_claims(trajectory, episode_metrics(trajectory))[3]
     assert not claim.holds, claim.measured
@@ -73,7 +73,7 @@ def test_claim_4_fails_for_a_policy_commanding_more_than_nn_dsc(factor):
 def test_claim_4_fails_without_the_auxiliary_system_on_the_default_scenario():
     """nn_dsc_no_aux winds up: saturated until 18.3 s, peak sway command 54 x limit."""
     trajectory = run_episode(
-        "wang2014_fine", "nn_dsc_no_aux", steps=2000, policy_options={"leakage": "plain"}
+        "wang2014_fine", "nn_dsc_no_aux", max_steps=2000, policy_options={"leakage": "plain"}
     )
     claim = evaluate_claims(trajectory, episode_metrics(trajectory))[3]
     assert not claim.holds, claim.measured

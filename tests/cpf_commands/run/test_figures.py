@@ -12,7 +12,7 @@ from cpf_commands.run.experiment import run_episode
 
 @pytest.fixture(scope="module")
 def run():
-    return run_episode("wang2014", "nn_dsc", seed=0, steps=400)
+    return run_episode("wang2014", "nn_dsc", seed=0, max_steps=400)
 
 
 def test_fig3_desired_paths_are_drawn_as_the_legend_shows(run):

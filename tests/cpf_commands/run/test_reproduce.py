@@ -64,7 +64,7 @@ def test_claims_are_five_and_read_the_metrics(short_run):
 
 
 def test_reproduce_writes_outputs(tmp_path):
-    _metrics, _claims = reproduce("wang2014", "nn_dsc", steps=60, out=tmp_path, figures=True)
+    _metrics, _claims = reproduce("wang2014", "nn_dsc", max_steps=60, out=tmp_path, figures=True)
     directory = tmp_path / "wang2014_nn_dsc"
     for name in (
         "metrics.json",
@@ -89,7 +89,7 @@ def _run_cli(capsys, *argv):
 
 
 def test_cli_default_is_the_paper_reproduction(tmp_path, capsys):
-    code, out = _run_cli(capsys, "--steps", "40", "--out", str(tmp_path))
+    code, out = _run_cli(capsys, "--max-steps", "40", "--out", str(tmp_path))
     assert code == 0
     saved = json.loads((tmp_path / "wang2014_fine_nn_dsc" / "metrics.json").read_text())
     assert saved["scenario"] == "wang2014_fine"
@@ -102,7 +102,7 @@ def test_cli_default_is_the_paper_reproduction(tmp_path, capsys):
 
 def test_a_short_run_measures_the_claims_but_does_not_judge_them(tmp_path, capsys):
     """--steps 20 is 0.2 s of the paper's 150 s: no 'NOT MET' (nor 'holds') on so short a run."""
-    code, out = _run_cli(capsys, "--steps", "20", "--out", str(tmp_path))
+    code, out = _run_cli(capsys, "--max-steps", "20", "--out", str(tmp_path))
     assert code == 0 and "NOT MET" not in out and "-> holds" not in out
     gap = "not judged: the run is shorter than the claim needs (0.2 s < 150 s)"
     assert out.count(gap) == 5 and out.count("measured: ") == 5
@@ -114,15 +114,15 @@ def test_a_short_run_measures_the_claims_but_does_not_judge_them(tmp_path, capsy
 
 
 def test_cli_prints_claims_only_where_they_apply(tmp_path, capsys):
-    _, out = _run_cli(capsys, "--scenario", "wang2014", "--steps", "40", "--out", str(tmp_path),
+    _, out = _run_cli(capsys, "--scenario", "wang2014", "--max-steps", "40", "--out", str(tmp_path),
                       "--policy", "dsc")  # fmt: skip
     assert "  1. [Fig. 3]" in out and "  5. [Fig. 7]" in out
     assert "[Fig. 4]" not in out and "(2. does not apply: dsc has no NN)" in out
-    _, out = _run_cli(capsys, "--scenario", "wang2014", "--steps", "40", "--out", str(tmp_path),
+    _, out = _run_cli(capsys, "--scenario", "wang2014", "--max-steps", "40", "--out", str(tmp_path),
                       "--policy", "nn_dsc_global_v0")  # fmt: skip
     assert "[Fig. 4]" in out and "[Fig. 7]" not in out
     assert "(5. does not apply: nn_dsc_global_v0 has no speed estimator)" in out
-    _, out = _run_cli(capsys, "--scenario", "saturation_heavy", "--steps", "40",
+    _, out = _run_cli(capsys, "--scenario", "saturation_heavy", "--max-steps", "40",
                       "--out", str(tmp_path))  # fmt: skip
     assert "Claims of" not in out and "[Fig." not in out
     assert "Run metrics over the last quarter" in out and "max path error" in out
@@ -131,7 +131,7 @@ def test_cli_prints_claims_only_where_they_apply(tmp_path, capsys):
 
 
 def test_cli_no_figures_does_not_claim_figures(tmp_path, capsys):
-    _, out = _run_cli(capsys, "--steps", "20", "--out", str(tmp_path))
+    _, out = _run_cli(capsys, "--max-steps", "20", "--out", str(tmp_path))
     assert "Figures" not in out and "metrics.json and trajectory.npz in" in out
     assert not list((tmp_path / "wang2014_fine_nn_dsc").glob("*.png"))
 
@@ -139,9 +139,9 @@ def test_cli_no_figures_does_not_claim_figures(tmp_path, capsys):
 @pytest.mark.parametrize("steps", ["0", "-3", "many"])
 def test_cli_rejects_bad_steps_as_usage_error(steps, capsys):
     with pytest.raises(SystemExit) as exit_info:
-        run_main(["--steps", steps])
+        run_main(["--max-steps", steps])
     assert exit_info.value.code == 2
-    assert "--steps: must be an integer >= 1" in capsys.readouterr().err
+    assert "--max-steps: must be an integer >= 1" in capsys.readouterr().err
 
 
 def test_cli_rejects_leakage_for_a_policy_without_nn(tmp_path, capsys):
@@ -174,7 +174,7 @@ def test_progress_bar_starts_after_the_kernels_are_compiled(tmp_path, monkeypatc
     monkeypatch.setattr(FleetSim, "step", spy_step)
     monkeypatch.setattr(FleetSim, "accelerations", spy_accelerations)
     monkeypatch.setattr(experiment, "tqdm", spy_bar)
-    assert run_main(["--steps", "3", "--out", str(tmp_path), "--no-figures"]) == 0
+    assert run_main(["--max-steps", "3", "--out", str(tmp_path), "--no-figures"]) == 0
     bar = events.index("bar")
     assert "step" in events[:bar] and "accelerations" in events[:bar]
     assert "compiles them on the first run" in capsys.readouterr().out
@@ -187,7 +187,7 @@ def test_cli_rejects_unknown_scenario(capsys):
 
 
 def test_settling_time():
-    t = run_episode("wang2014", "nn_dsc", steps=4)
+    t = run_episode("wang2014", "nn_dsc", max_steps=4)
     t.errors[..., 0] = [[0.2] * 5, [0.01] * 5, [0.06] + [0.0] * 4, [0.0] * 5]
     assert settling_time(t) == pytest.approx(0.15)
     assert settling_time(t, tolerance=0.3) == 0.0
@@ -231,7 +231,7 @@ def test_steady_state_formula_gamma_scaled_reading():
     (M23 = 1.09 vs M33 = 2.76) and the end of the transient weigh most: it
     measures 0.486 at 40 s and 0.452 at 150 s.
     """
-    trajectory = run_episode("wang2014", "nn_dsc", steps=800)
+    trajectory = run_episode("wang2014", "nn_dsc", max_steps=800)
     predicted, s = predicted_nn_error(trajectory, NNDSCGains(), vessel=1)
     measured = _nn_relative_error(trajectory, 1)
     assert 9.0 < s < 11.0

@@ -21,8 +21,9 @@ def test_an_agent_episode_becomes_a_gif_on_its_training_scenario(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     video = tmp_path / "enjoy.gif"
-    argv = ["--policy", str(AGENT), "--video", str(video), "--video-every", "4", "--steps", "12",
-            "--out", str(tmp_path / "out"), "--no-figures", "--quiet"]  # fmt: skip
+    argv = ["--policy", str(AGENT), "--video", str(video), "--video-every", "4",
+            "--max-steps", "12", "--out", str(tmp_path / "out"),
+            "--no-figures", "--quiet"]  # fmt: skip
     assert run_main(argv) == 0
     printed = capsys.readouterr().out
     assert "bench_lossy_links with" in printed  # the folder's training scenario by default
@@ -41,11 +42,11 @@ def test_mp4_needs_ffmpeg_and_the_error_suggests_a_gif(
 ) -> None:
     monkeypatch.setattr(shutil, "which", lambda name: None)
     with pytest.raises(SystemExit):
-        run_main(["--video", str(tmp_path / "a.mp4"), "--steps", "2", "--quiet"])
+        run_main(["--video", str(tmp_path / "a.mp4"), "--max-steps", "2", "--quiet"])
     error = capsys.readouterr().err
     assert "needs the ffmpeg program on PATH" in error and f"--video {tmp_path / 'a.gif'}" in error
     with pytest.raises(SystemExit):
-        run_main(["--video", str(tmp_path / "a.avi"), "--steps", "2", "--quiet"])
+        run_main(["--video", str(tmp_path / "a.avi"), "--max-steps", "2", "--quiet"])
     assert "ending in .mp4 (needs ffmpeg) or .gif" in capsys.readouterr().err
     assert not any(tmp_path.iterdir())  # refused before anything ran
 
@@ -53,7 +54,7 @@ def test_mp4_needs_ffmpeg_and_the_error_suggests_a_gif(
 @pytest.mark.skipif(shutil.which("ffmpeg") is None, reason="ffmpeg is not installed")
 def test_mp4_with_ffmpeg(tmp_path: Path) -> None:
     video = tmp_path / "enjoy.mp4"
-    assert run_main(["--scenario", "wang2014", "--video", str(video), "--steps", "6",
+    assert run_main(["--scenario", "wang2014", "--video", str(video), "--max-steps", "6",
                      "--out", str(tmp_path / "out"), "--no-figures", "--quiet"]) == 0  # fmt: skip
     assert video.read_bytes()[4:8] == b"ftyp"  # an MP4 container
 

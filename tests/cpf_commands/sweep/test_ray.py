@@ -35,14 +35,14 @@ AGENT = ROOT / "tests" / "fixtures" / "agents" / "residual_ppo_lossy_links"
 
 def test_two_seeds_by_two_scenarios_then_a_resume(tmp_path, capsys) -> None:
     out = tmp_path / "sweep"
-    argv = ["--scenarios", "bench_mild", "bench_lossy_links", "--seeds", "0", "1"]
-    argv += ["--set", *TINY, "--eval-num-seeds", "2", "--eval-steps", "50", "--out", str(out)]
+    argv = ["--scenarios", "bench_mild", "bench_lossy_links", "--num-seeds", "2"]
+    argv += ["--set", *TINY, "--eval-num-seeds", "2", "--eval-max-steps", "50", "--out", str(out)]
     assert sweep_main(argv) == 0  # Tune's status output on
     printed = capsys.readouterr().out
     assert "4/4 trials done" in printed and "| bench_lossy_links | 2/2 |" in printed
     assert "Trial status" in printed  # what --quiet must hide below
     spec = SweepSpec.from_settings(
-        ["bench_mild", "bench_lossy_links"], [0, 1], TINY, eval_num_seeds=2, eval_steps=50
+        ["bench_mild", "bench_lossy_links"], [0, 1], TINY, eval_num_seeds=2, eval_max_steps=50
     )
     models = {}
     evaluation = json.loads(next(out.glob(f"trials/*/{EVALUATION_FILE}")).read_text())
@@ -70,8 +70,16 @@ def test_two_seeds_by_two_scenarios_then_a_resume(tmp_path, capsys) -> None:
 def test_an_interrupted_sweep_resumes_keeping_finished_trials(tmp_path) -> None:
     out = tmp_path / "sweep"
     argv = [sys.executable, "-c", "from cpf_commands.sweep.cli import sweep_main; sweep_main()"]
-    argv += ["--scenarios", "bench_mild", "--seeds", "0", "1", "2", "--quiet"]
-    argv += ["--set", "timesteps=30000", "fleets=8", "--eval-num-seeds", "1", "--eval-steps", "20"]
+    argv += ["--scenarios", "bench_mild", "--num-seeds", "3", "--quiet"]
+    argv += [
+        "--set",
+        "timesteps=30000",
+        "fleets=8",
+        "--eval-num-seeds",
+        "1",
+        "--eval-max-steps",
+        "20",
+    ]
     argv += ["--cpus-per-trial", "2", "--out", str(out)]  # one trial at a time
     process = subprocess.Popen(argv, start_new_session=True, stdout=subprocess.DEVNULL)
     first = out / "trials" / "bench_mild-seed0" / EVALUATION_FILE
@@ -89,7 +97,7 @@ def test_an_interrupted_sweep_resumes_keeping_finished_trials(tmp_path) -> None:
         [0, 1, 2],
         ["timesteps=30000", "fleets=8"],
         eval_num_seeds=1,
-        eval_steps=20,
+        eval_max_steps=20,
         cpus_per_trial=2,
     )
     rows = run_sweep(spec, out, quiet=True)
@@ -111,9 +119,17 @@ def test_auto_without_a_cluster_is_a_clear_error(tmp_path, monkeypatch, capsys) 
 def test_the_benchmark_on_ray_equals_the_local_run(tmp_path) -> None:
     policies = ["nn_dsc", "backstepping", AGENT]
     names = ["bench_lossy_links", "bench_mild"]
-    local = run_bench(policies, names, num_seeds=2, steps=60, out=tmp_path / "local", figures=False)
+    local = run_bench(
+        policies, names, num_seeds=2, max_steps=60, out=tmp_path / "local", figures=False
+    )
     remote = run_bench(
-        policies, names, num_seeds=2, steps=60, out=tmp_path / "ray", figures=False, distribute=True
+        policies,
+        names,
+        num_seeds=2,
+        max_steps=60,
+        out=tmp_path / "ray",
+        figures=False,
+        distribute=True,
     )
     assert [(c.policy, c.scenario, c.seeds) for c in remote] == [
         (c.policy, c.scenario, c.seeds) for c in local

@@ -62,7 +62,7 @@ def test_settings_are_parsed_to_the_field_types(text: str, expected: tuple) -> N
         ("timesteps", "takes FIELD=VALUE"),
         ("=3", "takes FIELD=VALUE"),
         ("bogus=1", "unknown TrainConfig field 'bogus'.*'timesteps'"),
-        ("seed=1,2", "set seed with --seeds"),
+        ("seed=1,2", "set seed with --seed and --num-seeds"),
         ("scenario=wang2014", "set scenario with --scenarios"),
         ("timesteps=many", "'many' is not a valid int"),
         ("timesteps=1.5", "'1.5' is not a valid int"),
@@ -254,7 +254,7 @@ class _RayThatMustNotStart(types.ModuleType):
 @pytest.mark.parametrize(
     ("argv", "match"),
     [
-        (["--seeds", "0", "--out", "x"], "--scenarios"),
+        (["--num-seeds", "1", "--out", "x"], "--scenarios"),
         (["--scenarios", "bench_mild", "--out", "x", "--set", "bogus=1"], "unknown TrainConfig"),
         (["--scenarios", "bench_mild", "--out", "x", "--cpus-per-trial", "0"], "integer >= 1"),
         (["--scenarios", "nowhere", "--out", "x"], "invalid choice"),
