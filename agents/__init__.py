@@ -27,22 +27,22 @@ from typing import TYPE_CHECKING, Any
 import cpf_env  # noqa: F401
 
 if TYPE_CHECKING:
-    from agents.loading import TrainedPolicy, load_policy
-    from agents.mixture_env import MixtureVecEnv
-    from agents.train_config import TrainConfig
-    from agents.training import train
-    from agents.vec_env import FleetVecEnv
+    from agents.envs.mixture_env import MixtureVecEnv
+    from agents.envs.vec_env import FleetVecEnv
+    from agents.folder.loading import TrainedPolicy, load_policy
+    from agents.training.config import TrainConfig
+    from agents.training.trainer import train
 
 __all__ = ["FleetVecEnv", "MixtureVecEnv", "TrainConfig", "TrainedPolicy", "load_policy", "train"]
 
 #: The module of each exported name, imported on first use.
 _HOMES = {
-    "FleetVecEnv": "agents.vec_env",
-    "MixtureVecEnv": "agents.mixture_env",
-    "TrainConfig": "agents.train_config",
-    "TrainedPolicy": "agents.loading",
-    "load_policy": "agents.loading",
-    "train": "agents.training",
+    "FleetVecEnv": "agents.envs.vec_env",
+    "MixtureVecEnv": "agents.envs.mixture_env",
+    "TrainConfig": "agents.training.config",
+    "TrainedPolicy": "agents.folder.loading",
+    "load_policy": "agents.folder.loading",
+    "train": "agents.training.trainer",
 }
 
 

@@ -72,8 +72,8 @@ def _tree(root: int) -> list[int]:
 
 def _training_process_rss(fleets: int, scenario: str, queue: multiprocessing.Queue) -> None:
     """In a fresh process: build FleetVecEnv + PPO, collect and learn one rollout, report RSS."""
-    from agents.algorithms import build_model, make_env
-    from agents.train_config import TrainConfig
+    from agents.training.algorithms import build_model, make_env
+    from agents.training.config import TrainConfig
 
     config = TrainConfig(scenario=scenario, fleets=fleets, timesteps=1, torch_threads=1)
     venv = make_env(config)

@@ -87,7 +87,7 @@ def timed_ppo(
     ``seed=None`` for SuperSuit's vector env, which has no ``seed()``; ``n_epochs`` and
     ``batch_size`` override the defaults.
     """
-    from agents.train_config import TrainConfig
+    from agents.training.config import TrainConfig
 
     config = TrainConfig()
     env = make_env()

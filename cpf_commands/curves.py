@@ -237,8 +237,8 @@ def figure(curves: Sequence[Curve], base_cost: float, names: Sequence[str]) -> F
 
 def _base_cost(folders: Sequence[Path], runs: Sequence[RunCurve], base: str | None) -> float:
     """The base policy's evaluation cost (see the module docstring)."""
-    from agents.evaluation import DEFAULT_EVAL_NUM_SEEDS
-    from agents.train_config import config_from_record
+    from agents.training.config import config_from_record
+    from agents.training.evaluation import DEFAULT_EVAL_NUM_SEEDS
 
     records = [json.loads((folder / "run.json").read_text()) for folder in folders]
     configs = [config_from_record(record["config"]) for record in records]

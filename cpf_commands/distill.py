@@ -1,16 +1,16 @@
-"""``cpf-distill``: DAgger of a local residual student from a teacher policy (``agents.distill``).
+"""``cpf-distill``: DAgger of a local residual student from a teacher (``agents.distill.dagger``).
 
 The run is one TOML file: its top-level keys are ``agents.TrainConfig`` fields
 (the student: ``scenario``, a name, a list of names or ``"suite"``; ``base``,
 ``mode``, ``scale``, ``fleets``, ``net_arch``, ...) and its ``[distill]`` table
-holds ``agents.distill_config.DistillConfig`` fields (``teacher``, ``rounds``,
+holds ``agents.distill.config.DistillConfig`` fields (``teacher``, ``rounds``,
 ``steps``, ``epochs``, ``batch_size``, ``learning_rate``, ``procedural``,
 ``redraw``, ``fit_applied``, ``label_base``), with the procedural fleets' ``ScenarioDistribution``
 ranges in a ``[distill.distribution]`` table (e.g. ``v0 = [0.05, 0.5]``,
 ``force_scale = [0.5, 1.0]``). The student may be an MLP over K neighbour slots or, with
 ``encoder = "deepsets"`` (and ``shared_slot_statistics = true``), a
 permutation-invariant encoder that runs on any degree; ``history = H`` gives
-it its own last H inputs and actions (``agents.history``).
+it its own last H inputs and actions (``agents.envs.history``).
 ``--seed`` sets ``TrainConfig.seed`` (the student's weights, the fleets'
 seeds and the data order). ``--out`` receives an ordinary agent folder
 (``agents.load_policy``, ``cpf-bench --policies DIR``) plus the run files:
@@ -25,8 +25,8 @@ seeds and the data order). ``--out`` receives an ordinary agent folder
   beyond the residual's reach), ``at_limit`` (share of force label components
   at an actuator limit or the residual's reach) and ``seconds`` (since the start);
 - with ``--eval-num-seeds N`` (N > 0; default 0, none), ``evaluations.csv`` in
-  ``cpf-train``'s columns (``agents.schedule.EvaluationLog``, the evaluator
-  ``agents.evaluation.TestSplitEvaluator`` on the training scenarios'
+  ``cpf-train``'s columns (``agents.training.schedule.EvaluationLog``, the evaluator
+  ``agents.training.evaluation.TestSplitEvaluator`` on the training scenarios'
   ``test`` split, N seeds each): the student before round 0 (exactly the
   base) and after each round, at the labelled vessel-steps so far, and
   ``run.json``'s ``evaluation`` (the settings, as ``cpf-train`` records
@@ -57,15 +57,15 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from agents.evaluation import TestSplitEvaluator
+from agents.training.evaluation import TestSplitEvaluator
 from cpf_commands.common.arguments import non_negative_int
 from cpf_commands.hyperparameters import merge_settings, moved_keys, toml_chain
 from cpf_env.infra import atomic
 from cpf_env.scenarios.suite import SUITE
 
 if TYPE_CHECKING:
-    from agents.distill_config import DistillConfig
-    from agents.train_config import TrainConfig
+    from agents.distill.config import DistillConfig
+    from agents.training.config import TrainConfig
 
 __all__ = ["distill_main", "read_distill_config"]
 
@@ -86,8 +86,8 @@ def read_distill_config(path: str | Path, seed: int) -> tuple[TrainConfig, Disti
         ValueError: Unreadable or invalid TOML, a missing ``[distill]`` table, an unknown
             key (the valid ones are listed), or a value the configurations refuse.
     """
-    from agents.distill_config import DistillConfig
-    from agents.train_config import TrainConfig
+    from agents.distill.config import DistillConfig
+    from agents.training.config import TrainConfig
 
     file = Path(path)
     values: dict[str, Any] = {}
@@ -213,8 +213,8 @@ def distill_main(argv: Sequence[str] | None = None) -> int:
             parser.error(f"{folder} exists; pass --force to replace it, or choose another --out.")
     try:
         config, settings = read_distill_config(args.config, args.seed)
-        from agents.device import torch_device
-        from agents.distill_config import check_distillation
+        from agents.distill.config import check_distillation
+        from agents.training.device import torch_device
 
         check_distillation(config, settings)
         torch_device(args.device)
@@ -222,11 +222,11 @@ def distill_main(argv: Sequence[str] | None = None) -> int:
         parser.error(str(error))
     import torch
 
-    from agents.distill import distill
+    from agents.distill.dagger import distill
 
     if config.torch_threads is not None:
         torch.set_num_threads(config.torch_threads)
-    from agents.schedule import EVALUATIONS, evaluations_csv
+    from agents.training.schedule import EVALUATIONS, evaluations_csv
 
     evaluate = (
         None

@@ -1,7 +1,7 @@
 """``cpf-export``: a trained agent folder as one ONNX graph, checked against torch.
 
 The graph holds the normalization, the network, the action bounds and the
-residual scaling (``agents.onnx_policy``, which documents the input layout);
+residual scaling (``agents.folder.onnx_policy``, which documents the input layout);
 ``cpf-bench --policies nn_dsc agent.onnx`` runs it through onnxruntime. An
 agent with a neighbour encoder is exported for ``--slots K`` neighbour slots
 (default its training K; at most n - 1). The graph is tied to one fleet size
@@ -59,7 +59,7 @@ def _parser() -> argparse.ArgumentParser:
 
 def _check_paths(folder: Path, out: Path) -> None:
     """Raise ValueError if the agent folder or the output's folder is missing, before loading."""
-    from agents.agent_folder import MANIFEST
+    from agents.folder.format import MANIFEST
 
     if not folder.exists():
         raise ValueError(
@@ -89,7 +89,7 @@ def export_main(argv: Sequence[str] | None = None) -> int:
         parser.error(f"--slots must be >= 1, got {args.slots}.")
     try:
         _check_paths(Path(args.folder), Path(args.out))
-        from agents.onnx_policy import export_onnx
+        from agents.folder.onnx_policy import export_onnx
 
         # before the work: writable, not a link, room for about twice the weights
         weights = Path(args.folder) / "policy.safetensors"

@@ -57,7 +57,7 @@ RESIDUAL = "residual"
 
 
 def _valid_keys() -> list[str]:
-    from agents.train_config import TrainConfig
+    from agents.training.config import TrainConfig
 
     return [field.name for field in dataclasses.fields(TrainConfig)] + list(SCHEDULE_KEYS)
 
@@ -74,7 +74,7 @@ def moved_keys(unknown: list[str]) -> str:
     The keys of files written before the ``[residual]`` table: ``base``, ``eval_seeds``
     and the residual's fields at the top level.
     """
-    from agents.train_config import FLAT_RESIDUAL_FIELDS
+    from agents.training.config import FLAT_RESIDUAL_FIELDS
 
     places = {"base": "base_policy", "eval_seeds": "eval_num_seeds"}
     places |= {name: f"[residual] {name}" for name in FLAT_RESIDUAL_FIELDS}
@@ -174,7 +174,7 @@ def parse_settings(items: list[str]) -> dict[str, Any]:
     """
     import tomllib
 
-    from agents.train_config import TrainConfig
+    from agents.training.config import TrainConfig
     from cpf_env.envs.residual import ResidualConfig
 
     valid = [key for key in _valid_keys() if key != RESIDUAL]

@@ -3,13 +3,13 @@
 Familiar to RL Baselines3 Zoo users: ``--algo``, ``--scenario`` (the env),
 ``--seed``, ``--timesteps`` (``-n``), an output folder with the network's
 weights (safetensors), the normalization statistics and the exact
-configuration (JSON), tied by a manifest of hashes (``agents.agent_folder``). The folder loads
+configuration (JSON), tied by a manifest of hashes (``agents.folder.format``). The folder loads
 with ``agents.load_policy(DIR)`` and is accepted wherever a policy name is
 (``cpf-bench --policies nn_dsc DIR``, ``cpf-run --policy DIR``).
 
 RL Zoo conventions too (``docs/residual_rl.md``, "A training run"): held-out
 evaluation on the benchmark's ``test`` split with the best agent kept
-(``--eval-every``, ``--eval-num-seeds``; ``agents.evaluation``),
+(``--eval-every``, ``--eval-num-seeds``; ``agents.training.evaluation``),
 checkpoints and ``--resume`` (``checkpoint_every``), a checkpoint and agent
 on Ctrl-C, ``--tensorboard-log DIR``, and ``--config FILE.toml``
 (``cpf_commands.hyperparameters``; ``--set KEY=VALUE`` sets any other hyperparameter;
@@ -33,7 +33,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from agents.evaluation import DEFAULT_EVAL_NUM_SEEDS, TestSplitEvaluator
+from agents.training.evaluation import DEFAULT_EVAL_NUM_SEEDS, TestSplitEvaluator
 from cpf_commands.common.arguments import non_negative_int, positive_int
 from cpf_commands.hyperparameters import (
     SCHEDULE_KEYS,
@@ -47,8 +47,8 @@ from cpf_env.scenarios.splits import SHIFT_SUFFIX, check_training
 from cpf_env.scenarios.suite import SUITE
 
 if TYPE_CHECKING:
-    from agents.schedule import RunSchedule
-    from agents.train_config import TrainConfig
+    from agents.training.config import TrainConfig
+    from agents.training.schedule import RunSchedule
 
 __all__ = ["DEFAULT_CHECKPOINT_EVERY", "DEFAULT_EVAL_EVERY", "train_main"]
 
@@ -76,7 +76,7 @@ def _scenarios(names: list[str]) -> str | tuple[str, ...]:
 
 
 def _parser() -> argparse.ArgumentParser:
-    from agents.train_config import INIT_LOG_STD, TrainConfig
+    from agents.training.config import INIT_LOG_STD, TrainConfig
     from baselines import POLICIES
 
     defaults = TrainConfig()
@@ -218,8 +218,8 @@ def _resolve(args: argparse.Namespace, given: set[str]) -> tuple[TrainConfig, Ru
     Raises:
         ValueError: A bad hyperparameter file or value.
     """
-    from agents.schedule import RunSchedule
-    from agents.train_config import INIT_LOG_STD, TrainConfig
+    from agents.training.config import INIT_LOG_STD, TrainConfig
+    from agents.training.schedule import RunSchedule
 
     values = {} if args.config is None else read_hyperparameters(args.config)
     values = merge_settings(values, parse_settings(args.settings))
@@ -250,7 +250,7 @@ def _resumed(
     Raises:
         ValueError: Options other than ``RESUME_OPTIONS``, or no run to resume.
     """
-    from agents.run_folder import read_run_record
+    from agents.training.run_folder import read_run_record
 
     extra = sorted(given - RESUME_OPTIONS)
     if extra:
@@ -284,9 +284,9 @@ def train_main(argv: Sequence[str] | None = None) -> int:
     """``cpf-train``: see ``cpf-train --help``."""
     parser = _parser()
     args = parser.parse_args(argv)
-    from agents.device import torch_device
-    from agents.schedule import TrainingInterrupted
-    from agents.training import train
+    from agents.training.device import torch_device
+    from agents.training.schedule import TrainingInterrupted
+    from agents.training.trainer import train
     from cpf_env.infra.atomic import FolderLockedError
 
     given = _given(parser, argv)

@@ -61,7 +61,7 @@ from typing import Any
 
 import torch
 
-from agents.actor import PolicyNetwork
+from agents.folder.actor import PolicyNetwork
 from agents.marl.fixed_seeds import EVALUATION_FIELDS, FixedSeedEvaluation
 from agents.marl.models import NeighbourSetMlpConfig
 from agents.marl.policy_folder import save_marl_policy

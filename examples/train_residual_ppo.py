@@ -62,8 +62,8 @@ def train_runs(
     agents: Sequence[str],
 ) -> list[Path]:
     """Train every (scenario, agent, seed) not trained yet; return all run folders."""
-    from agents.train_config import TrainConfig
-    from agents.training import train
+    from agents.training.config import TrainConfig
+    from agents.training.trainer import train
 
     folders = []
     for seed in seeds:  # seed outermost: an interrupted sweep still covers every cell

@@ -292,7 +292,7 @@ def test_every_route_has_one_base_policy_default_and_one_rule_for_names() -> Non
     """The base policy defaults to None everywhere; the env layer refuses a name alike."""
     import inspect
 
-    from agents.resolve import make_core
+    from agents.envs.resolve import make_core
     from cpf_env.envs.gym_envs import CentralizedFleetEnv
     from cpf_env.envs.parallel import CooperativePathFollowingEnv
 

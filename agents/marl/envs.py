@@ -1,7 +1,7 @@
 """``make_env``: a ``TorchRLFleetEnv`` with its base policy given by name.
 
 The env layer (``cpf_env.envs.torchrl_env``) takes a base policy object and
-imports no policy code; names resolve in ``agents.resolve``, as on every
+imports no policy code; names resolve in ``agents.envs.resolve``, as on every
 learning route, with ``FleetVecEnv``'s defaults (residual on ``"nn_dsc"``,
 stagger on).
 
@@ -15,7 +15,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from agents.resolve import resolve_base_policy
+from agents.envs.resolve import resolve_base_policy
 from cpf_env.envs.core import DEFAULT_INFO_LEVEL, check_flag
 from cpf_env.envs.input_statistics import InputStatistics, estimate_input_statistics
 from cpf_env.envs.policy import FleetPolicy
@@ -54,7 +54,7 @@ def make_env(
         policy_options: Options (gains) of a base policy given by name.
         shared_slot_statistics: With ``normalize=True``, scale every neighbour slot
             with the slots' pooled statistics and leave the links' weights a_ij raw
-            (``agents.slot_statistics.shared_slot_statistics``, ``raw_weights=True``):
+            (``agents.envs.slot_statistics.shared_slot_statistics``, ``raw_weights=True``):
             the inputs a ``NeighbourSetEncoder`` reads (``agents.marl.models``).
         privileged_state: With ``state=True``, append to the global ``"state"`` what no
             vessel observes (``cpf_env.evaluation.privileged.unobserved_state``: the true
@@ -94,7 +94,7 @@ def _shared_slot_statistics(
     scenario: Scenario, base: FleetPolicy | None, residual: ResidualConfig, steps: int
 ) -> InputStatistics:
     """The env's input statistics (as ``normalize=True`` estimates them), slots pooled."""
-    from agents.slot_statistics import shared_slot_statistics
+    from agents.envs.slot_statistics import shared_slot_statistics
 
     estimated = estimate_input_statistics(scenario, base, residual, steps=steps)
     layout = residual.learner_layout(observation_layout(scenario))

@@ -2,9 +2,9 @@
 
 BenchMARL's ``MlpConfig`` actor reads each vessel's flat local input of K
 neighbour slots, so it is tied to K and to the slots' order. ``NeighbourSetMlp``
-runs ``agents.encoder.NeighbourSetEncoder`` over the slots (one shared slot MLP,
+runs ``agents.folder.encoder.NeighbourSetEncoder`` over the slots (one shared slot MLP,
 mean or sum over the linked slots) and an MLP over the encoder's features: the
-actor of ``agents.actor.PolicyNetwork``, the one the SB3 learner and
+actor of ``agents.folder.actor.PolicyNetwork``, the one the SB3 learner and
 ``cpf-distill`` train, with the same tensor names. One network runs on any
 degree; ``agents.marl.policy_folder.save_marl_policy`` saves it, and
 ``cpf-bench`` runs the folder on scenarios with more neighbours than trained.
@@ -30,8 +30,8 @@ from typing import Any
 
 from tensordict import TensorDictBase
 
-from agents.actor import PolicyNetwork
-from agents.encoder import POOLINGS, NeighbourSetEncoder
+from agents.folder.actor import PolicyNetwork
+from agents.folder.encoder import POOLINGS, NeighbourSetEncoder
 from agents.marl.compat import import_benchmarl
 from agents.marl.tasks import CpfTaskConfig, checked_config
 from cpf_env.envs.residual import EXTRAS

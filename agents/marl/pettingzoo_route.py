@@ -5,7 +5,7 @@ up by PettingZoo module name) and builds every ``SerialEnv`` worker with the
 same seed, so all workers play identical episodes. ``CpfPettingZooTask``
 has the members and configs of ``CpfTask`` on the same residual composition,
 one residual ``cpf_env.parallel_env`` per worker (over the named base policy,
-resolved by ``agents.resolve``), and seeds the i-th env its maker builds
+resolved by ``agents.envs.resolve``), and seeds the i-th env its maker builds
 with seed + i: distinct, reproducible episodes in every worker (TorchRL's
 ``SerialEnv`` may build one more env first, for its specs; it takes seed + 0).
 With ``parallel_collection=True`` the maker is copied into each process and
@@ -30,8 +30,8 @@ from typing import Any
 import torch
 
 import cpf_env
+from agents.envs.resolve import resolve_base_policy
 from agents.marl.tasks import CpfTask, CpfTaskClass, CpfTaskEnum, checked_config
-from agents.resolve import resolve_base_policy
 from cpf_env.envs.input_statistics import estimate_input_statistics
 from cpf_env.envs.residual import learner_config
 from cpf_env.envs.torchrl_env import GROUP

@@ -5,33 +5,33 @@ BenchMARL's PPO family (MAPPO, IPPO: ``share_policy_params=True``, an MLP over
 each vessel's local input, or ``agents.marl.models.NeighbourSetMlp``: the
 neighbour encoder, then an MLP):
 
-- ``policy.safetensors``: the actor MLP as ``agents.actor.PolicyNetwork``
+- ``policy.safetensors``: the actor MLP as ``agents.folder.actor.PolicyNetwork``
   tensors (``hidden.<i>.weight`` (out, in), ``hidden.<i>.bias``, ``output.weight``,
   ``output.bias``), float32. The output layer keeps only the rows of the
   Gaussian's location: the deterministic action BenchMARL evaluates with is
   ``tanh(loc)`` on [-1, 1] (its ``TanhNormal``), so the scale rows are dropped.
   With the encoder, also its tensors (``encoder.phi.*``, ``encoder.empty_weight``,
-  ``encoder.tolerance``: ``agents.agent_folder``'s names);
+  ``encoder.tolerance``: ``agents.folder.format``'s names);
 - ``normalization.json``: the env's frozen ``InputStatistics``, or ``null``;
 - ``config.json``: the task config (``CpfTaskConfig``), the algorithm, the layer
   sizes and activation, and the run's record (seed, frames, iterations); with
-  the encoder, the field ``actor`` of ``agents.agent_folder``'s version 2
+  the encoder, the field ``actor`` of ``agents.folder.format``'s version 2
   (``encoder``, ``history``, ``pooling``, ``hidden``, ``slot_size``, ``slots``,
   ``tail``);
-- ``manifest.json``: ``agents.agent_folder``'s manifest (format ``cpf-agent``,
+- ``manifest.json``: ``agents.folder.format``'s manifest (format ``cpf-agent``,
   version 3) with trainer ``benchmarl``, and the SHA-256 and size of each
   file. Folders of the former format name ``cpf-marl-agent`` (versions 1 and
   2) are read too.
 
 ``read_marl_agent`` reads it back (every hash checked, every field typed
 strictly, the weights' shapes, dtype and values checked before any network is
-allocated: ``agents.agent_folder``'s discipline; no pickle anywhere) as a
+allocated: ``agents.folder.format``'s discipline; no pickle anywhere) as a
 ``TrainConfig``, the actor and its statistics; ``agents.load_policy`` (and so
 ``cpf-bench --policies FOLDER`` and ``cpf-run --policy FOLDER``) dispatches
 here on the manifest's trainer and runs it as an ``agents.TrainedPolicy``: the named
 base policy underneath, the same residual composition and statistics, local
 observations only. An encoder actor runs on any number of neighbour slots
-(its statistics shared by the slots, ``agents.encoder.statistics_for_slots``),
+(its statistics shared by the slots, ``agents.folder.encoder.statistics_for_slots``),
 so on scenarios of a higher degree than its task's. Nothing here imports
 BenchMARL: a saved folder loads with the ``rl`` extra.
 """
@@ -43,8 +43,9 @@ from typing import Any
 
 import torch
 
-from agents.actor import PolicyNetwork, encoder_layout
-from agents.agent_folder import (
+from agents.folder.actor import PolicyNetwork, encoder_layout
+from agents.folder.files import AgentFolderError, check_fields, field
+from agents.folder.format import (
     CONFIG,
     NORMALIZATION,
     WEIGHTS,
@@ -58,8 +59,7 @@ from agents.agent_folder import (
     read_weights,
     write_with_manifest,
 )
-from agents.folder_files import AgentFolderError, check_fields, field
-from agents.train_config import TrainConfig
+from agents.training.config import TrainConfig
 from cpf_env.envs.input_statistics import InputStatistics
 from cpf_env.envs.residual import ResidualConfig
 from cpf_env.infra import atomic

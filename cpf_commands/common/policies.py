@@ -9,7 +9,7 @@ labelled and evaluated the same way. A policy specification is one of:
   (imported only then, so the analytic side never needs the learning stack);
   the folder holds data only (a plain SB3 save, a pickle, is refused);
 * a path to a ``.onnx`` file written by ``cpf-export``, run by onnxruntime
-  (``agents.onnx_policy``; the ``onnx`` extra);
+  (``agents.folder.onnx_policy``; the ``onnx`` extra);
 * ``package.module:NAME``, a policy class or factory of the user's own
   (``user_policy``), imported only when named;
 * a name registered by an installed package under the entry-point group
@@ -221,7 +221,7 @@ def resolve_policy(spec: PolicySpec, scenario: str | Scenario, **options: Any) -
         _check_name(spec)
         if _is_onnx(spec):
             try:
-                from agents.onnx_policy import load_onnx_policy
+                from agents.folder.onnx_policy import load_onnx_policy
             except ImportError as error:
                 raise ValueError(
                     f"{str(spec)!r} is an ONNX policy, which needs onnxruntime and the learning "

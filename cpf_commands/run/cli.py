@@ -129,13 +129,13 @@ def _default_scenario(policy: str) -> str:
 
     Raises:
         ValueError: A folder that is not an agent folder, or whose configuration is unreadable
-            (``agents.loading.read_config``'s message, naming the file and field); a MARL
+            (``agents.folder.loading.read_config``'s message, naming the file and field); a MARL
             folder whose task overrides scenario fields (a name would leave them out).
     """
     if not Path(policy).is_dir():
         return DEFAULT_SCENARIO
     try:
-        from agents.loading import read_config, read_scenario_overrides
+        from agents.folder.loading import read_config, read_scenario_overrides
     except ImportError as error:
         raise ValueError(
             f"{policy!r} is a folder, but loading trained agents needs the learning extra: "

@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from agents.train_config import TrainConfig
+from agents.training.config import TrainConfig
 from cpf_commands.bench.run import BASE_SEED
 from cpf_commands.bench.views import markdown_table
 from cpf_commands.sweep.spec import SweepSpec, trial_name

@@ -32,7 +32,7 @@ from pathlib import Path
 from typing import Any
 
 import cpf_env
-from agents.train_config import TrainConfig
+from agents.training.config import TrainConfig
 from cpf_env.envs.residual import ResidualConfig
 from cpf_env.infra import atomic
 

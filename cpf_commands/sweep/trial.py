@@ -20,8 +20,8 @@ from typing import Any
 import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback
 
-from agents.train_config import TrainConfig
-from agents.training import train
+from agents.training.config import TrainConfig
+from agents.training.trainer import train
 from cpf_bench.report import summarize
 from cpf_commands.bench.run import run_bench
 from cpf_commands.sweep.report import trial_state, write_evaluation

@@ -197,7 +197,7 @@ class EpisodeCore:
             raise TypeError(
                 f"base_policy={base_policy!r} is a name, and the environment layer takes "
                 "policy objects: build one with baselines.make_policy(name, scenario), or "
-                "use a learning route of the agents package (agents.vec_env.FleetVecEnv, "
+                "use a learning route of the agents package (agents.envs.vec_env.FleetVecEnv, "
                 "agents.marl.envs.make_env), which resolves names."
             )
         if base_policy is not None and not isinstance(base_policy, FleetPolicy):

@@ -16,9 +16,9 @@ import torch
 from conftest import ROOT
 
 from agents import TrainConfig, load_policy
-from agents.actor import PolicyNetwork, build_actor
-from agents.agent_folder import Normalization, read_agent, write_agent
-from agents.folder_files import AgentFolderError
+from agents.folder.actor import PolicyNetwork, build_actor
+from agents.folder.files import AgentFolderError
+from agents.folder.format import Normalization, read_agent, write_agent
 from cpf_commands.bench.cli import bench_main
 from cpf_commands.run.cli import run_main
 from cpf_env.envs.residual import ResidualConfig
@@ -133,8 +133,8 @@ def test_the_loaded_agent_acts_as_sb3_predicts(tmp_path: Path) -> None:
     from stable_baselines3 import PPO
     from stable_baselines3.common.vec_env import VecMonitor
 
-    from agents.algorithms import build_model, make_env
-    from agents.train_config import TrainConfig
+    from agents.training.algorithms import build_model, make_env
+    from agents.training.config import TrainConfig
 
     policy = load_policy(AGENT)
     record, _, _ = read_agent(AGENT)  # a version-1 folder: its config in today's layout
@@ -243,9 +243,9 @@ def test_build_actor_has_the_layers_sb3_trains(encoder: str | None) -> None:
     """The untrained actor (for other learners) has the tensors ``cpf-train`` writes."""
     from stable_baselines3.common.vec_env import VecMonitor
 
-    from agents.actor import actor_tensors
-    from agents.algorithms import build_model, make_env
-    from agents.history_env import HistoryVecEnv
+    from agents.envs.history_env import HistoryVecEnv
+    from agents.folder.actor import actor_tensors
+    from agents.training.algorithms import build_model, make_env
 
     config = dataclasses.replace(ENCODER_CONFIG, encoder=encoder, batch_size=32)
     env = VecMonitor(HistoryVecEnv(make_env(config), config.history))

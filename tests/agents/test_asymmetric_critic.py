@@ -12,11 +12,16 @@ from stable_baselines3 import PPO
 from stable_baselines3.common.vec_env import VecNormalize
 
 from agents import TrainConfig, load_policy, train
-from agents.algorithms import AsymmetricActorCriticPolicy, LocalInputs, make_env, unobserved_columns
-from agents.init_from import read_init_source
-from agents.run_folder import TrainingRun
-from agents.schedule import RunSchedule
-from agents.vec_env import FleetVecEnv
+from agents.envs.vec_env import FleetVecEnv
+from agents.training.algorithms import (
+    AsymmetricActorCriticPolicy,
+    LocalInputs,
+    make_env,
+    unobserved_columns,
+)
+from agents.training.init_from import read_init_source
+from agents.training.run_folder import TrainingRun
+from agents.training.schedule import RunSchedule
 from baselines import make_policy
 from cpf_commands.train import train_main
 from cpf_env import FleetSim, scenarios

@@ -30,7 +30,7 @@ from safetensors.torch import load as load_tensors
 from safetensors.torch import save as save_tensors
 
 from agents import load_policy
-from agents.folder_files import MAX_JSON_BYTES, AgentFolderError
+from agents.folder.files import MAX_JSON_BYTES, AgentFolderError
 from cpf_commands.bench.cli import bench_main
 from cpf_commands.run.cli import run_main
 
@@ -468,7 +468,7 @@ def onnx_file(tmp_path: Path) -> Callable[..., Path]:
     pytest.importorskip("onnxruntime")
     from onnx import TensorProto, helper, numpy_helper
 
-    from agents.onnx_policy import seal_onnx
+    from agents.folder.onnx_policy import seal_onnx
     from cpf_env import scenarios
 
     n = scenarios.get("bench_lossy_links").n
@@ -505,7 +505,7 @@ def onnx_file(tmp_path: Path) -> Callable[..., Path]:
 
 
 def _onnx_refused(path: Path, *patterns: str) -> str:
-    from agents.onnx_policy import load_onnx_policy
+    from agents.folder.onnx_policy import load_onnx_policy
 
     with pytest.raises(AgentFolderError) as caught:
         load_onnx_policy(path)
@@ -519,7 +519,7 @@ def _onnx_refused(path: Path, *patterns: str) -> str:
 def test_a_sealed_graph_loads_and_acts(onnx_file: Callable[..., Path]) -> None:
     import numpy as np
 
-    from agents.onnx_policy import load_onnx_policy
+    from agents.folder.onnx_policy import load_onnx_policy
 
     policy = load_onnx_policy(onnx_file())
     obs = np.zeros((2, policy.n, policy.obs_dim))
@@ -571,7 +571,7 @@ def test_an_onnx_path_that_is_no_regular_file_is_refused(
 def test_an_onnx_link_to_a_sealed_file_is_followed(
     onnx_file: Callable[..., Path], tmp_path: Path
 ) -> None:
-    from agents.onnx_policy import load_onnx_policy
+    from agents.folder.onnx_policy import load_onnx_policy
 
     link = tmp_path / "link.onnx"
     link.symlink_to(onnx_file())
@@ -676,7 +676,7 @@ def _exported_refused(folder: Path, tmp_path: Path, *patterns: str) -> str:
     """``_refused``; ``export_onnx`` (cpf-export) refuses the folder with the same message."""
     message = _refused(folder, *patterns)
     pytest.importorskip("onnx")
-    from agents.onnx_policy import export_onnx
+    from agents.folder.onnx_policy import export_onnx
 
     out = tmp_path / "refused.onnx"
     with pytest.raises(AgentFolderError) as caught:

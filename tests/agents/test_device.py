@@ -7,7 +7,7 @@ from pathlib import Path
 import pytest
 import torch
 
-from agents.device import torch_device
+from agents.training.device import torch_device
 from cpf_commands.distill import distill_main
 from cpf_commands.train import train_main
 

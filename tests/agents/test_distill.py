@@ -15,9 +15,8 @@ from conftest import ROOT, STUDENT_TOML
 from safetensors.torch import load_file
 
 from agents import load_policy
-from agents.actor import build_actor
-from agents.agent_folder import read_agent
-from agents.distill import (
+from agents.distill.config import DistillConfig, check_distillation, draw_seeds
+from agents.distill.dagger import (
     _applied_bounds,
     _group,
     _groups,
@@ -28,10 +27,11 @@ from agents.distill import (
     student_actions,
     student_actor,
 )
-from agents.distill_config import DistillConfig, check_distillation, draw_seeds
-from agents.evaluation import TestSplitEvaluator
-from agents.train_config import TrainConfig
-from agents.vec_env import FleetVecEnv
+from agents.envs.vec_env import FleetVecEnv
+from agents.folder.actor import build_actor
+from agents.folder.format import read_agent
+from agents.training.config import TrainConfig
+from agents.training.evaluation import TestSplitEvaluator
 from baselines import make_policy
 from cpf_commands.bench.run import run_bench
 from cpf_commands.distill import distill_main, read_distill_config

@@ -8,8 +8,8 @@ import torch
 from stable_baselines3 import PPO
 
 from agents import FleetVecEnv
-from agents.algorithms import DeepSetsExtractor
-from agents.encoder import NeighbourSetEncoder, empty_weight_after
+from agents.folder.encoder import NeighbourSetEncoder, empty_weight_after
+from agents.training.algorithms import DeepSetsExtractor
 from cpf_env.envs.input_statistics import InputStatistics
 from cpf_env.sim.observation import SLOTS, observation_box
 

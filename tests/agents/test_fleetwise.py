@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from agents.fleetwise import WHOLE_BATCH_BASES, FleetwiseBase
-from agents.vec_env import FleetVecEnv
+from agents.envs.fleetwise import WHOLE_BATCH_BASES, FleetwiseBase
+from agents.envs.vec_env import FleetVecEnv
 from baselines import make_policy
 from cpf_env import scenarios
 from cpf_env.envs.residual import ResidualConfig

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from agents import FleetVecEnv
-from agents.history import OwnHistory
-from agents.history_env import HistoryVecEnv
+from agents.envs.history import OwnHistory
+from agents.envs.history_env import HistoryVecEnv
 from cpf_env.sim.observation import SLOTS
 
 H = 3

@@ -11,9 +11,9 @@ import pytest
 from stable_baselines3.common.vec_env import VecNormalize
 
 from agents import TrainConfig, load_policy, train
-from agents.init_from import read_init_source
-from agents.run_folder import TrainingRun
-from agents.schedule import RunSchedule
+from agents.training.init_from import read_init_source
+from agents.training.run_folder import TrainingRun
+from agents.training.schedule import RunSchedule
 from cpf_commands.train import train_main
 
 STUDENTS = Path(__file__).parents[2] / "tests" / "fixtures" / "agents"

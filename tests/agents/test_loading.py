@@ -14,9 +14,9 @@ from stable_baselines3 import PPO
 from test_mixture_env import fleet_of
 
 from agents import FleetVecEnv, TrainConfig, load_policy, train
-from agents.algorithms import build_model
-from agents.history_env import HistoryVecEnv
-from agents.loading import TrainedPolicy
+from agents.envs.history_env import HistoryVecEnv
+from agents.folder.loading import TrainedPolicy
+from agents.training.algorithms import build_model
 from cpf_env import FleetSim, scenarios
 from cpf_env.envs.residual import ResidualConfig
 from cpf_env.model.graph import Graph
@@ -256,8 +256,9 @@ def test_loading_an_agent_folder_imports_no_learning_algorithm(agent: Path) -> N
         f"load_policy({str(mlp)!r}).act_batch\n"
         f"load_policy({str(marl)!r}).act_batch\n"
         "print(sorted(m for m in sys.modules if m.split('.')[0] == 'stable_baselines3'\n"
-        "    or m in ('agents.training', 'agents.algorithms', 'agents.history_env',\n"
-        "             'agents.run_folder', 'agents.mixture_env', 'agents.vec_env')))\n"
+        "    or m in ('agents.training.trainer', 'agents.training.algorithms',\n"
+        "             'agents.envs.history_env', 'agents.training.run_folder',\n"
+        "             'agents.envs.mixture_env', 'agents.envs.vec_env')))\n"
     )
     environment = {**os.environ, "PYTHONPATH": str(ROOT)}
     done = subprocess.run(

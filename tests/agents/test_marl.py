@@ -24,7 +24,7 @@ from safetensors.torch import load_file
 from torchrl.envs.utils import ExplorationType, set_exploration_type
 
 from agents import load_policy
-from agents.folder_files import AgentFolderError
+from agents.folder.files import AgentFolderError
 from agents.marl import envs, policy_folder
 from agents.marl.tasks import CONF, CpfTask, CpfTaskClass
 from cpf_env.evaluation.privileged import unobserved_state

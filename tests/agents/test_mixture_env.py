@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from agents import FleetVecEnv, TrainConfig, load_policy, train
-from agents.algorithms import make_env
-from agents.mixture_env import MixtureVecEnv, split_fleets
+from agents.envs.mixture_env import MixtureVecEnv, split_fleets
+from agents.training.algorithms import make_env
 from cpf_commands.train import train_main
 from cpf_env import FleetSim, scenarios
 from cpf_env.envs.residual import ResidualConfig, ResidualController
@@ -183,7 +183,7 @@ def test_balanced_rewards_divide_each_scenario_by_its_running_mean_cost() -> Non
     """Group g's rewards divided by the mean cost per step of everything g has seen."""
     from stable_baselines3.common.vec_env import VecMonitor
 
-    from agents.mixture_env import BalancedRewards
+    from agents.envs.mixture_env import BalancedRewards
 
     mixture = MixtureVecEnv(["bench_mild", "bench_lossy_links"], base_policy="nn_dsc", num_fleets=2)
     env = BalancedRewards(VecMonitor(mixture), mixture)
@@ -209,7 +209,7 @@ def test_each_scenarios_episode_cost_is_logged(tmp_path: Path) -> None:
     from stable_baselines3.common.logger import configure
     from stable_baselines3.common.vec_env import VecMonitor
 
-    from agents.schedule import ScenarioEpisodes
+    from agents.training.schedule import ScenarioEpisodes
 
     short = [{"max_steps": 8}, {"max_steps": 12}]
     mixture = MixtureVecEnv(
@@ -242,7 +242,7 @@ def test_each_scenarios_episode_cost_is_logged(tmp_path: Path) -> None:
 
 def test_pooled_slot_statistics_match_all_slots_taken_together() -> None:
     """Each slot gets the mean and variance of the K slots' values pooled, component-wise."""
-    from agents.slot_statistics import SlotSharedVecNormalize, pool_slot_statistics
+    from agents.envs.slot_statistics import SlotSharedVecNormalize, pool_slot_statistics
 
     rng = np.random.default_rng(0)
     layout_size, k, size = 18, 3, 4

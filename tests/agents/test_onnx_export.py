@@ -12,8 +12,8 @@ pytest.importorskip("onnx")
 onnxruntime = pytest.importorskip("onnxruntime")
 
 from agents import load_policy  # noqa: E402
-from agents.loading import TrainedPolicy  # noqa: E402
-from agents.onnx_policy import OnnxActor, load_onnx_policy  # noqa: E402
+from agents.folder.loading import TrainedPolicy  # noqa: E402
+from agents.folder.onnx_policy import OnnxActor, load_onnx_policy  # noqa: E402
 from cpf_commands.bench.run import run_bench  # noqa: E402
 from cpf_commands.export import export_main  # noqa: E402
 from cpf_env import FleetSim  # noqa: E402

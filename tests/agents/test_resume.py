@@ -15,8 +15,8 @@ import pytest
 from stable_baselines3.common.callbacks import BaseCallback
 
 from agents import TrainConfig, load_policy, train
-from agents.evaluation import TestSplitEvaluator
-from agents.schedule import RunSchedule, TrainingInterrupted
+from agents.training.evaluation import TestSplitEvaluator
+from agents.training.schedule import RunSchedule, TrainingInterrupted
 
 #: 2 fleets x 5 vessels x 16 steps = 160 vessel-steps per PPO rollout.
 TINY = {"fleets": 2, "n_steps": 16, "batch_size": 80, "n_epochs": 1, "net_arch": (16, 16)}

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from agents import TrainConfig, load_policy, train
-from agents.evaluation import TestSplitEvaluator
-from agents.schedule import RunSchedule
+from agents.training.evaluation import TestSplitEvaluator
+from agents.training.schedule import RunSchedule
 from cpf_commands.bench.cli import bench_main
 from cpf_commands.train import train_main
 

@@ -9,11 +9,11 @@ import numpy as np
 import pytest
 import torch
 
-from agents.algorithms import make_env
-from agents.fleetwise import FleetwiseBase
-from agents.snapshot import SnapshotError, capture, decode_value, encode_value, restore
-from agents.train_config import TrainConfig
-from agents.vec_env import FleetVecEnv
+from agents.envs.fleetwise import FleetwiseBase
+from agents.envs.vec_env import FleetVecEnv
+from agents.training.algorithms import make_env
+from agents.training.config import TrainConfig
+from agents.training.snapshot import SnapshotError, capture, decode_value, encode_value, restore
 from cpf_env import scenarios
 
 

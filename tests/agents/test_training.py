@@ -13,8 +13,8 @@ from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.vec_env import VecMonitor
 
 from agents import TrainConfig, load_policy, train
-from agents.algorithms import ALGORITHMS, build_model, make_env
-from agents.folder_files import AgentFolderError
+from agents.folder.files import AgentFolderError
+from agents.training.algorithms import ALGORITHMS, build_model, make_env
 from baselines import make_policy
 from cpf_commands.train import train_main
 from cpf_env import FleetSim, scenarios

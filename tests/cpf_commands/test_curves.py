@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from conftest import STUDENT_TOML
 
-from agents.evaluation import TestSplitEvaluator
+from agents.training.evaluation import TestSplitEvaluator
 from cpf_commands import distill as distill_command
 from cpf_commands.bench.run import run_bench
 from cpf_commands.curves import curves_main

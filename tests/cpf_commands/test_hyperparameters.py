@@ -9,7 +9,7 @@ import pytest
 from conftest import ROOT
 
 from agents import TrainConfig
-from agents.evaluation import DEFAULT_EVAL_NUM_SEEDS
+from agents.training.evaluation import DEFAULT_EVAL_NUM_SEEDS
 from cpf_commands.hyperparameters import hyperparameters_toml, parse_settings, read_hyperparameters
 from cpf_commands.train import DEFAULT_CHECKPOINT_EVERY, DEFAULT_EVAL_EVERY, train_main
 from cpf_env.envs.residual import ResidualConfig
@@ -192,7 +192,7 @@ def test_an_extending_file_overrides_the_residual_table_key_by_key(tmp_path: Pat
 
 def test_a_run_record_of_the_earlier_layout_is_read_in_todays(tmp_path: Path) -> None:
     """run.json of a run before the residual table: ``base``, flat fields, ``seeds``."""
-    from agents.run_folder import read_run_record
+    from agents.training.run_folder import read_run_record
 
     old = {"base": "dsc", "mode": "force_and_rate", "scale": 0.4, "scenario": "bench_mild"}
     record = {"config": old, "schedule": {"eval_every": 0, "checkpoint_every": 0},

@@ -14,9 +14,9 @@ import torch
 from fault_injection import killed_at
 
 from agents import TrainConfig, train
-from agents.agent_folder import AgentFolderError, read_agent
-from agents.run_folder import TrainingRun
-from agents.schedule import RunSchedule
+from agents.folder.format import AgentFolderError, read_agent
+from agents.training.run_folder import TrainingRun
+from agents.training.schedule import RunSchedule
 
 AGENT = ("policy.safetensors", "normalization.json", "config.json", "manifest.json")
 #: 2 fleets x 5 vessels x 16 steps = 160 vessel-steps per PPO rollout; two of them.
@@ -145,7 +145,7 @@ def test_an_aborted_force_says_the_old_run_stays(
     def second_ctrl_c(*args: object, **kwargs: object) -> None:
         raise KeyboardInterrupt
 
-    monkeypatch.setattr("agents.training.train", second_ctrl_c)
+    monkeypatch.setattr("agents.training.trainer.train", second_ctrl_c)
     (tmp_path / "run").mkdir()
     (tmp_path / "run" / "config.json").write_text("{}")
     assert train_main(["--out", str(tmp_path / "run"), "--force", "--quiet"]) == 130

@@ -7,7 +7,7 @@ its episodes through ``make_core``:
 - the scenario: a registered name or a ``Scenario``, with field overrides
   (``cpf_env.scenarios.make_scenario``);
 - the base policy: a name of ``baselines.POLICIES`` (built with
-  ``policy_options``; a base of ``agents.fleetwise.WHOLE_BATCH_BASES``, ``mpc``,
+  ``policy_options``; a base of ``agents.envs.fleetwise.WHOLE_BATCH_BASES``, ``mpc``,
   as a ``FleetwiseBase``, one instance per fleet, since the vector envs restart
   single fleets), ``None`` or ``"none"`` (no base: the learner commands
   everything), or a policy object;
@@ -31,7 +31,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from agents.fleetwise import WHOLE_BATCH_BASES, FleetwiseBase
+from agents.envs.fleetwise import WHOLE_BATCH_BASES, FleetwiseBase
 from baselines import POLICIES, make_policy
 from cpf_env.envs.core import EpisodeCore
 from cpf_env.envs.policy import FleetPolicy

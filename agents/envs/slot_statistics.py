@@ -24,7 +24,7 @@ With ``raw_weights=True`` (the runs with a neighbour encoder,
 ``TrainConfig(encoder="deepsets")``) the slots' weights a_ij keep mean 0 and
 variance 1, so an empty slot's ``a_ij = 0`` is exactly 0 after normalization,
 whatever the statistics are at that step: the encoder's mask
-(``agents.encoder``) tells empty slots from links by that value alone.
+(``agents.folder.encoder``) tells empty slots from links by that value alone.
 """
 
 from __future__ import annotations

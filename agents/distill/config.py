@@ -1,4 +1,4 @@
-"""The settings of ``agents.distill``: the teacher, the data and the DAgger budget, and the report.
+"""The settings of ``agents.distill.dagger``: the teacher, the data, the budget, the report.
 
 ``DistillConfig`` holds what ``distill`` is asked for (the teacher, rounds,
 steps, epochs, the procedural fleets and their ``ScenarioDistribution``, the
@@ -24,7 +24,7 @@ runs it). With no residual the twin commands what the env's base does, bit
 for bit; with one, the label is the teacher's correction alone, and a
 residual the teacher does not ask for is labelled zero. The rollouts, the
 plant and the applied bounds stay the env's base's: the student is deployed
-on it unchanged. Only the observer bases (``agents.fleetwise.WHOLE_BATCH_BASES``)
+on it unchanged. Only the observer bases (``agents.envs.fleetwise.WHOLE_BATCH_BASES``)
 take it: ``nn_dsc``'s auxiliary system, shown the whole force, would take
 the residual for saturation.
 """
@@ -37,8 +37,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from agents.fleetwise import WHOLE_BATCH_BASES
-from agents.train_config import TrainConfig
+from agents.envs.fleetwise import WHOLE_BATCH_BASES
+from agents.training.config import TrainConfig
 from baselines import ALL_POLICIES
 from cpf_env.scenarios.sampler import ScenarioDistribution
 from cpf_env.scenarios.splits import EVALUATION_SEED, check_training
@@ -175,7 +175,7 @@ class DistillReport:
             (since start, evaluations included).
         draws: Per round, the procedural draw seeds its rollouts ran (``draw_seeds``).
         device: The torch device the student was fitted on.
-        evaluations: The rows of ``evaluations.csv`` (``agents.schedule.EvaluationLog``):
+        evaluations: The rows of ``evaluations.csv`` (``agents.training.schedule.EvaluationLog``):
             the student before round 0 (its output is zero: the base policy) and after
             each round, at the labelled vessel-steps so far; empty without an evaluator.
     """

@@ -2,14 +2,14 @@
 
 ``PolicyNetwork`` maps (R, k) float32 inputs to (R, a) actions in [-1, 1]:
 an MLP with ``tanh`` (PPO) or ``ReLU`` (SAC) hidden layers (``ACTORS``),
-optionally behind a DeepSets neighbour encoder (``agents.encoder``), whose
+optionally behind a DeepSets neighbour encoder (``agents.folder.encoder``), whose
 deterministic action is the output clipped to [-1, 1] (PPO, as SB3's
 ``predict`` clips) or squashed by ``tanh`` and unscaled as SB3 does (SAC), in
 float32, so it has the bits of SB3's ``predict``. ``build_actor`` builds the
 one ``cpf-train`` trains for a ``TrainConfig`` (untrained, for other learners
-such as ``agents.distill``); ``actor_tensors`` and ``sb3_actor_layers`` take
+such as ``agents.distill.dagger``); ``actor_tensors`` and ``sb3_actor_layers`` take
 it out of a trained SB3 model; ``actor_record`` and ``encoder_layout`` are
-the layout that ``agents.agent_folder`` writes beside the weights.
+the layout that ``agents.folder.format`` writes beside the weights.
 """
 
 from __future__ import annotations
@@ -19,8 +19,8 @@ from typing import Any
 
 import torch
 
-from agents.encoder import NeighbourSetEncoder
-from agents.train_config import TrainConfig
+from agents.folder.encoder import NeighbourSetEncoder
+from agents.training.config import TrainConfig
 from cpf_env.sim.observation import SLOTS
 
 __all__ = [
@@ -101,9 +101,9 @@ def build_actor(config: TrainConfig, input_size: int, action_size: int) -> Polic
     """The untrained actor of a run: an MLP, or the neighbour encoder and an MLP.
 
     The layers are those SB3 builds for ``config`` (``net_arch``, the algorithm's
-    activation and output transform; ``agents.algorithms.build_model``), with
+    activation and output transform; ``agents.training.algorithms.build_model``), with
     torch's default initialization (seed torch first for the same weights).
-    ``agents.distill`` builds its student with it, for learners other than SB3.
+    ``agents.distill.dagger`` builds its student with it, for learners other than SB3.
 
     Args:
         config: The run (``algo``, ``net_arch``, ``encoder``, ``history``, slots).

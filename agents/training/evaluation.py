@@ -6,7 +6,7 @@ episode on a scenario in which nothing is random), through
 ``cpf_bench.evaluate`` and ``agents.load_policy``: the number
 ``cpf-bench --policies FOLDER --scenarios NAME --split test --num-seeds S`` reports
 as the mean cost of that folder. ``cpf-train`` and ``cpf-distill`` hand it to
-``agents.training.train`` and ``agents.distill.distill``.
+``agents.training.trainer.train`` and ``agents.distill.dagger.distill``.
 
 Example::
 
@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from agents.loading import load_policy
+from agents.folder.loading import load_policy
 from cpf_bench import evaluate
 
 __all__ = ["DEFAULT_EVAL_NUM_SEEDS", "TestSplitEvaluator"]

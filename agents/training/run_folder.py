@@ -1,15 +1,15 @@
 """One training run in its folder: learn, evaluate, checkpoint, resume, write the agent.
 
-``agents.training.train`` claims the folder and hands over to ``TrainingRun``.
+``agents.training.trainer.train`` claims the folder and hands over to ``TrainingRun``.
 The folder during and after a run (``docs/residual_rl.md`` has the user's view):
 
 - ``run.json``: the configuration and schedule, written first (``--resume`` reads it);
 - ``progress.csv``: SB3's log (continued, not restarted, by a resumed run);
 - ``evaluations.csv`` and ``best/`` (an agent folder): held-out evaluations and
-  the best agent so far (``agents.schedule``);
-- ``checkpoint/``: the latest checkpoint (``agents.checkpoint``), replaced whole;
+  the best agent so far (``agents.training.schedule``);
+- ``checkpoint/``: the latest checkpoint (``agents.training.checkpoint``), replaced whole;
 - at the end, or after Ctrl-C: the agent (``policy.safetensors``,
-  ``normalization.json``, ``config.json``, ``manifest.json``; ``agents.agent_folder``)
+  ``normalization.json``, ``config.json``, ``manifest.json``; ``agents.folder.format``)
   and SB3's ``model.zip``.
 
 The agent and ``model.zip`` are written whole: a copy of the run folder
@@ -49,20 +49,22 @@ from stable_baselines3.common.logger import CSVOutputFormat, KVWriter, Logger, m
 from stable_baselines3.common.running_mean_std import RunningMeanStd
 from stable_baselines3.common.vec_env import VecEnv, VecMonitor, VecNormalize
 
-from agents.actor import actor_tensors, encoder_layout, sb3_actor_layers
-from agents.agent_folder import Normalization, network_from_tensors, read_agent, write_agent
-from agents.algorithms import (
+from agents.envs.history_env import HistoryVecEnv
+from agents.envs.mixture_env import BalancedRewards, MixtureVecEnv
+from agents.envs.slot_statistics import SlotSharedVecNormalize
+from agents.folder.actor import actor_tensors, encoder_layout, sb3_actor_layers
+from agents.folder.files import AgentFolderError
+from agents.folder.format import Normalization, network_from_tensors, read_agent, write_agent
+from agents.training.algorithms import (
     build_model,
     make_env,
     planned_timesteps,
     unobserved_columns,
 )
-from agents.checkpoint import checkpoint_timesteps, load_checkpoint
-from agents.folder_files import AgentFolderError
-from agents.history_env import HistoryVecEnv
-from agents.init_from import InitSource
-from agents.mixture_env import BalancedRewards, MixtureVecEnv
-from agents.schedule import (
+from agents.training.checkpoint import checkpoint_timesteps, load_checkpoint
+from agents.training.config import TrainConfig, config_from_record
+from agents.training.init_from import InitSource
+from agents.training.schedule import (
     BEST,
     CHECKPOINT,
     EVALUATIONS,
@@ -76,8 +78,6 @@ from agents.schedule import (
     TrainingInterrupted,
     evaluations_csv,
 )
-from agents.slot_statistics import SlotSharedVecNormalize
-from agents.train_config import TrainConfig, config_from_record
 from cpf_env.infra import atomic
 
 __all__ = [
@@ -108,7 +108,7 @@ def write_run_record(
         schedule: Its periods.
         evaluation: The evaluator's JSON-ready ``settings`` (if it has any), or None.
         device: The torch device the run trains on (a resumed run may name another).
-        init_from: The agent folder the run started from (``agents.init_from``), or None.
+        init_from: The agent folder the run started from (``agents.training.init_from``), or None.
     """
     record: dict[str, Any] = {
         "config": config.to_json(),
@@ -272,8 +272,8 @@ class TrainingRun:
         checkpoint: The checkpoint folder to resume from, or None (a fresh run).
         tensorboard_log: Parent folder of the TensorBoard event files, or None.
         destination: The run folder (claimed by the caller's lock); None: ``folder``.
-        device: The torch device SB3 trains on (``agents.device.torch_device``).
-        init_from: The agent folder a fresh run starts from (``agents.init_from``), or
+        device: The torch device SB3 trains on (``agents.training.device.torch_device``).
+        init_from: The agent folder a fresh run starts from (``agents.training.init_from``), or
             its record for a resumed one (the checkpoint holds the weights); None: neither.
 
     Raises:
@@ -316,7 +316,8 @@ class TrainingRun:
                     slots,
                     size,
                     gamma=config.gamma,
-                    raw_weights=config.encoder is not None,  # empty slots stay 0 (agents.encoder)
+                    raw_weights=config.encoder
+                    is not None,  # empty slots stay 0 (agents.folder.encoder)
                 )
             else:
                 self.env = VecNormalize(
@@ -326,7 +327,7 @@ class TrainingRun:
         if isinstance(init_from, InitSource) and checkpoint is None:
             init_from.apply(self.model, self.env)
         if init_from is not None and isinstance(self.env, VecNormalize):
-            self.env.training = False  # the folder's statistics stay (agents.init_from)
+            self.env.training = False  # the folder's statistics stay (agents.training.init_from)
         atomic.check_writable(self.destination, _bytes_needed(self.model))
         previous = ""
         if checkpoint is not None and (checkpoint / PROGRESS).is_file():

@@ -1,9 +1,9 @@
 """Bases that act on whole batches only, run fleet by fleet for the learners' vector envs.
 
-The vector envs (``agents.vec_env.FleetVecEnv``, ``agents.mixture_env``) restart
+The vector envs (``agents.envs.vec_env.FleetVecEnv``, ``agents.envs.mixture_env``) restart
 single fleets and then ask the base to act for them alone
 (``act_batch(obs, fleets)``); ``mpc`` (and ``mpc_tuned``) acts for every
-row it is given and refuses a subset. ``make_core`` (``agents.resolve``), through which
+row it is given and refuses a subset. ``make_core`` (``agents.envs.resolve``), through which
 ``cpf-train`` and ``cpf-distill`` build their envs, runs the names of
 ``WHOLE_BATCH_BASES`` as a ``FleetwiseBase``: one instance per fleet.
 Evaluation (``agents.load_policy``, ``cpf-bench``) acts for all fleets at once

@@ -18,7 +18,7 @@ resampled at every reset (the group's generators go on, as in
 Seeding: ``seed(s)`` gives fleet k of group g the seed ``s + offset_g + k``
 with ``offset_g = B_0 + ... + B_{g-1}``, so no two fleets of the mixture
 share a seed. The infos of a group's ending slots carry ``"scenario"`` (the
-group's scenario name), from which ``agents.training`` logs per-scenario
+group's scenario name), from which ``agents.training.trainer`` logs per-scenario
 episode costs.
 
 Example:
@@ -41,7 +41,7 @@ from numpy.typing import NDArray
 from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper
 from stable_baselines3.common.vec_env.base_vec_env import VecEnvIndices, VecEnvStepReturn
 
-from agents.vec_env import FleetVecEnv
+from agents.envs.vec_env import FleetVecEnv
 from cpf_env.envs.core import DEFAULT_INFO_LEVEL, check_num_fleets, checked_actions
 from cpf_env.envs.policy import FleetPolicy
 from cpf_env.envs.residual import ResidualConfig

@@ -11,14 +11,14 @@ evaluation reads:
   (``encoder.phi.0.weight`` (hidden, slot_size), ``encoder.phi.0.bias``,
   ``encoder.phi.2.weight`` (hidden, hidden), ``encoder.phi.2.bias``, and the
   scalars ``encoder.empty_weight`` and ``encoder.tolerance``), the MLP then
-  reading the encoder's features (``agents.encoder.NeighbourSetEncoder``);
+  reading the encoder's features (``agents.folder.encoder.NeighbourSetEncoder``);
 - ``normalization.json``: the observation statistics (``mean``, ``var`` (k,),
   ``epsilon``, ``clip``), or ``null`` if the run did not normalize;
 - ``config.json``: the trainer's record (``sb3``: ``{"config": TrainConfig, ...}``
   and the run's record; ``benchmarl``: the task, algorithm and layer sizes,
   ``agents.marl.policy_folder``), and, for an actor with an encoder or a
   history, the field ``actor``: ``encoder`` (``"deepsets"`` or null),
-  ``history`` (own-history entries, ``agents.history``) and, with an encoder,
+  ``history`` (own-history entries, ``agents.envs.history``) and, with an encoder,
   ``pooling``, ``hidden``, ``slot_size`` (3 + m), ``slots`` (K of training,
   which ``normalization.json`` covers) and ``tail`` (floats after the slots:
   extras and history);
@@ -31,7 +31,7 @@ MLP) and 2 (the ``actor`` field), and the BenchMARL actors' former format
 name ``cpf-marl-agent`` (versions 1 and 2, the same layout): both without a
 ``trainer`` field, which the name implies (``LEGACY_FORMATS``).
 
-Reading trusts nothing in the folder (``agents.folder_files``): only regular
+Reading trusts nothing in the folder (``agents.folder.files``): only regular
 files inside it are opened, with size and JSON depth limits; every field is
 typed strictly; the weights must be float32 (float16, bfloat16, float64 or
 integer tensors are refused, not converted) and finite, and their shapes must
@@ -48,7 +48,7 @@ sit beside these files (``cpf-train`` keeps it to resume training), but is not
 listed in the manifest and is never opened by evaluation.
 
 The actor itself (its layers, activations and SB3's deterministic action)
-is ``agents.actor.PolicyNetwork``.
+is ``agents.folder.actor.PolicyNetwork``.
 """
 
 from __future__ import annotations
@@ -64,14 +64,14 @@ import torch
 from safetensors.torch import load as load_tensors
 from safetensors.torch import save as save_tensors
 
-from agents.actor import ACTORS, PolicyNetwork, actor_record
-from agents.encoder import (
+from agents.folder.actor import ACTORS, PolicyNetwork, actor_record
+from agents.folder.encoder import (
     POOLINGS,
     NeighbourSetEncoder,
     empty_weight_after,
     statistics_for_slots,
 )
-from agents.folder_files import (
+from agents.folder.files import (
     MAX_JSON_BYTES,
     MAX_WEIGHT_BYTES,
     AgentFolderError,
@@ -83,7 +83,7 @@ from agents.folder_files import (
     read_verified,
     statistics_arrays,
 )
-from agents.train_config import ENCODERS, TrainConfig, upgrade_record
+from agents.training.config import ENCODERS, TrainConfig, upgrade_record
 from cpf_env.envs.input_statistics import InputStatistics
 from cpf_env.envs.residual import ResidualConfig
 from cpf_env.infra import atomic
@@ -292,7 +292,7 @@ def read_record(folder: Path, manifest: dict[str, Any]) -> dict[str, Any]:
     """An ``sb3`` folder's ``config.json``, its ``config`` in today's layout.
 
     A folder of format 1 or 2 holds the ``TrainConfig`` of that time (``base`` and the
-    residual's fields at the top level): ``agents.train_config.upgrade_record`` moves it
+    residual's fields at the top level): ``agents.training.config.upgrade_record`` moves it
     to today's; a folder of format 3 is read as it is.
 
     Raises:

@@ -6,7 +6,7 @@ or a privileged reference of ``baselines.PRIVILEGED`` (e.g. ``oracle``,
 centralized, told the true model and the coming disturbances; default
 ``nn_dsc_privileged``). It acts on the fleet's true observations (a
 privileged one is bound to the simulator it reads). The student is the
-deployable actor of the agent-folder format (``agents.actor.PolicyNetwork``,
+deployable actor of the agent-folder format (``agents.folder.actor.PolicyNetwork``,
 built by ``student_actor`` with ``build_actor``, the actor ``cpf-train`` builds
 for the same ``TrainConfig``: an MLP with tanh hidden layers and a clipped
 output, behind a DeepSets neighbour encoder with ``encoder="deepsets"``, so
@@ -25,7 +25,7 @@ reach the label is clipped (``DistillReport.clipped`` says how often; raise
 ``TrainConfig.residual.scale`` if it is large).
 
 Which base the label is taken on: ``DistillConfig.label_base``
-(``agents.distill_config``).
+(``agents.distill.config``).
 
 The loss. By default it is the mean squared error between the student's
 pre-clip output u and the clipped label. With ``DistillConfig.fit_applied``
@@ -87,7 +87,7 @@ rows of ``evaluations.csv`` (``DistillReport.evaluations``).
 
 Example (a tiny budget):
     >>> import tempfile
-    >>> from agents.train_config import TrainConfig
+    >>> from agents.training.config import TrainConfig
     >>> config = TrainConfig(scenario="wang2014", fleets=2, net_arch=(16,))
     >>> out = tempfile.mkdtemp() + "/student"
     >>> report = distill(config, DistillConfig(rounds=2, steps=20, epochs=2), out)
@@ -109,17 +109,17 @@ import numpy as np
 import torch
 from numpy.typing import NDArray
 
-from agents.actor import PolicyNetwork, build_actor
-from agents.agent_folder import write_agent
-from agents.device import torch_device
-from agents.distill_config import DistillConfig, DistillReport, check_distillation, draw_seeds
-from agents.history_env import HistoryVecEnv
-from agents.loading import one_torch_thread
-from agents.mixture_env import split_fleets
-from agents.schedule import EvaluationLog, Evaluator
-from agents.slot_statistics import shared_slot_statistics
-from agents.train_config import TrainConfig
-from agents.vec_env import FleetVecEnv
+from agents.distill.config import DistillConfig, DistillReport, check_distillation, draw_seeds
+from agents.envs.history_env import HistoryVecEnv
+from agents.envs.mixture_env import split_fleets
+from agents.envs.slot_statistics import shared_slot_statistics
+from agents.envs.vec_env import FleetVecEnv
+from agents.folder.actor import PolicyNetwork, build_actor
+from agents.folder.format import write_agent
+from agents.folder.loading import one_torch_thread
+from agents.training.config import TrainConfig
+from agents.training.device import torch_device
+from agents.training.schedule import EvaluationLog, Evaluator
 from baselines import make_policy
 from cpf_env import scenarios
 from cpf_env.envs.input_statistics import InputStatistics
@@ -427,7 +427,7 @@ def input_statistics(config: TrainConfig, inputs: NDArray[np.float32]) -> InputS
     """The student's input statistics: the mean and variance of ``inputs`` (S, d).
 
     As ``cpf-train`` normalizes: with ``shared_slot_statistics`` the neighbour
-    slots share pooled statistics (``agents.slot_statistics``), and with an
+    slots share pooled statistics (``agents.envs.slot_statistics``), and with an
     encoder the slots' weights keep mean 0 and variance 1 (an empty slot stays
     exactly 0, as the encoder's mask needs).
     """
@@ -480,7 +480,7 @@ def distill(
 
     With ``evaluate`` (``cpf-distill --eval-num-seeds``: ``cpf-train``'s evaluator
     on the benchmark's ``test`` split) the student is evaluated before round 0
-    and after each round (``agents.schedule.EvaluationLog``, no ``best/``: the
+    and after each round (``agents.training.schedule.EvaluationLog``, no ``best/``: the
     student is the last round's). Before round 0 its output is exactly zero
     (``student_actor``), so the first row is the base policy (the folder
     evaluated then holds identity input statistics, which a zero output
@@ -498,7 +498,7 @@ def distill(
             must be ``ppo``, whose actor format the student takes).
         settings: Teacher, procedural draws and budget.
         out: The agent folder to write (replaced whole if it exists).
-        device: Where torch fits and runs the student (``agents.device.torch_device``:
+        device: Where torch fits and runs the student (``agents.training.device.torch_device``:
             ``"cpu"``, ``"cuda"``, ``"cuda:1"``, ``"auto"``); the folder is written
             from the CPU and loads on the CPU.
         evaluate: Agent folder -> mean cost per scenario, or None (no evaluation).

@@ -8,7 +8,7 @@ learner's raw inputs and its correction:
   scenario it is exported for (``scenario=``, default the training
   scenario's; the residual range is per vessel);
 - the saved normalization (``(x - mean) / sqrt(var + eps)``, clipped);
-- the actor (``agents.actor.PolicyNetwork``);
+- the actor (``agents.folder.actor.PolicyNetwork``);
 - output ``action`` (B, n, a) float32 in [-1, 1] (clipped or tanh-squashed);
 - output ``residual`` (B, n, a) float32: the correction in physical units, the
   action times the residual range (``residual_range``: ``scale`` x each
@@ -21,7 +21,7 @@ metadata (key ``cpf_config``), and the file's own SHA-256 in key ``cpf_sha256``
 policy on its own, sealed as an agent folder's manifest seals its files: a
 graph swapped or edited after export is refused on load, before onnxruntime
 parses it. The loader reads the file as it reads an agent folder
-(``agents.folder_files``: a regular file of at most 256 MiB, strict JSON), and
+(``agents.folder.files``: a regular file of at most 256 MiB, strict JSON), and
 checks the graph's interface (one rank-3 float input ``inputs`` (B, n, k), a
 rank-3 output ``action``) before running it. ``load_onnx_policy(path,
 scenario)`` rebuilds the base policy and runs the graph with onnxruntime, and
@@ -35,9 +35,9 @@ static number K' of neighbour slots (``export_onnx(..., slots=K')``,
 input's length, so the graph takes exactly K' slots, and runs every
 scenario whose graph has degree <= K' (fewer neighbours: empty slots,
 masked). The saved statistics are given to every slot
-(``agents.encoder.statistics_for_slots``). An agent trained with a history
+(``agents.folder.encoder.statistics_for_slots``). An agent trained with a history
 takes it as part of its input, and the graph keeps no state: the caller
-appends each vessel's history (``agents.history.OwnHistory``, as
+appends each vessel's history (``agents.envs.history.OwnHistory``, as
 ``load_onnx_policy``'s policy does). The input layout, per vessel, in order:
 
 - the 18 own-vessel features (``cpf_env.sim.observation``);
@@ -64,10 +64,9 @@ import numpy as np
 import torch
 from numpy.typing import NDArray
 
-from agents.actor import PolicyNetwork
-from agents.agent_folder import Normalization, read_agent, training_config
-from agents.encoder import statistics_for_slots
-from agents.folder_files import (
+from agents.folder.actor import PolicyNetwork
+from agents.folder.encoder import statistics_for_slots
+from agents.folder.files import (
     MAX_WEIGHT_BYTES,
     AgentFolderError,
     field,
@@ -75,8 +74,9 @@ from agents.folder_files import (
     read_file,
     sha256,
 )
-from agents.loading import TrainedPolicy, load_policy
-from agents.train_config import TrainConfig
+from agents.folder.format import Normalization, read_agent, training_config
+from agents.folder.loading import TrainedPolicy, load_policy
+from agents.training.config import TrainConfig
 from cpf_env.infra import atomic
 from cpf_env.scenarios import Scenario, make_scenario
 from cpf_env.sim.observation import SLOTS

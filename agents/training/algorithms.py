@@ -2,10 +2,10 @@
 
 ``make_env`` builds a run's ``FleetVecEnv`` (or ``MixtureVecEnv``),
 ``build_model`` its untrained PPO or SAC model with the residual-learning
-defaults (``agents.training`` lists them) and, with ``encoder="deepsets"``,
+defaults (``agents.training.trainer`` lists them) and, with ``encoder="deepsets"``,
 the ``DeepSetsExtractor`` in front of the actor and, with
 ``asymmetric_critic``, the ``AsymmetricActorCriticPolicy``; ``planned_timesteps`` the
-budget SB3 really trains. ``agents.training.train`` and ``agents.run_folder`` use
+budget SB3 really trains. ``agents.training.trainer.train`` and ``agents.training.run_folder`` use
 them; reading an agent folder needs none of this (no SB3 import).
 """
 
@@ -25,12 +25,12 @@ from stable_baselines3.common.torch_layers import (
 )
 from stable_baselines3.common.vec_env import VecEnv
 
-from agents.actor import ENCODER_HIDDEN, ENCODER_POOLING
-from agents.device import torch_device
-from agents.encoder import NeighbourSetEncoder
-from agents.mixture_env import MixtureVecEnv
-from agents.train_config import TrainConfig
-from agents.vec_env import FleetVecEnv
+from agents.envs.mixture_env import MixtureVecEnv
+from agents.envs.vec_env import FleetVecEnv
+from agents.folder.actor import ENCODER_HIDDEN, ENCODER_POOLING
+from agents.folder.encoder import NeighbourSetEncoder
+from agents.training.config import TrainConfig
+from agents.training.device import torch_device
 from cpf_env.evaluation.privileged import UNOBSERVED_SIZE
 from cpf_env.sim.observation import SLOTS, observation_box
 
@@ -125,7 +125,7 @@ class AsymmetricActorCriticPolicy(ActorCriticPolicy):
     MLP from its own feature width (``share_features_extractor`` is always
     False). Everything else is SB3's ``ActorCriticPolicy``: the actor's modules
     (``pi_features_extractor``, ``mlp_extractor.policy_net``, ``action_net``) are
-    where ``agents.actor.sb3_actor_layers`` reads them, so the agent
+    where ``agents.folder.actor.sb3_actor_layers`` reads them, so the agent
     folder holds an ordinary local actor.
 
     Args:
@@ -208,7 +208,7 @@ def build_model(config: TrainConfig, env: VecEnv, device: str = "cpu") -> BaseAl
         config: The run (algorithm, network, learning settings, seed).
         env: The (monitored, maybe normalized, maybe with history) ``FleetVecEnv`` from
             ``make_env``.
-        device: The torch device SB3 trains on (``agents.device.torch_device``).
+        device: The torch device SB3 trains on (``agents.training.device.torch_device``).
 
     Raises:
         ValueError: A device torch does not know or this machine does not have.

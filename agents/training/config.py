@@ -1,7 +1,7 @@
 """``TrainConfig``: everything that defines a training run, checked before anything runs.
 
 ``cpf-train`` builds it from its defaults, a hyperparameter file and the
-command line; ``agents.training.train`` runs it; every agent folder keeps it
+command line; ``agents.training.trainer.train`` runs it; every agent folder keeps it
 in ``config.json``, from which ``agents.load_policy`` rebuilds the learner's
 input and base policy.
 """
@@ -13,7 +13,7 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
-from agents.history import history_size
+from agents.envs.history import history_size
 from baselines import POLICIES
 from cpf_env import scenarios
 from cpf_env.envs.residual import EXTRAS, ResidualConfig, learner_config
@@ -33,9 +33,9 @@ __all__ = [
     "upgrade_record",
 ]
 
-#: Algorithms ``agents.training.ALGORITHMS`` maps to SB3 classes.
+#: Algorithms ``agents.training.trainer.ALGORITHMS`` maps to SB3 classes.
 ALGORITHM_NAMES = ("ppo", "sac")
-#: Neighbour encoders of the actor (``agents.encoder``); None: an MLP over the flat input.
+#: Neighbour encoders of the actor (``agents.folder.encoder``); None: an MLP over the flat input.
 ENCODERS = ("deepsets",)
 #: ``ResidualConfig`` fields that records before agent-folder format 3 held at the top level.
 FLAT_RESIDUAL_FIELDS = (
@@ -52,7 +52,7 @@ MAX_SEED = 2**32 - 1
 #: saturates every action; outside, the Gaussian's density under- or overflows.
 LOG_STD_RANGE = (-20.0, 5.0)
 #: Initial log standard deviation of a run started from an agent folder
-#: (``agents.init_from``; ``cpf-train --init-from`` unless one is given): 0.08 of the
+#: (``agents.training.init_from``; ``cpf-train --init-from`` unless one is given): 0.08 of the
 #: residual range, small enough to keep the folder's behaviour (default -1: 0.37).
 INIT_LOG_STD = -2.5
 
@@ -69,7 +69,7 @@ class TrainConfig:
     Attributes:
         algo: ``"ppo"`` or ``"sac"``.
         scenario: A registered scenario name, or several (a tuple): a mixture, one
-            group of fleets per scenario (``agents.mixture_env``). The first is the
+            group of fleets per scenario (``agents.envs.mixture_env``). The first is the
             agent's default evaluation scenario (``home_scenario``).
         base_policy: A name of ``baselines.POLICIES``, or ``"none"``: the agent commands
             forces and path-variable rate itself (learning from scratch).
@@ -101,21 +101,21 @@ class TrainConfig:
             ``{"heading": 1.0}``), applied after ``reward_form``; the benchmark's
             cost stays the scenario's own reward.
         balance_rewards: In a mixture, divide each scenario's rewards by its running
-            mean cost per step (``agents.mixture_env.BalancedRewards``), so no scenario
+            mean cost per step (``agents.envs.mixture_env.BalancedRewards``), so no scenario
             steers the updates by the size of its cost alone. Ignored for one scenario.
         shared_slot_statistics: Normalize every neighbour slot with the same pooled
-            statistics (``agents.slot_statistics``) instead of per-position ones.
+            statistics (``agents.envs.slot_statistics``) instead of per-position ones.
         encoder: ``"deepsets"``: the actor reads the neighbour slots through a
             ``NeighbourSetEncoder`` (PPO only; with ``normalize_observations`` it
             needs ``shared_slot_statistics``), so the agent runs on any number of
             slots; None: an MLP over the flat input of K slots.
         history: Own-history entries appended to the learner's input
-            (``agents.history_env.HistoryVecEnv`` in training, kept by the loaded policy
+            (``agents.envs.history_env.HistoryVecEnv`` in training, kept by the loaded policy
             in evaluation); 0: none.
         asymmetric_critic: PPO's critic also reads what no vessel observes
             (``cpf_env.evaluation.privileged.unobserved_state``: the true lumped force,
             v0, the vessel's offset from the fleet's mean path variable), the actor
-            only the local input (``agents.algorithms.AsymmetricActorCriticPolicy``);
+            only the local input (``agents.training.algorithms.AsymmetricActorCriticPolicy``);
             the agent folder holds the actor, as for any run (PPO only).
     """
 
@@ -275,7 +275,7 @@ class TrainConfig:
         """Floats after the neighbour slots of the learner's input, per vessel.
 
         The extras (``cpf_env.envs.residual.EXTRAS``), then the own history
-        (``agents.history.history_size``: H x (18 + a + 1), a the learner's action size).
+        (``agents.envs.history.history_size``: H x (18 + a + 1), a the learner's action size).
         """
         learner = self.learner_config()
         extras = sum(EXTRAS[name] for name in learner.extras)

@@ -2,7 +2,7 @@
 
 ``HistoryVecEnv(venv, length)`` appends, to every slot's observation, its last
 ``length`` entries ``[own_{t-k}, action_{t-k}, valid]``, newest first
-(``agents.history.OwnHistory``, which ``agents.load_policy``'s policy keeps
+(``agents.envs.history.OwnHistory``, which ``agents.load_policy``'s policy keeps
 the same way in evaluation).
 
 Episode boundaries. When a slot's episode ends, the observation returned is
@@ -14,7 +14,7 @@ truncated value on the input the policy would have seen.
 Wrap below ``VecNormalize`` (the history is normalized with the rest), as
 ``cpf-train`` does with ``TrainConfig(history=H)``; the
 ``NeighbourSetEncoder``'s ``tail`` then counts the extras and the history
-(``env.history.size``, ``agents.history.history_size``).
+(``env.history.size``, ``agents.envs.history.history_size``).
 
 Example:
     >>> from agents import FleetVecEnv
@@ -31,7 +31,7 @@ from numpy.typing import NDArray
 from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper
 from stable_baselines3.common.vec_env.base_vec_env import VecEnvStepReturn
 
-from agents.history import OwnHistory
+from agents.envs.history import OwnHistory
 from cpf_env.sim.observation import SLOTS, observation_box
 
 __all__ = ["HistoryVecEnv"]

@@ -1,11 +1,11 @@
 """Training residual (or from-scratch) agents with Stable-Baselines3 on ``FleetVecEnv``.
 
-``train(config, out)`` (``config`` an ``agents.train_config.TrainConfig``)
+``train(config, out)`` (``config`` an ``agents.training.config.TrainConfig``)
 builds ``FleetVecEnv`` (or ``MixtureVecEnv``) -> ``VecMonitor`` ->
 ``VecNormalize`` (observations only; rewards stay in their units so episode costs read as the
 benchmark's), creates PPO or SAC with residual-learning defaults and learns
 in the run folder ``out`` (a lock refuses a second run on the same folder;
-``agents.run_folder`` lists its files and how they are written whole;
+``agents.training.run_folder`` lists its files and how they are written whole;
 ``overwrite`` trains beside the old run, which stays until the new agent is
 written): held-out evaluations and the best
 agent (``best/``), checkpoints every K vessel-steps (``checkpoint/``, from
@@ -14,14 +14,14 @@ Ctrl-C) the agent itself:
 
 - ``policy.safetensors``, ``normalization.json``, ``config.json`` (the exact
   ``TrainConfig``, the package versions and the training time) and
-  ``manifest.json``: the data-only agent (``agents.agent_folder``) that
+  ``manifest.json``: the data-only agent (``agents.folder.format``) that
   ``agents.load_policy(out)`` reads;
 - ``model.zip``: SB3's own save, to continue training with plain SB3 (a pickle,
   never read by evaluation nor by ``resume``);
 - ``progress.csv`` (and TensorBoard event files with ``tensorboard_log``).
 
 ``init_from`` starts PPO from an agent folder of the same recipe (a distilled
-student, say) instead of the zero residual: ``agents.init_from``.
+student, say) instead of the zero residual: ``agents.training.init_from``.
 
 Residual-learning defaults (Johannink et al. 2019, Silver et al. 2018, and
 our measurements in ``docs/residual_rl.md``): the policy's mean action starts
@@ -44,11 +44,16 @@ from pathlib import Path
 
 from stable_baselines3.common.callbacks import BaseCallback
 
-from agents.device import torch_device
-from agents.init_from import InitSource, read_init_source
-from agents.run_folder import TrainingRun, prepare_resume, read_init_record, write_run_record
-from agents.schedule import Evaluator, RunSchedule
-from agents.train_config import TrainConfig
+from agents.training.config import TrainConfig
+from agents.training.device import torch_device
+from agents.training.init_from import InitSource, read_init_source
+from agents.training.run_folder import (
+    TrainingRun,
+    prepare_resume,
+    read_init_record,
+    write_run_record,
+)
+from agents.training.schedule import Evaluator, RunSchedule
 from cpf_env.infra import atomic
 from cpf_env.scenarios.splits import check_training
 
@@ -89,11 +94,11 @@ def train(
         run_files: File name -> text, written into ``out`` when the run (or its resumed
             part) starts (``cpf-train`` saves its resolved ``hyperparameters.toml`` so).
         device: The torch device SB3 trains on: ``"cpu"`` (default), ``"auto"``, ``"cuda"``,
-            ``"cuda:N"`` (``agents.device.torch_device``); recorded in ``run.json``, not in
+            ``"cuda:N"`` (``agents.training.device.torch_device``); recorded in ``run.json``, not in
             the ``TrainConfig``. The agent folder loads on the CPU whatever trained it;
             resuming is bit for bit on the CPU (torch's GPU generators are not checkpointed).
         init_from: An agent folder (a ``cpf-distill`` student, say) to start PPO's actor
-            and observation statistics from (``agents.init_from``: same recipe, critic
+            and observation statistics from (``agents.training.init_from``: same recipe, critic
             fresh, statistics frozen); recorded in ``run.json`` and ``config.json``. A
             resumed run keeps its own record and may not name another.
 

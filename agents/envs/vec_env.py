@@ -35,7 +35,7 @@ input, after the local input: what the vessel cannot observe
 (``cpf_env.evaluation.privileged.unobserved_state``: the true lumped force
 over the force scale, v0, theta_i minus the fleet's mean). They are for an
 asymmetric critic (``TrainConfig.asymmetric_critic``); the actor drops them
-(``agents.algorithms.AsymmetricActorCriticPolicy``). A terminal observation
+(``agents.training.algorithms.AsymmetricActorCriticPolicy``). A terminal observation
 carries the state the fleet ended in.
 
 Infos follow ``info_level`` (``"none"``, the default of every route: an empty
@@ -64,7 +64,7 @@ from numpy.typing import NDArray
 from stable_baselines3.common.vec_env import VecEnv
 from stable_baselines3.common.vec_env.base_vec_env import VecEnvIndices, VecEnvStepReturn
 
-from agents.resolve import make_core
+from agents.envs.resolve import make_core
 from cpf_env.envs.core import DEFAULT_INFO_LEVEL, check_info_level, checked_actions
 from cpf_env.envs.policy import FleetPolicy
 from cpf_env.envs.residual import ResidualConfig

@@ -21,14 +21,14 @@ BLAS may pick another kernel).
 Normalized inputs. SB3's ``VecNormalize`` maps an empty slot's ``a_ij = 0`` to
 ``(0 - mean) / sqrt(var + eps)``, not to 0. ``empty_weight`` is that value
 (``empty_weight_after(statistics)`` computes it from statistics pooled across
-slots, ``agents.slot_statistics``); a slot is empty when its weight is within
+slots, ``agents.envs.slot_statistics``); a slot is empty when its weight is within
 ``tolerance`` of it. A training run with ``TrainConfig(encoder="deepsets")``
 keeps the weights' statistics at mean 0 and variance 1
 (``SlotSharedVecNormalize(raw_weights=True)``), so an empty slot is an exact 0
 throughout training and in the saved agent, and ``empty_weight`` stays 0.
 
 This module needs torch only (an agent folder's reader uses it);
-``agents.algorithms.DeepSetsExtractor`` wraps the encoder as an SB3 features
+``agents.training.algorithms.DeepSetsExtractor`` wraps the encoder as an SB3 features
 extractor::
 
     >>> encoder = NeighbourSetEncoder(slot_size=4, tail=3)
@@ -54,7 +54,7 @@ def empty_weight_after(statistics: InputStatistics, n_slots: int, slot_size: int
     """The value an empty slot's ``a_ij = 0`` takes after ``statistics`` normalize it.
 
     Args:
-        statistics: Observation statistics with slots pooled (``agents.slot_statistics``).
+        statistics: Observation statistics with slots pooled (``agents.envs.slot_statistics``).
         n_slots: K, the slots the statistics cover.
         slot_size: Floats per slot, 3 + m.
 
@@ -68,7 +68,7 @@ def empty_weight_after(statistics: InputStatistics, n_slots: int, slot_size: int
     if not all(float(w.min()) == float(w.max()) for w in weights):
         raise ValueError(
             "the slots' a_ij statistics differ between slots; pool them first "
-            "(agents.slot_statistics.SlotSharedVecNormalize)."
+            "(agents.envs.slot_statistics.SlotSharedVecNormalize)."
         )
     scaled = -float(weights[0][0]) / float((weights[1][0] + statistics.epsilon) ** 0.5)
     return float(min(max(scaled, -statistics.clip), statistics.clip))
@@ -80,7 +80,7 @@ def statistics_for_slots(
     """Statistics of an input of K = ``n_slots`` slots, for the same input with ``new_slots``.
 
     The own features and the tail keep their statistics; every slot gets the
-    slots' shared ones (``agents.slot_statistics`` pools them), so an encoder
+    slots' shared ones (``agents.envs.slot_statistics`` pools them), so an encoder
     trained on K slots is normalized alike on K' (a 10-vessel star's centre: 9).
 
     Args:
@@ -104,7 +104,7 @@ def statistics_for_slots(
         if not np.all(slots == slots[0]):
             raise ValueError(
                 "the slots' statistics differ between slots; an encoder's slots share one set "
-                "(train with shared_slot_statistics, agents.slot_statistics)."
+                "(train with shared_slot_statistics, agents.envs.slot_statistics)."
             )
         parts.append(np.concatenate([values[:SLOTS], np.tile(slots[0], new_slots), values[stop:]]))
     return InputStatistics(parts[0], parts[1], statistics.epsilon, statistics.clip)

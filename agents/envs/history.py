@@ -14,7 +14,7 @@ ago (by default the 18 own-vessel features of the local observation,
 before it. So the input is local by construction: a vessel's own past,
 nothing from other vessels. ``clear`` empties rows whose episode restarts.
 
-One implementation serves training and evaluation: ``agents.history_env.HistoryVecEnv``
+One implementation serves training and evaluation: ``agents.envs.history_env.HistoryVecEnv``
 appends it to an SB3 vector env's observations, and ``agents.load_policy``'s
 policy keeps it itself across ``act_batch`` calls (cleared by ``reset`` and
 ``reset_fleets``), so a trained agent sees in evaluation the history it

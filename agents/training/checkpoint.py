@@ -6,7 +6,7 @@ folder the caller swaps in whole):
 - ``tensors.safetensors``: the networks' and optimizers' ``state_dict``s (SB3's
   ``get_parameters``, plus SAC's entropy coefficient) and torch's random state;
 - ``arrays.npz``: every numpy array of the state (read with ``allow_pickle=False``);
-- ``state.json``: the rest as a tree (``agents.snapshot``): SB3's counters,
+- ``state.json``: the rest as a tree (``agents.training.snapshot``): SB3's counters,
   last observations and episode buffers, numpy's and Python's random states,
   the whole vector env below the model (simulator arrays, base policy's
   adaptive weights, link buffers, random generators, ``VecMonitor`` and
@@ -36,7 +36,7 @@ from safetensors.torch import load as load_tensors
 from safetensors.torch import save as save_tensors
 from stable_baselines3.common.base_class import BaseAlgorithm
 
-from agents.snapshot import SnapshotError, capture, decode_value, encode_value, restore
+from agents.training.snapshot import SnapshotError, capture, decode_value, encode_value, restore
 from cpf_env.infra import atomic
 
 __all__ = ["CHECKPOINT_FILES", "checkpoint_timesteps", "load_checkpoint", "save_checkpoint"]
@@ -88,7 +88,7 @@ def save_checkpoint(folder: Path, model: BaseAlgorithm, extra: dict[str, Any]) -
         extra: JSON-ready state of the caller (schedules, best cost so far).
 
     Raises:
-        agents.snapshot.SnapshotError: Env state that cannot be stored as data.
+        agents.training.snapshot.SnapshotError: Env state that cannot be stored as data.
     """
     tensors: dict[str, Any] = {}
     arrays: dict[str, Any] = {}
@@ -124,7 +124,7 @@ def checkpoint_timesteps(folder: Path) -> int:
     """Vessel-steps (SB3 timesteps) the checkpoint in ``folder`` had trained.
 
     Raises:
-        agents.snapshot.SnapshotError: No readable checkpoint there.
+        agents.training.snapshot.SnapshotError: No readable checkpoint there.
     """
     try:
         state = json.loads((folder / STATE).read_text())
@@ -140,7 +140,7 @@ def load_checkpoint(folder: Path, model: BaseAlgorithm) -> dict[str, Any]:
         The ``extra`` state given to ``save_checkpoint``.
 
     Raises:
-        agents.snapshot.SnapshotError: A missing or damaged file, or a model or env
+        agents.training.snapshot.SnapshotError: A missing or damaged file, or a model or env
             built differently from the one that wrote the checkpoint.
     """
     missing = [name for name in CHECKPOINT_FILES if not (folder / name).is_file()]

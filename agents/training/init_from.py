@@ -17,8 +17,8 @@ folder's (``tests/agents/test_init_from.py``). What is not the folder's:
   small exploration noise below and PPO's clipped steps are what limits how
   far the actor moves from the student meanwhile;
 - the exploration noise: ``TrainConfig.log_std_init``, for which ``cpf-train
-  --init-from`` defaults to ``agents.train_config.INIT_LOG_STD`` (-2.5: a standard deviation of 0.08
-  of the residual range, 4 % of the force limits at ``scale = 0.5``) instead of
+  --init-from`` defaults to ``agents.training.config.INIT_LOG_STD`` (-2.5: a standard
+  deviation of 0.08 of the residual range, 4 % of the force limits at ``scale = 0.5``) instead of
   -1, whose noise (0.37 of the range) would move the student far from what it
   learned;
 - nothing else changes during the run but the weights: the observation
@@ -46,10 +46,10 @@ from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.running_mean_std import RunningMeanStd
 from stable_baselines3.common.vec_env import VecEnv, VecNormalize
 
-from agents.actor import PolicyNetwork, sb3_actor_layers
-from agents.agent_folder import MANIFEST, Normalization, read_agent, training_config
-from agents.algorithms import unobserved_columns
-from agents.train_config import TrainConfig
+from agents.folder.actor import PolicyNetwork, sb3_actor_layers
+from agents.folder.format import MANIFEST, Normalization, read_agent, training_config
+from agents.training.algorithms import unobserved_columns
+from agents.training.config import TrainConfig
 
 __all__ = ["RECIPE", "InitSource", "read_init_source"]
 
@@ -96,7 +96,7 @@ class InitSource:
         """Give ``model``'s actor the folder's weights, ``env``'s ``VecNormalize`` its statistics.
 
         Args:
-            model: A fresh PPO model of the run (``agents.algorithms.build_model``).
+            model: A fresh PPO model of the run (``agents.training.algorithms.build_model``).
             env: The model's env (its outermost wrapper, ``VecNormalize`` when the run
                 normalizes).
         """

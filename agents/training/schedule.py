@@ -16,7 +16,7 @@ taken there resumes bit for bit), in this order:
    included; summed over resumed parts), the evaluation's own seconds, the
    mean cost over scenarios and one ``cost_<scenario>`` column each;
 2. a checkpoint, when due or when Ctrl-C was pressed (``checkpoint/``, replaced
-   whole: ``agents.checkpoint``'s files, a copy of ``progress.csv``, ``best/``
+   whole: ``agents.training.checkpoint``'s files, a copy of ``progress.csv``, ``best/``
    and this schedule's state);
 3. after Ctrl-C, ``TrainingInterrupted`` ends ``learn`` (``train`` then writes
    the agent so far and re-raises it).
@@ -46,7 +46,7 @@ import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback
 from tqdm.auto import tqdm
 
-from agents.checkpoint import save_checkpoint
+from agents.training.checkpoint import save_checkpoint
 from cpf_env.infra import atomic
 
 __all__ = [
@@ -157,7 +157,7 @@ class EvaluationLog:
     """A run's held-out evaluations: the rows of ``evaluations.csv``, and ``best/``.
 
     ``cpf-train`` (through ``ScheduleCallback``) and ``cpf-distill`` (through
-    ``agents.distill``) evaluate with it. Each evaluation writes the current
+    ``agents.distill.dagger``) evaluate with it. Each evaluation writes the current
     agent as an agent folder in a scratch folder, hands it to ``evaluate``
     and appends a row: ``vessel_steps``, ``wall_clock_seconds`` (the run's
     clock after the evaluation, evaluations included), ``evaluation_seconds``

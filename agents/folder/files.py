@@ -1,6 +1,6 @@
 """Reading the files of an agent folder nobody vouches for: bounded, regular, strictly typed.
 
-An agent folder (``agents.agent_folder``, ``agents.marl.policy_folder``) or a
+An agent folder (``agents.folder.format``, ``agents.marl.policy_folder``) or a
 ``cpf-export`` ONNX file may come from anyone, so every read here assumes the
 worst:
 

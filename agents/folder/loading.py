@@ -6,7 +6,7 @@ on, normalized with the saved statistics, and acts on the mean action
 (deterministic). An agent with a neighbour encoder (``TrainConfig(encoder=...)``)
 gets as many neighbour slots as the evaluation scenario needs (at least its
 training K), and an agent trained with a history (``TrainConfig(history=H)``)
-keeps each vessel's own history itself (``agents.history.OwnHistory``, as
+keeps each vessel's own history itself (``agents.envs.history.OwnHistory``, as
 ``HistoryVecEnv`` kept it in training), cleared by ``reset`` and
 ``reset_fleets``. It offers ``reset``, ``reset_fleets``, ``act``, ``act_batch``,
 ``predict``, ``diagnostics`` and ``name``, so ``cpf-bench``, ``cpf-run`` and
@@ -31,8 +31,12 @@ import numpy as np
 import torch
 from numpy.typing import ArrayLike, NDArray
 
-from agents.actor import PolicyNetwork
-from agents.agent_folder import (
+from agents.envs.history import OwnHistory
+from agents.envs.resolve import resolve_base_policy
+from agents.folder.actor import PolicyNetwork
+from agents.folder.encoder import statistics_for_slots
+from agents.folder.files import AgentFolderError, field
+from agents.folder.format import (
     CONFIG,
     Normalization,
     read_agent,
@@ -41,12 +45,8 @@ from agents.agent_folder import (
     read_record,
     training_config,
 )
-from agents.encoder import statistics_for_slots
-from agents.folder_files import AgentFolderError, field
-from agents.history import OwnHistory
 from agents.marl.policy_folder import marl_config, read_marl_agent
-from agents.resolve import resolve_base_policy
-from agents.train_config import TrainConfig
+from agents.training.config import TrainConfig
 from cpf_env.envs.policy import FleetPolicy
 from cpf_env.envs.residual import ResidualController, learner_config
 from cpf_env.scenarios import Scenario, make_scenario
@@ -68,9 +68,9 @@ Array = NDArray[np.float64]
 def load_policy(path: str | Path, scenario: str | Scenario | None = None) -> TrainedPolicy:
     """Load a trained agent from the folder ``cpf-train --out`` (or ``save_marl_policy``) wrote.
 
-    Reads the data-only formats (``agents.agent_folder``, and a BenchMARL actor's
+    Reads the data-only formats (``agents.folder.format``, and a BenchMARL actor's
     ``agents.marl.policy_folder``: safetensors and JSON, every file checked
-    against the manifest, read with ``agents.folder_files``' limits); nothing in
+    against the manifest, read with ``agents.folder.files``' limits); nothing in
     the folder can run code. Pickles are never read: a plain SB3 save
     (``model.zip``, ``vecnormalize.pkl``) is refused.
 
@@ -183,7 +183,7 @@ class TorchActor:
 
     With a neighbour encoder the inputs may have any number K' of slots: the
     statistics (saved for the training K, slots pooled) are given to every
-    slot (``agents.encoder.statistics_for_slots``).
+    slot (``agents.folder.encoder.statistics_for_slots``).
 
     Args:
         network: The deterministic actor.
@@ -223,7 +223,7 @@ class TrainedPolicy(FleetPolicy):
     Args:
         name: Label (the folder name).
         config: The training run's configuration.
-        actor: The learned part (``TorchActor``, or ``agents.onnx_policy.OnnxActor``).
+        actor: The learned part (``TorchActor``, or ``agents.folder.onnx_policy.OnnxActor``).
         scenario: The evaluation scenario.
     """
 
@@ -347,7 +347,7 @@ class TrainedPolicy(FleetPolicy):
 
         A ``TorchActor`` runs with one torch thread (see there): the actions have
         the same bits whatever the caller's thread setting. With a history, each
-        call records the inputs and actions (``agents.history.OwnHistory``).
+        call records the inputs and actions (``agents.envs.history.OwnHistory``).
 
         Args:
             obs: (B, n, obs_dim) local observations.
