@@ -57,11 +57,16 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from agents.training.evaluation import TestSplitEvaluator
 from cpf_commands.common.arguments import non_negative_int
+from cpf_commands.common.extras import missing_extra
 from cpf_commands.hyperparameters import merge_settings, moved_keys, toml_chain
 from cpf_env.infra import atomic
 from cpf_env.scenarios.suite import SUITE
+
+try:  # the learning extra; on the base install, a message instead of a traceback
+    from agents.training.evaluation import TestSplitEvaluator
+except ModuleNotFoundError as error:
+    raise SystemExit(missing_extra("cpf-distill", error)) from None
 
 if TYPE_CHECKING:
     from agents.distill.config import DistillConfig

@@ -20,10 +20,15 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-import torch
+from cpf_commands.common.extras import missing_extra
 
-import agents.marl
-from agents.marl.compat import import_benchmarl
+try:  # the benchmarl extra; on the base install, a message instead of a traceback
+    import torch
+
+    import agents.marl
+    from agents.marl.compat import import_benchmarl
+except ModuleNotFoundError as error:
+    raise SystemExit(missing_extra("cpf-marl", error, "benchmarl")) from None
 
 __all__ = ["marl_main"]
 

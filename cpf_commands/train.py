@@ -33,8 +33,8 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from agents.training.evaluation import DEFAULT_EVAL_NUM_SEEDS, TestSplitEvaluator
 from cpf_commands.common.arguments import non_negative_int, positive_int
+from cpf_commands.common.extras import missing_extra
 from cpf_commands.hyperparameters import (
     SCHEDULE_KEYS,
     hyperparameters_toml,
@@ -45,6 +45,11 @@ from cpf_commands.hyperparameters import (
 from cpf_env import scenarios
 from cpf_env.scenarios.splits import SHIFT_SUFFIX, check_training
 from cpf_env.scenarios.suite import SUITE
+
+try:  # the learning extra; on the base install, a message instead of a traceback
+    from agents.training.evaluation import DEFAULT_EVAL_NUM_SEEDS, TestSplitEvaluator
+except ModuleNotFoundError as error:
+    raise SystemExit(missing_extra("cpf-train", error)) from None
 
 if TYPE_CHECKING:
     from agents.training.config import TrainConfig

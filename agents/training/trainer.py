@@ -131,7 +131,7 @@ def train(
             import tensorboard  # noqa: F401
         except ImportError as error:
             raise ValueError(
-                "--tensorboard-log needs tensorboard: pip install 'cpf_env[rl]'."
+                "--tensorboard-log needs tensorboard: pip install -e '.[rl]'."
             ) from error
     atomic.check_writable(folder)  # the space is checked once the model exists
     with atomic.FolderLock(folder, "another training run"):  # recovers a killed swap first

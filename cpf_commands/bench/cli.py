@@ -234,6 +234,11 @@ def _available_memory() -> int | None:
     return None
 
 
+def _count(number: int, one: str, many: str) -> str:
+    """``number`` and the noun in its number: 1 scenario, 2 scenarios."""
+    return f"{number} {one if number == 1 else many}"
+
+
 def bench_main(argv: Sequence[str] | None = None) -> int:
     """``cpf-bench``: see ``cpf-bench --help``."""
     parser = _parser()
@@ -282,7 +287,8 @@ def bench_main(argv: Sequence[str] | None = None) -> int:
             "run (the policy does not fit the scenario); summary.md lists them and why."
         )
     print(
-        f"cpf-bench: {len(args.policies)} policies x {len(args.scenarios)} scenarios in "
+        f"cpf-bench: {_count(len(args.policies), 'policy', 'policies')} x "
+        f"{_count(len(args.scenarios), 'scenario', 'scenarios')} in "
         f"{elapsed:.0f} s; results in {args.out}/ (report.html, summary.md, summary.csv, "
         "episodes.csv)"
     )

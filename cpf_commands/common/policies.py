@@ -233,7 +233,7 @@ def resolve_policy(spec: PolicySpec, scenario: str | Scenario, **options: Any) -
         except ImportError as error:
             raise ValueError(
                 f"{str(spec)!r} is a folder, but loading trained agents needs "
-                "agents.load_policy (the learning extra: pip install 'cpf_env[rl]')."
+                "agents.load_policy (the learning extra: pip install -e '.[rl]')."
             ) from error
         return load_policy(Path(spec), resolved)
     if isinstance(spec, FleetPolicy):

@@ -139,7 +139,7 @@ def _default_scenario(policy: str) -> str:
     except ImportError as error:
         raise ValueError(
             f"{policy!r} is a folder, but loading trained agents needs the learning extra: "
-            "pip install 'cpf_env[rl]'."
+            "pip install -e '.[rl]'."
         ) from error
     names = read_config(policy).scenarios
     overrides = read_scenario_overrides(policy)

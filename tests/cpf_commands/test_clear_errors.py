@@ -74,3 +74,26 @@ def test_cpf_export_says_which_path_is_missing(folder, out, expected, tmp_path, 
     line = _error(export_main, [str(tmp_path / folder), str(tmp_path / out)], capsys)
     assert expected.format(tmp=tmp_path) in line
     assert line.startswith("cpf-export: error: ") and not (tmp_path / out).exists()
+
+
+@pytest.mark.parametrize(
+    ("module", "command", "absent", "extra"),
+    [("cpf_commands.train", "cpf-train", "torch", "rl"),
+     ("cpf_commands.distill", "cpf-distill", "torch", "rl"),
+     ("cpf_commands.marl", "cpf-marl", "torch", "benchmarl")],
+)  # fmt: skip
+def test_learning_commands_without_their_extra_say_what_to_install(
+    module: str, command: str, absent: str, extra: str
+) -> None:
+    """On the base install the command names the missing package and the install, no traceback."""
+    import subprocess
+    import sys
+
+    hide = (  # the package cannot be imported, as on an install without the extra
+        f"import sys; sys.modules[{absent!r}] = None; import runpy; "
+        f"runpy.run_module({module!r}, run_name='__main__')"
+    )
+    done = subprocess.run([sys.executable, "-c", hide, "--help"], capture_output=True, text=True)
+    assert done.returncode == 1 and "Traceback" not in done.stderr
+    assert done.stderr.startswith(f"{command}: needs {absent}, which is not installed")
+    assert f"pip install -e '.[{extra}]'" in done.stderr
