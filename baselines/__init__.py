@@ -22,6 +22,12 @@ default benchmark set): ``ilos``, integral line-of-sight guidance with surge
 and heading control and the cooperative law's path variable (Børhaug, Pavlov
 & Pettersen 2008; ``baselines.ilos``).
 
+For vessels that observe noisy, late pose fixes and maybe no velocity
+(``Scenario.sensors``; ``FILTERED``, deployable, outside the default set):
+``nn_dsc_ekf`` and ``mpc_tuned_ekf``, ``nn_dsc`` and ``mpc_tuned`` on the estimate
+of an extended Kalman filter on the nominal vessel model with a disturbance
+bias (``baselines.estimator``).
+
 Privileged references, not deployable (``PRIVILEGED``): ``nn_dsc_global_v0``,
 ``nn_dsc`` told v0's schedule on every vessel (no estimator; an ablation
 of the speed estimator, which a vessel cut off from the leader cannot
@@ -51,6 +57,7 @@ from typing import Any
 
 from baselines.backstepping import BacksteppingPolicy
 from baselines.delay_compensated import BacksteppingDelayCompensated, NNDSCDelayCompensated
+from baselines.estimator import Filtered, MPCTunedFiltered, NNDSCFiltered
 from baselines.gains import BacksteppingGains, CooperativeGains, NNDSCGains
 from baselines.ilos import ILOSGains, ILOSPolicy
 from baselines.mpc import MPCPolicy, MPCPrivileged, OraclePolicy, RecedingHorizonGains
@@ -64,6 +71,7 @@ from cpf_env.envs.policy import FleetPolicy
 __all__ = [
     "ALL_POLICIES",
     "DIAGNOSTICS",
+    "FILTERED",
     "HEADROOM_REFERENCE",
     "POLICIES",
     "PRIVILEGED",
@@ -75,6 +83,7 @@ __all__ = [
     "BacksteppingPrivileged",
     "CooperativeGains",
     "DSCPolicy",
+    "Filtered",
     "GlobalSpeedPolicy",
     "ILOSGains",
     "ILOSPolicy",
@@ -84,7 +93,9 @@ __all__ = [
     "MPCToldLinks",
     "MPCToldV0",
     "MPCTuned",
+    "MPCTunedFiltered",
     "NNDSCDelayCompensated",
+    "NNDSCFiltered",
     "NNDSCGains",
     "NNDSCPolicy",
     "NNDSCPrivileged",
@@ -115,6 +126,10 @@ POLICIES: dict[str, type[FleetPolicy]] = {
 #: fully actuated suite scores: there ``ilos`` loses to ``nn_dsc`` on every scenario.
 UNDERACTUATED: dict[str, type[FleetPolicy]] = {ILOSPolicy.name: ILOSPolicy}
 
+FILTERED: dict[str, type[FleetPolicy]] = {
+    policy.name: policy for policy in (NNDSCFiltered, MPCTunedFiltered)
+}
+
 #: Privileged references by name: not deployable, they read what no local observation
 #: holds (the simulator, or the scenario's v0 schedule).
 PRIVILEGED: dict[str, type[FleetPolicy]] = {
@@ -130,8 +145,13 @@ PRIVILEGED: dict[str, type[FleetPolicy]] = {
         BacksteppingPrivileged,
     )
 }
-#: Every policy class by name: ``POLICIES``, ``UNDERACTUATED``, then ``PRIVILEGED``.
-ALL_POLICIES: dict[str, type[FleetPolicy]] = {**POLICIES, **UNDERACTUATED, **PRIVILEGED}
+#: Every policy class by name: ``POLICIES``, ``UNDERACTUATED``, ``FILTERED``, then ``PRIVILEGED``.
+ALL_POLICIES: dict[str, type[FleetPolicy]] = {
+    **POLICIES,
+    **UNDERACTUATED,
+    **FILTERED,
+    **PRIVILEGED,
+}
 #: The headroom bound the benchmark's normalized score is measured against.
 HEADROOM_REFERENCE = OraclePolicy.name
 
@@ -140,7 +160,7 @@ def make_policy(name: str, env: object, **options: Any) -> FleetPolicy:
     """Build the policy ``name`` for the scenario of ``env``.
 
     Args:
-        name: A key of ``POLICIES``, ``UNDERACTUATED`` or ``PRIVILEGED``.
+        name: A key of ``POLICIES``, ``UNDERACTUATED``, ``FILTERED`` or ``PRIVILEGED``.
         env: A ``CooperativePathFollowingEnv``, a ``FleetSim``, any object with a
             ``.scenario``, a ``Scenario`` or a scenario name (a privileged
             reference built without a simulator must be bound to one before acting).

@@ -11,8 +11,9 @@ array of ``FleetArrays`` is stored after steps 1, 10, 100, 150 (the reset),
 
 ``--compare`` reports, per array, whether the records are ``np.array_equal``
 and equal byte for byte (which also tells 0.0 from -0.0 and NaN payloads)
-and exits 1 on any difference. Usage (the interpreter decides which checkout
-is measured)::
+and exits 1 on any difference, or if an array of the old record is missing
+from the new; arrays only the new record has are named, not compared.
+Usage (the interpreter decides which checkout is measured)::
 
     /path/to/old/.venv/bin/python tools/trajectory_fingerprint.py --out /tmp/old.npz
     python tools/trajectory_fingerprint.py --out /tmp/new.npz
@@ -120,9 +121,13 @@ def record(path: str, fleet_counts: tuple[int, ...]) -> None:
 def compare(old_path: str, new_path: str) -> int:
     """Compare two records; print a summary and every difference. Returns the exit status."""
     old, new = np.load(old_path), np.load(new_path)
-    if set(old.files) != set(new.files):
-        print(f"different keys: {sorted(set(old.files) ^ set(new.files))[:10]} ...")
+    removed = sorted(set(old.files) - set(new.files))
+    if removed:
+        print(f"{len(removed)} arrays missing from {new_path}: {removed[:10]} ...")
         return 1
+    added = sorted({key.rsplit("/", 1)[1] for key in set(new.files) - set(old.files)})
+    if added:  # a new state array (e.g. a new mechanism's): compared from the next record on
+        print(f"only in {new_path}: the arrays {added} (not compared)")
     different = []
     for key in sorted(old.files):
         a, b = old[key], new[key]

@@ -38,7 +38,7 @@ from cpf_commands.common.ray_runtime import add_address_argument
 from cpf_env.infra import atomic
 from cpf_env.scenarios import make_scenario
 from cpf_env.scenarios.splits import SPLITS
-from cpf_env.scenarios.suite import is_deterministic, list_suite
+from cpf_env.scenarios.suite import TRACKS, is_deterministic, list_suite
 
 __all__ = ["bench_main"]
 
@@ -80,8 +80,16 @@ def _parser() -> argparse.ArgumentParser:
     )
     add_scenarios_argument(
         parser,
-        "registered scenario names (default: the benchmark suite, bench_*)",
-        default=list_suite(),
+        "registered scenario names (default: the scenarios of --track)",
+        default=None,
+    )
+    parser.add_argument(
+        "--track",
+        choices=sorted(TRACKS),
+        default=None,
+        help="the benchmark track to run when --scenarios is not given: core, the suite "
+        "bench_* (the default); hard, the same tasks under sensing and thruster dynamics, "
+        "hard_* (cpf_env.scenarios.hard)",
     )
     parser.add_argument(
         "--num-seeds", type=int, default=10, help="episodes per policy and scenario (default: 10)"
@@ -239,10 +247,23 @@ def _count(number: int, one: str, many: str) -> str:
     return f"{number} {one if number == 1 else many}"
 
 
+def _arguments(parser: argparse.ArgumentParser, argv: Sequence[str] | None) -> argparse.Namespace:
+    """The parsed arguments, ``scenarios`` resolved from ``--track`` when not given."""
+    args = parser.parse_args(argv)
+    if args.scenarios is not None and args.track is not None:
+        parser.error(
+            "--track and --scenarios both say which scenarios to run: give --track for a "
+            "whole track, or --scenarios for a selection (from one track or several)."
+        )
+    if args.scenarios is None:
+        args.scenarios = list_suite(args.track or "core")
+    return args
+
+
 def bench_main(argv: Sequence[str] | None = None) -> int:
     """``cpf-bench``: see ``cpf-bench --help``."""
     parser = _parser()
-    args = parser.parse_args(argv)
+    args = _arguments(parser, argv)
     start = time.perf_counter()
     try:
         lock = _claim_output(args)

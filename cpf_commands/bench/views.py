@@ -25,6 +25,7 @@ from cpf_bench.verdict import (
     worst_episode,
     worst_episode_regressed,
 )
+from cpf_env.scenarios import suite
 
 __all__ = [
     "display_name",
@@ -196,7 +197,17 @@ def markdown(
         f"`P(beats)`: probability of a lower cost than {reference} on the same seed. "
         "All numbers: `summary.csv`.",
     ]
-    versions = sorted({str(r["suite_version"]) for r in rows if r["suite_version"] is not None})
+    tracks = {suite.track_of(str(r["scenario"])) for r in rows}
+    versions = sorted(
+        {str(r["suite_version"]) for r in rows if suite.track_of(str(r["scenario"])) == "core"}
+    )
+    if "hard" in tracks:
+        lines += [
+            "",
+            f"Hard-track scenarios: hard track version {suite.HARD_VERSION} "
+            "(`cpf_env.scenarios.suite.HARD_VERSION`; sensing and thruster dynamics, "
+            "`cpf_env.scenarios.hard`); results of another version do not compare.",
+        ]
     if versions:
         lines += [
             "",

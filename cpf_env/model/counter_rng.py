@@ -2,10 +2,11 @@
 
 Every draw is a pure function of ``(key, counter, stream, index)``: a fleet's
 key (drawn once per episode from the env's ``np_random``), the control step,
-a stream id (waves, wind, current, packet loss) and an element index. Draws
-therefore do not depend on the number of fleets, the order in which threads
-run, or what other streams consumed: the single env and fleet k of the
-batched simulator see the same numbers, bit for bit.
+a stream id (waves, wind, current, packet loss, sensor noise and dropouts)
+and an element index. Draws therefore do not depend on the number of
+fleets, the order in which threads run, or what other streams consumed: the
+single env and fleet k of the batched simulator see the same numbers, bit
+for bit.
 
 The mixer is SplitMix64 (Steele, Lea & Flood, OOPSLA 2014), chained once per
 coordinate; uniforms take the top 53 bits.
@@ -18,9 +19,20 @@ import math
 import numba
 import numpy as np
 
-__all__ = ["STREAM_CURRENT", "STREAM_LOSS", "STREAM_WAVES", "STREAM_WIND", "normal", "uniform"]
+__all__ = [
+    "STREAM_CURRENT",
+    "STREAM_DROPOUT",
+    "STREAM_FIX",
+    "STREAM_LOSS",
+    "STREAM_WAVES",
+    "STREAM_WIND",
+    "normal",
+    "uniform",
+]
 
 STREAM_WAVES, STREAM_WIND, STREAM_CURRENT, STREAM_LOSS = 1, 2, 3, 4
+#: The sensors' noise on each fix, and whether a scheduled fix is lost (``cpf_env.model.sensors``).
+STREAM_FIX, STREAM_DROPOUT = 5, 6
 
 _GOLDEN = np.uint64(0x9E3779B97F4A7C15)
 _MUL1 = np.uint64(0xBF58476D1CE4E5B9)

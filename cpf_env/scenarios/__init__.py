@@ -3,7 +3,7 @@
 What lives here: the ``Scenario`` type (``scenario``), the registry of named
 scenarios (``registry``), the paper's simulation and its variants
 (``paper``), the fine-step scenarios of the reproduction (``fine``), the
-benchmark suite (``suite``), the reward's weights and forms
+benchmark suite and its tracks (``suite``; the hard track: ``hard``), the reward's weights and forms
 (``reward_weights``) and the value checks that scenario fields go through
 (``checks``). Importing this package registers every catalog scenario.
 
@@ -18,7 +18,7 @@ import them.
     True
 """
 
-from cpf_env.scenarios import fine, paper, splits, suite
+from cpf_env.scenarios import fine, hard, paper, splits, suite
 from cpf_env.scenarios.registry import get, list_scenarios, make_scenario, register
 from cpf_env.scenarios.scenario import InitialState, Scenario, SpeedSchedule
 
@@ -28,6 +28,7 @@ __all__ = [
     "SpeedSchedule",
     "fine",
     "get",
+    "hard",
     "list_scenarios",
     "make_scenario",
     "paper",

@@ -29,6 +29,7 @@ from cpf_env.model.disturbances import Disturbances
 from cpf_env.model.graph import Graph, SwitchingTopology, as_switching
 from cpf_env.model.links import LinkImpairments
 from cpf_env.model.paths import Path
+from cpf_env.model.sensors import Sensors
 from cpf_env.model.vessel import CYBERSHIP2, VesselModel
 from cpf_env.scenarios.checks import as_integer, as_real, check_plant_step
 from cpf_env.scenarios.reward_weights import RewardWeights
@@ -161,6 +162,9 @@ class Scenario:
         links: Packet loss and delay on every link.
         thrusters: Lag and slew-rate limit of the applied force
             (``cpf_env.model.actuators``); the default is an instant thruster.
+        sensors: Noise, rate and dropouts of the pose fixes the observation is
+            computed from, and whether velocity is measured (``cpf_env.model.sensors``);
+            the default observes the true state every step.
         dt: Control period (s).
         substeps: RK4 plant steps per control period.
         max_steps: Episode length (control steps) before truncation.
@@ -184,6 +188,7 @@ class Scenario:
     disturbances: Disturbances = field(default_factory=Disturbances)
     links: LinkImpairments = field(default_factory=LinkImpairments)
     thrusters: Thrusters = field(default_factory=Thrusters)
+    sensors: Sensors = field(default_factory=Sensors)
     dt: float = 0.05
     substeps: int = 5
     max_steps: int = 3000
@@ -229,6 +234,10 @@ class Scenario:
         if not isinstance(self.thrusters, Thrusters):
             raise ValueError(
                 f"thrusters must be a cpf_env.model.actuators.Thrusters, got {self.thrusters!r}."
+            )
+        if not isinstance(self.sensors, Sensors):
+            raise ValueError(
+                f"sensors must be a cpf_env.model.sensors.Sensors, got {self.sensors!r}."
             )
         if self.links.delay_steps >= self.max_steps:
             raise ValueError(

@@ -21,6 +21,10 @@ training scenario          its ``shift`` (outside the training ranges)
 ``bench_switching``        the graph switches every 5 s (was 10 s)
 ``bench_heterogeneous``    models +- 45 % (was +- 30 %)
 ``bench_large_fleet``      n = 7 on a star graph (was n = 10 on a ring), 20 % loss (was 10 %)
+``hard_*``                 its core scenario's shift, with fixes of 3 cm and 1.5 degrees every
+                           6 steps, 10 % lost (were 2 cm, 1 degree, 4 steps, 5 %), and
+                           thrusters with a 0.8 s lag and slew limits x 0.7 (were 0.5 s), where
+                           it has them (``cpf_env.scenarios.hard``)
 =========================  ==================================================================
 
 Training code draws only from the training distribution:
@@ -46,11 +50,12 @@ from cpf_env.model.disturbances import GaussMarkov
 from cpf_env.model.graph import Graph, SwitchingTopology
 from cpf_env.model.links import LinkImpairments
 from cpf_env.model.paths import Sinusoid
-from cpf_env.scenarios import suite
-from cpf_env.scenarios.registry import register
+from cpf_env.scenarios import hard, suite
+from cpf_env.scenarios.registry import get, register
 from cpf_env.scenarios.scenario import Scenario
 
 __all__ = [
+    "CORE_SHIFTS",
     "EVALUATION_SEED",
     "SHIFTS",
     "SPLITS",
@@ -131,8 +136,8 @@ def _large_fleet() -> Scenario:
     )
 
 
-#: Suite scenario -> its shifted variant's factory.
-SHIFTS: dict[str, Callable[[], Scenario]] = {
+#: Core suite scenario -> its shifted variant's factory.
+CORE_SHIFTS: dict[str, Callable[[], Scenario]] = {
     "bench_mild": _mild,
     "bench_saturation": _saturation,
     "bench_current_waves": _current_waves,
@@ -140,6 +145,24 @@ SHIFTS: dict[str, Callable[[], Scenario]] = {
     "bench_switching": _switching,
     "bench_heterogeneous": _heterogeneous,
     "bench_large_fleet": _large_fleet,
+}
+
+
+def _hard_shift(name: str) -> Scenario:
+    """Hard scenario ``name``'s shift: its core scenario's, with the shifted mechanisms it has."""
+    task, base = get(name), CORE_SHIFTS[hard.BASES[name]]()
+    changes: dict[str, object] = {}
+    if not task.sensors.ideal:
+        changes["sensors"] = hard.SHIFTED_FIX
+    if not task.thrusters.instant:
+        changes["thrusters"] = hard.SHIFTED_THRUSTERS
+    return base.replace(**changes)
+
+
+#: Every track's scenario -> its shifted variant's factory.
+SHIFTS: dict[str, Callable[[], Scenario]] = {
+    **CORE_SHIFTS,
+    **{name: functools.partial(_hard_shift, name) for name in hard.BASES},
 }
 
 
@@ -165,20 +188,22 @@ def split_scenario(name: str, split: str) -> Scenario:
         raise ValueError(f"unknown split {split!r}; choose one of {list(SPLITS)}.")
     if name not in SHIFTS:
         raise ValueError(
-            f"{name!r} has no held-out splits; only the suite's scenarios do: {sorted(SHIFTS)}."
+            f"{name!r} has no held-out splits; only the tracks' scenarios do: {sorted(SHIFTS)}."
         )
-    return getattr(suite, name)() if split == "test" else _named(name)
+    return get(name) if split == "test" else _named(name)
 
 
 def suite_version(name: str) -> int | None:
-    """``suite.SUITE_VERSION`` for a suite scenario or its shift variant, else None.
+    """The version of the track of a scenario or its shift variant, else None.
 
     Example:
         >>> suite_version("bench_mild_shift") == suite.SUITE_VERSION, suite_version("wang2014")
         (True, None)
+        >>> suite_version("hard_sensing") == suite.HARD_VERSION
+        True
     """
-    base = name[: -len(SHIFT_SUFFIX)] if name.endswith(SHIFT_SUFFIX) else name
-    return suite.SUITE_VERSION if base in SHIFTS else None
+    track = suite.track_of(name)
+    return None if track is None else suite.TRACK_VERSIONS[track]
 
 
 def check_training(scenario: str | Scenario, seeds: Iterable[int]) -> None:

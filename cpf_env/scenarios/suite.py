@@ -42,7 +42,16 @@ from cpf_env.scenarios import paper
 from cpf_env.scenarios.registry import register
 from cpf_env.scenarios.scenario import Scenario, SpeedSchedule
 
-__all__ = ["SUITE", "SUITE_VERSION", "is_deterministic", "list_suite"]
+__all__ = [
+    "HARD_VERSION",
+    "SUITE",
+    "SUITE_VERSION",
+    "TRACKS",
+    "TRACK_VERSIONS",
+    "is_deterministic",
+    "list_suite",
+    "track_of",
+]
 
 #: Version of the suite's definitions; results of different versions do not compare.
 #: 1: the first suite. 2: ``bench_switching`` cuts the fleet off the leader for
@@ -50,6 +59,9 @@ __all__ = ["SUITE", "SUITE_VERSION", "is_deterministic", "list_suite"]
 #: version 1 it cycled chain, ring and star with leader links throughout at a
 #: constant v0, and its final-window costs equalled ``bench_mild``'s).
 SUITE_VERSION = 2
+#: Version of the hard track's definitions (``cpf_env.scenarios.hard``). 1: sensing and
+#: thruster dynamics on the core suite's seven tasks.
+HARD_VERSION = 1
 
 #: Spread of the random starts (m, rad, path-variable units), common to the suite.
 POSITION_STD, HEADING_STD, THETA_STD = 1.0, 0.3, 0.5
@@ -161,11 +173,39 @@ _FACTORIES = (
 
 #: Names of the suite's scenarios, in the order the bench reports them.
 SUITE: tuple[str, ...] = tuple(factory.__name__ for factory in _FACTORIES)
+#: Each track's scenario names: ``core``, this suite; ``hard``, the same tasks under
+#: sensing and thruster dynamics (``cpf_env.scenarios.hard``, which registers them).
+TRACKS: dict[str, tuple[str, ...]] = {
+    "core": SUITE,
+    "hard": (
+        "hard_sensing",
+        "hard_sensing_waves",
+        "hard_thrusters",
+        "hard_lossy_sensing",
+        "hard_switching_thrusters",
+        "hard_heterogeneous",
+        "hard_large_fleet",
+    ),
+}
+#: Each track's version; results of different versions of a track do not compare.
+TRACK_VERSIONS = {"core": SUITE_VERSION, "hard": HARD_VERSION}
 
 
-def list_suite() -> list[str]:
-    """Names of the benchmark suite's scenarios."""
-    return list(SUITE)
+def list_suite(track: str = "core") -> list[str]:
+    """Names of a benchmark track's scenarios (default: the core suite).
+
+    Raises:
+        ValueError: An unknown track (the message lists them).
+    """
+    if track not in TRACKS:
+        raise ValueError(f"unknown track {track!r}; choose one of {sorted(TRACKS)}.")
+    return list(TRACKS[track])
+
+
+def track_of(name: str) -> str | None:
+    """The track of a scenario name (its ``_shift`` variant too), or None."""
+    base = name.removesuffix("_shift")
+    return next((track for track, names in TRACKS.items() if base in names), None)
 
 
 def is_deterministic(scenario: Scenario) -> bool:

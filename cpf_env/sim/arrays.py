@@ -44,6 +44,7 @@ class FleetArrays(NamedTuple):
     theta_dot: np.ndarray  # (B, n) last commanded (clipped) path-variable rate
     tau_command: np.ndarray  # (B, n, 3) last force command (N, N, N m)
     tau_applied: np.ndarray  # (B, n, 3) force applied over the last step (the thrusters' state)
+    fix: np.ndarray  # (B, n, 3) last pose fix x, y (m), psi (rad) of the sensors (eta if ideal)
     message: np.ndarray  # (B, n, m) last message sent (clipped)
     waves: np.ndarray  # (B, n, 3) wave force, earth frame (N, N, N m)
     wind: np.ndarray  # (B, n, 3) wind force, earth frame
@@ -72,6 +73,11 @@ class KernelConstants(NamedTuple):
     thruster_decay: float  # exp(-dt / T) of the thrusters' lag, 0 for instant thrusters
     thruster_slew: np.ndarray  # (3,) largest change of the applied force per step, inf: none
     instant_thrusters: bool  # the applied force is the saturated command
+    ideal_sensors: bool  # observe the true pose and velocity every step (Sensors.ideal)
+    fix_noise: np.ndarray  # (3,) standard deviations of a fix: x, y (m), psi (rad)
+    fix_period: int  # control steps between fixes
+    fix_dropout: float  # probability that a scheduled fix is lost
+    velocity_measured: bool  # False: the observation's nu reads 0
     theta_dot_max: float
     message_max: float
     path_kinds: np.ndarray  # (n,) int64

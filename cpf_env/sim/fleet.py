@@ -130,6 +130,17 @@ def _constants(scenario: Scenario) -> arrays.KernelConstants:
         thruster_decay=float(scenario.thrusters.decay(scenario.dt)),
         thruster_slew=_floats(scenario.thrusters.slews(scenario.dt)),
         instant_thrusters=bool(scenario.thrusters.instant),
+        ideal_sensors=bool(scenario.sensors.ideal),
+        fix_noise=_floats(
+            (
+                scenario.sensors.position_std,
+                scenario.sensors.position_std,
+                scenario.sensors.heading_std,
+            )
+        ),
+        fix_period=int(scenario.sensors.period),
+        fix_dropout=float(scenario.sensors.dropout),
+        velocity_measured=bool(scenario.sensors.velocity),
         theta_dot_max=float(scenario.theta_dot_max),
         message_max=float(scenario.message_max),
         path_kinds=_ints(kinds),
@@ -195,6 +206,7 @@ class FleetSim:
             theta_dot=np.zeros((B, n)),
             tau_command=np.zeros((B, n, 3)),
             tau_applied=np.zeros((B, n, 3)),
+            fix=np.zeros((B, n, 3)),
             message=np.zeros((B, n, m)),
             waves=np.zeros((B, n, 3)),
             wind=np.zeros((B, n, 3)),

@@ -13,7 +13,8 @@ One call advances B fleets x n vessels by one control period:
 4. advance the Gauss-Markov disturbance states exactly;
 5. send each vessel's packet (theta, message) and deliver, through the active
    topology, the packets sent ``delay`` steps ago that are not lost;
-6. write observations, rewards, error metrics and termination flags.
+6. take the sensors' pose fixes (``cpf_env.model.sensors``; the true pose by
+   default) and write observations, rewards, error metrics and termination flags.
 
 Arrays come in two named tuples (``cpf_env.sim.arrays``) built by
 ``cpf_env.sim.fleet``: ``FleetArrays`` (mutable state, leading axis B) and
@@ -263,6 +264,26 @@ def _exchange_messages(a: FleetArrays, c: KernelConstants, b: int, step: int) ->
 
 
 @numba.njit(cache=True, inline="always")
+def _take_fix(a: FleetArrays, c: KernelConstants, b: int, i: int, step: int) -> None:
+    """Vessel i's pose fix at ``step``, if one is scheduled and not lost; else the held one.
+
+    A fix is scheduled every ``fix_period`` steps from the reset (step 0, never
+    lost); it is the true pose plus independent normal noise on x, y and psi.
+    """
+    if step % c.fix_period != 0:
+        return
+    if step > 0 and c.fix_dropout > 0.0:
+        if counter_rng.uniform(a.key[b], step, counter_rng.STREAM_DROPOUT, i) < c.fix_dropout:
+            return
+    for k in range(3):
+        noise = 0.0
+        if c.fix_noise[k] > 0.0:
+            noise = c.fix_noise[k] * counter_rng.normal(a.key[b], step, counter_rng.STREAM_FIX,
+                                                        3 * i + k)  # fmt: skip
+        a.fix[b, i, k] = a.eta[b, i, k] + noise
+
+
+@numba.njit(cache=True, inline="always")
 def observe_fleet(a: FleetArrays, c: KernelConstants, b: int, speed_reference: float) -> None:
     """Write observations, errors, rewards and flags of fleet b at its current step.
 
@@ -284,11 +305,20 @@ def observe_fleet(a: FleetArrays, c: KernelConstants, b: int, speed_reference: f
         obs = a.obs[b, i]
         point = path_values(c.path_kinds[i], c.path_params[i], a.theta[b, i])
         z1, t1, t2 = path_frame(a.eta[b, i, 0], a.eta[b, i, 1], a.eta[b, i, 2], point)
+        if c.ideal_sensors:
+            seen_z1, seen_t1, seen_t2 = z1, t1, t2
+            for k in range(3):
+                a.fix[b, i, k] = a.eta[b, i, k]
+        else:  # cpf_env.model.sensors: the observation is the held fix's
+            _take_fix(a, c, b, i, step)
+            seen_z1, seen_t1, seen_t2 = path_frame(
+                a.fix[b, i, 0], a.fix[b, i, 1], a.fix[b, i, 2], point
+            )
         for k in range(3):
-            obs[NU + k] = a.nu[b, i, k]
-            obs[Z1 + k] = z1[k]
-            obs[T1 + k] = t1[k]
-            obs[T2 + k] = t2[k]
+            obs[NU + k] = a.nu[b, i, k] if c.velocity_measured else 0.0
+            obs[Z1 + k] = seen_z1[k]
+            obs[T1 + k] = seen_t1[k]
+            obs[T2 + k] = seen_t2[k]
             obs[TAU + k] = a.tau_applied[b, i, k]
             finite = finite and math.isfinite(a.eta[b, i, k]) and math.isfinite(a.nu[b, i, k])
         obs[THETA] = a.theta[b, i]

@@ -433,11 +433,12 @@ def test_commands_reject_an_unknown_policy(capsys):
 
 def test_default_bench_is_every_baseline_and_the_headroom_reference_on_the_suite():
     from baselines import HEADROOM_REFERENCE, PRIVILEGED
-    from cpf_commands.bench.cli import _parser
+    from cpf_commands.bench.cli import _arguments, _parser
 
-    args = _parser().parse_args([])
+    args = _arguments(_parser(), [])
     assert args.policies == [*POLICIES, HEADROOM_REFERENCE]
     assert HEADROOM_REFERENCE in PRIVILEGED and args.scenarios == suite.list_suite()
+    assert _arguments(_parser(), ["--track", "hard"]).scenarios == suite.list_suite("hard")
     assert args.num_seeds == 10
 
 

@@ -13,6 +13,7 @@ import pytest
 from cpf_commands.bench import cli
 from cpf_commands.bench.cli import bench_main
 from cpf_env.infra import atomic
+from cpf_env.scenarios.suite import list_suite
 
 QUICK = ["--policies", "nn_dsc", "--scenarios", "wang2014", "--num-seeds", "1", "--max-steps", "3",
          "--quiet"]  # fmt: skip
@@ -107,6 +108,7 @@ def test_disk_full_while_writing_keeps_the_old_results(
 _HOLD = """
 import sys, time
 from cpf_env.infra import atomic
+from cpf_env.scenarios.suite import list_suite
 with atomic.FolderLock(sys.argv[1]):
     print("locked", flush=True)
     time.sleep(60)
@@ -156,3 +158,19 @@ def test_episodes_csv_reads_back_bit_for_bit() -> None:
             np.testing.assert_array_equal(mine.metrics[metric], theirs.metrics[metric])
     with pytest.raises(ValueError, match="missing column"):
         read_episodes_csv("policy,scenario,seed,cost\nmpc,bench_mild,0,1.0\n")
+
+
+def test_track_hard_runs_the_hard_scenarios_and_names_the_track(tmp_path: Path) -> None:
+    argv = ["--policies", "nn_dsc", "nn_dsc_ekf", "--track", "hard", "--num-seeds", "1",
+            "--max-steps", "5", "--out", str(tmp_path), "--quiet", "--no-figures"]  # fmt: skip
+    assert bench_main(argv) == 0
+    summary = (tmp_path / "summary.md").read_text()
+    assert "hard track version 1" in summary and "benchmark suite version" not in summary
+    rows = (tmp_path / "episodes.csv").read_text().splitlines()[1:]
+    assert sorted({row.split(",")[1] for row in rows}) == sorted(list_suite("hard"))
+
+
+def test_track_and_scenarios_together_are_refused(capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit):
+        bench_main(["--track", "hard", "--scenarios", "bench_mild", "--out", "x"])
+    assert "give --track for a whole track, or --scenarios" in capsys.readouterr().err

@@ -1,0 +1,57 @@
+"""The hard track (``cpf_env.scenarios.hard``): its scenarios, mechanisms, splits and version."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import pytest
+
+from cpf_env import scenarios
+from cpf_env.scenarios import hard, splits, suite
+
+HARD = suite.list_suite("hard")
+
+
+def test_the_tracks_list_their_scenarios_and_an_unknown_track_is_refused() -> None:
+    assert suite.list_suite() == suite.list_suite("core") == list(suite.SUITE)
+    assert HARD == [factory.__name__ for factory in hard.HARD_FACTORIES] == list(hard.BASES)
+    assert all(name in scenarios.list_scenarios() for name in HARD)
+    with pytest.raises(ValueError, match=r"unknown track 'hardest'; choose one of \['core'"):
+        suite.list_suite("hardest")
+    assert suite.track_of("hard_sensing_shift") == "hard" and suite.track_of("wang2014") is None
+
+
+def test_each_mechanism_is_on_at_least_two_scenarios_and_all_on_the_large_fleet() -> None:
+    tasks = [scenarios.get(name) for name in HARD]
+    assert sum(not task.sensors.ideal for task in tasks) >= 2
+    assert sum(not task.thrusters.instant for task in tasks) >= 2
+    large = scenarios.get("hard_large_fleet")
+    assert large.n >= 10 and not large.sensors.ideal and not large.thrusters.instant
+
+
+@pytest.mark.parametrize("name", HARD)
+def test_a_hard_scenario_is_its_core_task_with_the_mechanisms_only(name: str) -> None:
+    task, core = scenarios.get(name), scenarios.get(hard.BASES[name])
+    same = dataclasses.replace(
+        task, name=core.name, description=core.description,
+        sensors=core.sensors, thrusters=core.thrusters,
+    )  # fmt: skip
+    assert same == core
+    assert not (task.sensors.ideal and task.thrusters.instant)
+
+
+@pytest.mark.parametrize("name", HARD)
+def test_the_shift_split_shifts_the_core_task_and_the_mechanisms(name: str) -> None:
+    task, shifted = scenarios.get(name), splits.split_scenario(name, "shift")
+    core_shift = splits.split_scenario(hard.BASES[name], "shift")
+    assert shifted.name == f"{name}_shift" and shifted.n == core_shift.n
+    assert shifted.paths == core_shift.paths and shifted.links == core_shift.links
+    if not task.sensors.ideal:
+        assert shifted.sensors == hard.SHIFTED_FIX != task.sensors
+    if not task.thrusters.instant:
+        assert shifted.thrusters == hard.SHIFTED_THRUSTERS != task.thrusters
+    assert splits.suite_version(shifted.name) == suite.HARD_VERSION
+    with pytest.raises(ValueError, match="held-out shift split"):
+        splits.check_training(shifted.name, range(4))
+    with pytest.raises(ValueError, match="evaluation seeds"):
+        splits.check_training(name, range(splits.EVALUATION_SEED, splits.EVALUATION_SEED + 2))
