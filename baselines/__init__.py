@@ -70,6 +70,7 @@ from cpf_env.envs.policy import FleetPolicy
 
 __all__ = [
     "ALL_POLICIES",
+    "DEPLOYABLE",
     "DIAGNOSTICS",
     "FILTERED",
     "HEADROOM_REFERENCE",
@@ -145,6 +146,8 @@ PRIVILEGED: dict[str, type[FleetPolicy]] = {
         BacksteppingPrivileged,
     )
 }
+#: Every deployable analytic policy by name: the default set and those for the hard conditions.
+DEPLOYABLE: dict[str, type[FleetPolicy]] = {**POLICIES, **UNDERACTUATED, **FILTERED}
 #: Every policy class by name: ``POLICIES``, ``UNDERACTUATED``, ``FILTERED``, then ``PRIVILEGED``.
 ALL_POLICIES: dict[str, type[FleetPolicy]] = {
     **POLICIES,

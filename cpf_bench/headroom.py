@@ -5,8 +5,9 @@ the final window (``cost_window``):
 
 * J_ref, the reference's mean cost (``nn_dsc`` by default);
 * J_best, the lowest mean cost of a deployable analytic policy that ran
-  (``baselines.POLICIES``: ``mpc`` included, trained agents and privileged
-  references not), and its name;
+  (``baselines.DEPLOYABLE``: the default set with ``mpc``, and the designs
+  for the hard conditions, ``ilos`` and the filtered ones; trained agents and
+  privileged references not), and its name;
 * J_oracle, the mean cost of the headroom bound (``baselines.HEADROOM_REFERENCE``);
 * headroom = 1 - J_oracle / J_best: the share of the best deployable
   analytic design's cost that a controller told everything removes, i.e.
@@ -32,7 +33,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from baselines import HEADROOM_REFERENCE, POLICIES
+from baselines import DEPLOYABLE, HEADROOM_REFERENCE
 from cpf_bench.report import CellResult
 
 __all__ = ["headroom_rows", "headroom_table", "oracle_not_lowest"]
@@ -57,7 +58,7 @@ def headroom_rows(
     rows: list[dict[str, object]] = []
     for name in dict.fromkeys(cell.scenario for cell in cells):
         bound = means.get((HEADROOM_REFERENCE, name))
-        deployable = {p: j for (p, s), j in means.items() if s == name and p in POLICIES}
+        deployable = {p: j for (p, s), j in means.items() if s == name and p in DEPLOYABLE}
         if bound is None or not deployable:
             continue
         best = min(deployable, key=lambda p: deployable[p])

@@ -142,3 +142,14 @@ def test_train_residual_ppo_example_trains_evaluates_and_reports(tmp_path, capsy
     summary = (results / "summary.md").read_text()
     assert "--eval-num-seeds 2 --eval-max-steps 40" in summary and run.name in summary
     capsys.readouterr()
+
+
+def test_hard_track_step_benchmark_times_both_sides():
+    spec = importlib.util.spec_from_file_location(
+        "hard_track_step", ROOT / "benchmarks" / "hard_track_step.py"
+    )
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    argv = ["--fleets", "4", "--rounds", "1", "--seconds", "0.05", "--scenarios", "hard_sensing"]
+    [(name, hard_rate, core_rate)] = module.main(argv)
+    assert name == "hard_sensing" and hard_rate > 0 and core_rate > 0

@@ -248,7 +248,7 @@ def markdown(
             "",
             "## Headroom",
             "",
-            f"Mean costs; best deployable analytic: the cheapest of baselines.POLICIES that ran; "
+            f"Mean costs; best deployable analytic: the cheapest of baselines.DEPLOYABLE that ran; "
             f"headroom = 1 - J {HEADROOM_REFERENCE} / J best (docs/benchmark.md).",
             "",
             *room,
