@@ -69,14 +69,14 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument(
         "--policies",
         nargs="+",
-        default=default_policies(),
+        default=None,
         type=policy_argument,
         metavar="POLICY",
         help="baseline names, policies installed packages register, package.module:NAME of "
         "your own policy class or factory (docs/extending.md), cpf-train --out folders or "
-        "cpf-export .onnx files, each once (default: every deployable baseline and the "
-        "headroom reference nn_dsc_privileged, which is told the true model error and "
-        "disturbances and has ideal links: not deployable)",
+        "cpf-export .onnx files, each once (default: every deployable baseline, with the "
+        "filtered designs nn_dsc_ekf and mpc_tuned_ekf on the hard track, and the headroom "
+        "bound oracle, which plans on copies of the simulator: not deployable)",
     )
     add_scenarios_argument(
         parser,
@@ -257,6 +257,8 @@ def _arguments(parser: argparse.ArgumentParser, argv: Sequence[str] | None) -> a
         )
     if args.scenarios is None:
         args.scenarios = list_suite(args.track or "core")
+    if args.policies is None:
+        args.policies = default_policies(args.track or "core")
     return args
 
 

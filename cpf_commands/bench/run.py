@@ -64,15 +64,18 @@ BASE_SEED = EVALUATION_SEED
 DEFAULT_REFERENCE = "nn_dsc"
 
 
-def default_policies() -> list[str]:
+def default_policies(track: str = "core") -> list[str]:
     """``cpf-bench``'s default policy set: every deployable baseline and the headroom bound.
 
     The headroom bound (``baselines.HEADROOM_REFERENCE``, ``oracle``, privileged,
-    not deployable) is what the normalized score is measured against.
+    not deployable) is what the normalized score is measured against. On the
+    hard track the designs under the navigation filter (``baselines.FILTERED``)
+    join: they are the analytic answer to its sensors.
     """
-    from baselines import HEADROOM_REFERENCE, POLICIES
+    from baselines import FILTERED, HEADROOM_REFERENCE, POLICIES
 
-    return [*POLICIES, HEADROOM_REFERENCE]
+    hard = [*FILTERED] if track == "hard" else []
+    return [*POLICIES, *hard, HEADROOM_REFERENCE]
 
 
 def write_outputs(

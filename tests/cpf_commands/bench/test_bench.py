@@ -438,7 +438,9 @@ def test_default_bench_is_every_baseline_and_the_headroom_reference_on_the_suite
     args = _arguments(_parser(), [])
     assert args.policies == [*POLICIES, HEADROOM_REFERENCE]
     assert HEADROOM_REFERENCE in PRIVILEGED and args.scenarios == suite.list_suite()
-    assert _arguments(_parser(), ["--track", "hard"]).scenarios == suite.list_suite("hard")
+    hard = _arguments(_parser(), ["--track", "hard"])
+    assert hard.scenarios == suite.list_suite("hard")
+    assert hard.policies == [*POLICIES, "nn_dsc_ekf", "mpc_tuned_ekf", HEADROOM_REFERENCE]
     assert args.num_seeds == 10
 
 
