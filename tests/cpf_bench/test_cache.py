@@ -18,7 +18,9 @@ def test_keys_change_with_the_scenario_the_horizon_and_the_policy():
     assert key != cache.cell_key("oracle", mild, 21)
     assert key != cache.cell_key("mpc", mild, 20)
     assert key != cache.cell_key("oracle", mild.replace(max_path_error=9.0), 20)
-    with pytest.raises(ValueError, match="only oracle, mpc, mpc_tuned are cached, not 'nn_dsc'"):
+    with pytest.raises(
+        ValueError, match="only oracle, mpc, mpc_tuned, mpc_tuned_ekf are cached, not 'nn_dsc'"
+    ):
         cache.cell_key("nn_dsc", mild, 20)
 
 
