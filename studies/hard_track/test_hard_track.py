@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import dataclasses
 
+import numpy as np
 from conftest import ROOT, load_script
 
+from cpf_bench.report import METRICS, CellResult, episodes_csv
 from cpf_env import scenarios
 from cpf_env.model.sensors import Sensors
 
@@ -20,10 +22,12 @@ def test_the_told_state_variant_is_the_hard_scenario_with_ideal_sensors() -> Non
 
 def test_the_hard_bench_is_read_as_mean_costs_per_policy_and_scenario(tmp_path) -> None:
     script = load_script(ROOT / "studies/hard_track/told_state.py")
-    header = "policy,scenario,seed,cost\n"
-    rows = [f"{p},hard_sensing,{seed},{c + seed - 10000}\n" for seed in (10000, 10002)
-            for p, c in (("mpc_tuned_ekf", 100.0), ("oracle", 60.0))]  # fmt: skip
-    (tmp_path / "episodes.csv").write_text(header + "".join(rows))
+    cells = [
+        CellResult(policy, "hard_sensing", (10000, 10002), False,
+                   {m: np.array([cost, cost + 2.0]) for m in METRICS})
+        for policy, cost in (("mpc_tuned_ekf", 100.0), ("oracle", 60.0))
+    ]  # fmt: skip
+    (tmp_path / "episodes.csv").write_text(episodes_csv(cells))
     assert script._hard_costs(tmp_path) == {  # the mean over the two seeds
         ("mpc_tuned_ekf", "hard_sensing"): 101.0, ("oracle", "hard_sensing"): 61.0
     }  # fmt: skip

@@ -15,12 +15,12 @@ telling the state closes. Usage::
 from __future__ import annotations
 
 import argparse
-import csv
 from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
 
+from cpf_bench.report import read_episodes_csv
 from cpf_commands.bench.run import run_bench
 from cpf_env import scenarios
 from cpf_env.model.sensors import Sensors
@@ -35,11 +35,8 @@ def told_state(name: str) -> Scenario:
 
 def _hard_costs(folder: Path) -> dict[tuple[str, str], float]:
     """(policy, scenario) -> mean cost over the episodes of a bench folder."""
-    costs: dict[tuple[str, str], list[float]] = {}
-    with (folder / "episodes.csv").open() as file:
-        for row in csv.DictReader(file):
-            costs.setdefault((row["policy"], row["scenario"]), []).append(float(row["cost"]))
-    return {key: float(np.mean(values)) for key, values in costs.items()}
+    cells = read_episodes_csv((folder / "episodes.csv").read_text())
+    return {(cell.policy, cell.scenario): float(np.mean(cell.metrics["cost"])) for cell in cells}
 
 
 def main(argv: Sequence[str] | None = None) -> None:
