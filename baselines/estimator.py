@@ -223,9 +223,7 @@ class Filtered(FleetPolicy):
         self._paths = np.ascontiguousarray(paths, dtype=np.float64)
         self._nominal = np.stack([model.to_params() for model in scenario.vessel_models])
         sensors = scenario.sensors
-        self._variances = np.array(
-            (sensors.position_std**2, sensors.position_std**2, sensors.heading_std**2)
-        )
+        self._variances = np.square(sensors.fix_std)
         self._velocity = bool(sensors.velocity)
         self._dt = float(scenario.dt)
         self._q = np.array(FILTER_NOISE)

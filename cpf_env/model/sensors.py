@@ -85,6 +85,11 @@ class Sensors:
             raise ValueError(f"Sensors.velocity must be True or False, got {self.velocity!r}.")
 
     @property
+    def fix_std(self) -> tuple[float, float, float]:
+        """Standard deviations of a fix's x (m), y (m) and psi (rad) noise."""
+        return (self.position_std, self.position_std, self.heading_std)
+
+    @property
     def ideal(self) -> bool:
         """True if the observation is the true state at every step (the default)."""
         return (

@@ -131,13 +131,7 @@ def _constants(scenario: Scenario) -> arrays.KernelConstants:
         thruster_slew=_floats(scenario.thrusters.slews(scenario.dt)),
         instant_thrusters=bool(scenario.thrusters.instant),
         ideal_sensors=bool(scenario.sensors.ideal),
-        fix_noise=_floats(
-            (
-                scenario.sensors.position_std,
-                scenario.sensors.position_std,
-                scenario.sensors.heading_std,
-            )
-        ),
+        fix_noise=_floats(scenario.sensors.fix_std),
         fix_period=int(scenario.sensors.period),
         fix_dropout=float(scenario.sensors.dropout),
         velocity_measured=bool(scenario.sensors.velocity),
