@@ -66,6 +66,7 @@ from baselines.mpc_tuned import MPCTuned
 from baselines.nn_dsc import DSCPolicy, GlobalSpeedPolicy, NNDSCPolicy, NoAuxPolicy
 from baselines.policy import DIAGNOSTICS, AnalyticPolicy
 from baselines.privileged import BacksteppingPrivileged, NNDSCPrivileged, PrivilegedPolicy
+from baselines.safety import MPCTunedFilteredSafe, MPCTunedSafe, NNDSCSafe, SafetyFiltered
 from cpf_env.envs.policy import FleetPolicy
 
 __all__ = [
@@ -76,6 +77,7 @@ __all__ = [
     "HEADROOM_REFERENCE",
     "POLICIES",
     "PRIVILEGED",
+    "SAFE",
     "UNDERACTUATED",
     "AnalyticPolicy",
     "BacksteppingDelayCompensated",
@@ -95,15 +97,19 @@ __all__ = [
     "MPCToldV0",
     "MPCTuned",
     "MPCTunedFiltered",
+    "MPCTunedFilteredSafe",
+    "MPCTunedSafe",
     "NNDSCDelayCompensated",
     "NNDSCFiltered",
     "NNDSCGains",
     "NNDSCPolicy",
     "NNDSCPrivileged",
+    "NNDSCSafe",
     "NoAuxPolicy",
     "OraclePolicy",
     "PrivilegedPolicy",
     "RecedingHorizonGains",
+    "SafetyFiltered",
     "make_policy",
 ]
 
@@ -130,6 +136,11 @@ UNDERACTUATED: dict[str, type[FleetPolicy]] = {ILOSPolicy.name: ILOSPolicy}
 FILTERED: dict[str, type[FleetPolicy]] = {
     policy.name: policy for policy in (NNDSCFiltered, MPCTunedFiltered)
 }
+#: Deployable designs under the separation's safety filter (``baselines.safety``), for the
+#: scenarios whose messages carry its broadcast (the crossing scenarios).
+SAFE: dict[str, type[FleetPolicy]] = {
+    policy.name: policy for policy in (NNDSCSafe, MPCTunedSafe, MPCTunedFilteredSafe)
+}
 
 #: Privileged references by name: not deployable, they read what no local observation
 #: holds (the simulator, or the scenario's v0 schedule).
@@ -147,12 +158,13 @@ PRIVILEGED: dict[str, type[FleetPolicy]] = {
     )
 }
 #: Every deployable analytic policy by name: the default set and those for the hard conditions.
-DEPLOYABLE: dict[str, type[FleetPolicy]] = {**POLICIES, **UNDERACTUATED, **FILTERED}
+DEPLOYABLE: dict[str, type[FleetPolicy]] = {**POLICIES, **UNDERACTUATED, **FILTERED, **SAFE}
 #: Every policy class by name: ``POLICIES``, ``UNDERACTUATED``, ``FILTERED``, then ``PRIVILEGED``.
 ALL_POLICIES: dict[str, type[FleetPolicy]] = {
     **POLICIES,
     **UNDERACTUATED,
     **FILTERED,
+    **SAFE,
     **PRIVILEGED,
 }
 #: The headroom bound the benchmark's normalized score is measured against.

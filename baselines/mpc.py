@@ -56,6 +56,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from baselines import mpc_kernels as kernels
+from baselines.barrier import BARRIER_MARGIN
 from baselines.policy import resolve_scenario
 from baselines.privileged import fleet_rows, simulator_of
 from cpf_env.envs.policy import FleetPolicy
@@ -64,16 +65,20 @@ from cpf_env.sim.fleet import FleetSim, observation_layout
 from cpf_env.sim.observation import LEADER, NU, SLOT_MSG, SLOT_WEIGHT, SLOTS, TAU, V0
 
 __all__ = [
+    "ORACLE_BARRIER_MARGIN",
     "SPEED_RATE",
     "MPCPolicy",
     "MPCPrivileged",
     "OraclePolicy",
     "RecedingHorizon",
     "RecedingHorizonGains",
+    "thruster_gain",
 ]
 
 Array = NDArray[np.float64]
 
+#: How far outside the collision distance the oracle's feedback keeps two vessels (m).
+ORACLE_BARRIER_MARGIN = 0.01
 #: The reference speed's rate limit of the oracle (and of ``mpc_tuned``'s estimate): a
 #: quarter of the nominal surge acceleration at the force limit (``RecedingHorizonGains``).
 SPEED_RATE = 0.25
@@ -92,7 +97,8 @@ class RecedingHorizonGains:
         rate_noise: Std of a sampled path-rate offset (1/s), common to a fleet's
             vessels (plus ``VESSEL_RATE_SHARE`` of it per vessel).
         K1: Kinematic gains (1/s), surge, sway, yaw.
-        K2: Velocity-error gains (1/s).
+        K2: Velocity-error gains (1/s), each capped at 1 / (2 T) behind thrusters with a
+            lag T (``thruster_gain``).
         k_sync: Gain of the synchronization error on the path rate (1/s), capped
             per vessel at 1 / (dt d_i) (d_i its weighted degree) so the consensus is
             stable on any graph.
@@ -105,6 +111,9 @@ class RecedingHorizonGains:
             (``inf``: no limit): ``mpc``'s speed estimate moves at most that much
             per second on each vessel; the oracle takes up v0 at that rate from 0,
             with the fleet's smallest such acceleration (``mpc_kernels.ramped_speed``).
+        barrier_margin: Where the scenario has a separation, how far outside its collision
+            distance the oracle's feedback keeps every pair of vessels (m, > 0;
+            ``baselines.barrier``); ``mpc`` has no barrier (``baselines.safety`` adds one).
     """
 
     horizon: float = 2.0
@@ -113,6 +122,7 @@ class RecedingHorizonGains:
     samples: int = 12
     force_noise: float = 0.1
     rate_noise: float = 0.3
+    vessel_rate_share: float = 0.1
     K1: tuple[float, float, float] = (1.0, 1.0, 1.0)
     K2: tuple[float, float, float] = (6.0, 6.0, 6.0)
     k_sync: float = 6.0
@@ -121,10 +131,33 @@ class RecedingHorizonGains:
     k5: float = 1.0
     k6: float = 1.0
     speed_rate: float = math.inf
+    barrier_margin: float = BARRIER_MARGIN
 
-    def vector(self, ramp: float) -> Array:
-        """The feedback's gains in kernel form (``mpc_kernels.GAINS_SIZE``,), ``ramp`` in m/s^2."""
-        return np.array([*self.K1, *self.K2, self.k_sync, self.k_mu, ramp], dtype=np.float64)
+    def vector(self, ramp: float, lag: float = 0.0) -> Array:
+        """The feedback's gains in kernel form (``mpc_kernels.GAINS_SIZE``,).
+
+        Args:
+            ramp: The oracle's reference-speed ramp (m/s^2).
+            lag: The thrusters' time constant T (s, ``cpf_env.model.actuators``); for
+                T > 0 each velocity gain is capped at 1 / (2 T) (``thruster_gain``).
+        """
+        K2 = [thruster_gain(k, lag) for k in self.K2]
+        return np.array(
+            [*self.K1, *K2, self.k_sync, self.k_mu, ramp, self.barrier_margin], dtype=np.float64
+        )
+
+
+def thruster_gain(gain: float, lag: float) -> float:
+    """A velocity-loop gain (1/s) a thruster lag T (s) leaves well damped: min(gain, 1 / (2 T)).
+
+    The velocity error e of the feedback obeys e' = -K2 e when the force acts
+    at once. Through a first-order thruster lag the loop is T e'' + e' + K2 e = 0,
+    whose damping 1 / (2 sqrt(K2 T)) falls below 1 / sqrt(2) (an overshoot of
+    more than 4 %) for K2 > 1 / (2 T); the default K2 = 6 1/s behind a 0.5 s
+    lag rings with a damping of 0.29. Capping K2 at 1 / (2 T) keeps the damping
+    at 1 / sqrt(2) or more; T = 0 leaves ``gain`` as it is.
+    """
+    return gain if lag <= 0.0 else min(gain, 1.0 / (2.0 * lag))
 
 
 def _gains(options: dict[str, Any]) -> RecedingHorizonGains:
@@ -138,6 +171,13 @@ def _gains(options: dict[str, Any]) -> RecedingHorizonGains:
         raise ValueError(
             "need horizon > 0, tail >= 0, knot >= 1 and samples >= 2 (warm start and bare "
             f"feedback), got {gains}."
+        )
+    if not 0.0 <= gains.vessel_rate_share <= 1.0:
+        raise ValueError(f"vessel_rate_share must be in [0, 1], got {gains.vessel_rate_share!r}.")
+    if not gains.barrier_margin > 0:
+        raise ValueError(
+            f"barrier_margin must be > 0 (m outside the collision distance), got "
+            f"{gains.barrier_margin!r}."
         )
     if not gains.speed_rate > 0:
         raise ValueError(
@@ -170,8 +210,6 @@ class RecedingHorizon(FleetPolicy):
     DEFAULTS: ClassVar[dict[str, Any]] = {}
     #: Plan dimensions per vessel: force offsets (3) and path-rate offset.
     DIMS = 4
-    #: Share of a sampled path-rate offset drawn per vessel; the rest is common to the fleet.
-    VESSEL_RATE_SHARE = 0.1
 
     def __init__(self, env: object, **options: Any) -> None:
         self.scenario = resolve_scenario(env)
@@ -186,7 +224,9 @@ class RecedingHorizon(FleetPolicy):
         _, tau_max = s.tau_limits
         surge = tau_max[:, 0] / np.array([v.mass - v.X_udot for v in s.vessel_models])
         self.speed_step: Array = self.gains.speed_rate * s.dt * surge
-        self._gain_vector = self.gains.vector(ramp=self.gains.speed_rate * float(surge.min()))
+        self._gain_vector = self.gains.vector(
+            ramp=self.gains.speed_rate * float(surge.min()), lag=s.thrusters.time_constant
+        )
         self._knots = max(1, round(self.gains.horizon / (s.dt * self.gains.knot)))
         self._tail = round(self.gains.tail / (s.dt * self.gains.knot))
         self._noise_scale = np.array([*(self.gains.force_noise * tau_max.max(axis=0)),
@@ -258,7 +298,7 @@ class RecedingHorizon(FleetPolicy):
             noise = self._rngs[b].standard_normal(shape[1:]) * self._noise_scale
             # the path rate moves the fleet as one (a vessel alone pays the 1 mm sync scale)
             common = self._rngs[b].standard_normal((K, 1, knots)) * self.gains.rate_noise
-            noise[..., 3] = self.VESSEL_RATE_SHARE * noise[..., 3] + common
+            noise[..., 3] = self.gains.vessel_rate_share * noise[..., 3] + common
             out[r, 2:, :, :knots] = warm[r][None] + noise[2:]
         return out
 
@@ -310,11 +350,29 @@ class _ReadsSimulator(RecedingHorizon):
 
 
 class OraclePolicy(_ReadsSimulator):
-    """The headroom bound: centralized, told everything, planning on copies of the simulator."""
+    """The headroom bound: centralized, told everything, planning on copies of the simulator.
+
+    Where the scenario has a separation (vessels that must give way), its
+    feedback keeps every pair of vessels ``barrier_margin`` (default
+    ``ORACLE_BARRIER_MARGIN``, a backstop just outside the collision) apart
+    and its path-rate samples are common to the fleet (``vessel_rate_share``
+    0 unless given): a vessel's own rate offset buys a pass by desynchronizing
+    the formation at the 1 mm sync scale, which the 10 s the planner sees
+    undercharge (docs/hard_track.md, "The bound").
+    """
 
     name = "oracle"
     privileged = True
-    DEFAULTS: ClassVar[dict[str, Any]] = {"speed_rate": SPEED_RATE}
+    DEFAULTS: ClassVar[dict[str, Any]] = {
+        "speed_rate": SPEED_RATE,
+        "barrier_margin": ORACLE_BARRIER_MARGIN,
+    }
+
+    def __init__(self, env: object, **options: Any) -> None:
+        scenario = resolve_scenario(env)
+        if scenario.separation is not None:
+            options = {"vessel_rate_share": 0.0, **options}
+        super().__init__(env, **options)
 
     def act_batch(self, obs: ArrayLike, fleets: ArrayLike | None = None) -> Array:
         """Actions (B, n, 4 + m) of the bound fleets; ``obs`` only fixes B (the truth is read).

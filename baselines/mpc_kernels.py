@@ -43,6 +43,7 @@ import numba
 import numpy as np
 
 import baselines.kernels  # noqa: F401  (keys this package's cached kernels on their sources first)
+from baselines.barrier import BARRIER_GAINS, barrier_filter
 from cpf_env.evaluation.privileged import fleet_lumped_uncertainty
 from cpf_env.model.paths import path_values
 from cpf_env.model.plant import rk4_substep, substep_time_terms
@@ -77,9 +78,10 @@ __all__ = [
     "tracking_feedback",
 ]
 
-#: Layout of the feedback gains: K1 (3, 1/s), K2 (3, 1/s), k_sync (1/s), k_mu (1/s), and
-#: the oracle's reference-speed ramp (m/s^2; inf: v0 itself).
-G_K1, G_K2, G_SYNC, G_MU, G_RAMP, GAINS_SIZE = 0, 3, 6, 7, 8, 9
+#: Layout of the feedback gains: K1 (3, 1/s), K2 (3, 1/s), k_sync (1/s), k_mu (1/s), the
+#: oracle's reference-speed ramp (m/s^2; inf: v0 itself) and the margin (m) its separation
+#: barrier keeps outside the collision distance.
+G_K1, G_K2, G_SYNC, G_MU, G_RAMP, G_BARRIER, GAINS_SIZE = 0, 3, 6, 7, 8, 9, 10
 #: Columns of a local rollout's start: x, y, psi, u, v, r, theta.
 LOCAL_STATE = 7
 
@@ -181,7 +183,10 @@ def oracle_actions(
 
     Told the truth: true state, true lumped force and mass matrix, true
     synchronization errors, the true v0 (taken up at ``gains[G_RAMP]``,
-    ``ramped_speed``). ``offsets`` (n, 4) is the plan's
+    ``ramped_speed``). Where the scenario has a separation, every vessel's
+    force then keeps the true position of every other at the collision
+    distance plus ``gains[G_BARRIER]`` (``baselines.barrier``, on its true
+    model). ``offsets`` (n, 4) is the plan's
     current knot; ``lumped`` (n, 3) and ``mass`` (n, 3, 3) are scratch.
     The message sent is v0 (no vessel needs it: the oracle is centralized).
     """
@@ -218,6 +223,21 @@ def oracle_actions(
         out[i, 3] = _clipped(command[3] + offsets[i, 3], -c.theta_dot_max, c.theta_dot_max)
         for q in range(4, out.shape[1]):
             out[i, q] = _clipped(v0, -c.message_max, c.message_max)
+    if c.separation[0] > 0.0:  # every vessel kept clear of every other (baselines.barrier)
+        others = np.empty((a.eta.shape[1], 4))
+        for i in range(a.eta.shape[1]):
+            count = 0
+            for j in range(a.eta.shape[1]):
+                if j != i:
+                    cj, sj = math.cos(a.eta[b, j, 2]), math.sin(a.eta[b, j, 2])
+                    others[count, 0], others[count, 1] = a.eta[b, j, 0], a.eta[b, j, 1]
+                    others[count, 2] = cj * a.nu[b, j, 0] - sj * a.nu[b, j, 1]
+                    others[count, 3] = sj * a.nu[b, j, 0] + cj * a.nu[b, j, 1]
+                    count += 1
+            barrier_filter(out[i, :3], a.eta[b, i, 0], a.eta[b, i, 1], a.eta[b, i, 2],
+                           a.nu[b, i], a.params[b, i], others, count,
+                           c.separation[1] + gains[G_BARRIER], BARRIER_GAINS[0],
+                           BARRIER_GAINS[1], c.tau_min[i], c.tau_max[i])  # fmt: skip
 
 
 @numba.njit(cache=True)

@@ -1,12 +1,15 @@
-"""``FleetSim.step`` on each hard-track scenario against its core task, timed in turns.
+"""``FleetSim.step`` on each hard-track scenario against the same fleet without its mechanisms.
 
 The hard track adds a fix per vessel (a counter-based normal per axis on the
 steps a fix is due, a uniform for its dropout) and a second path frame to the
-observation, and a lag and slew limit to the applied force. This times the
+observation, a lag and slew limit to the applied force, and the distances
+between every two vessels for the separation term. This times the
 simulator's step with zero actions (every fleet restarting when one ends) on
-a hard scenario and on the core scenario it builds on, alternately in one
-process, ``--rounds`` times each, and prints vessel-steps per second and the
-ratio hard / core of the medians: the same load for both sides. Usage::
+a hard scenario and on the same scenario with ideal sensors, instant
+thrusters and no separation (the core suite's machinery; for a hard scenario
+built on a core task, that task), alternately in one process, ``--rounds``
+times each, and prints vessel-steps per second and the ratio hard / core of
+the medians: the same load for both sides. Usage::
 
     NUMBA_NUM_THREADS=1 python benchmarks/hard_track_step.py --fleets 1024 --rounds 5
 """
@@ -21,7 +24,9 @@ from collections.abc import Sequence
 import numpy as np
 
 from cpf_env import scenarios
-from cpf_env.scenarios import hard
+from cpf_env.model.actuators import Thrusters
+from cpf_env.model.sensors import Sensors
+from cpf_env.scenarios.suite import list_suite
 from cpf_env.sim.fleet import FleetSim
 
 
@@ -46,12 +51,14 @@ def main(argv: Sequence[str] | None = None) -> list[tuple[str, float, float]]:
     parser.add_argument("--fleets", type=int, default=1024, help="batch size B")
     parser.add_argument("--rounds", type=int, default=5, help="timings per side, alternated")
     parser.add_argument("--seconds", type=float, default=1.0, help="seconds per timing")
-    parser.add_argument("--scenarios", nargs="+", default=list(hard.BASES), help="hard scenarios")
+    parser.add_argument("--scenarios", nargs="+", default=list_suite("hard"), help="hard scenarios")
     args = parser.parse_args(argv)
     rows = []
     print(f"{'hard scenario':<26} {'hard':>12} {'core':>12} {'hard / core':>12}  (vessel-steps/s)")
     for name in args.scenarios:
-        sims = [FleetSim(scenarios.get(n), args.fleets) for n in (name, hard.BASES[name])]
+        task = scenarios.get(name)
+        bare = task.replace(sensors=Sensors(), thrusters=Thrusters(), separation=None)
+        sims = [FleetSim(task, args.fleets), FleetSim(bare, args.fleets)]
         rates: list[list[float]] = [[], []]
         for _ in range(args.rounds):
             for side, sim in enumerate(sims):

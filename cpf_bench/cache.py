@@ -1,11 +1,12 @@
 """Content-keyed cache of the bench's slow cells: the receding-horizon planners.
 
-The headroom bound (``oracle``), ``mpc`` and ``mpc_tuned`` (and ``mpc_tuned_ekf``, on a
-navigation filter) plan by rolling candidate plans out over their horizon at
-every revision, about a hundred times the work of the other analytic
-policies. Their episodes are a pure function of what they are run on (and
-each episode of its seed alone: the policies seed their sampling from the
-episode, not from its row in the batch), so
+The headroom bound (``oracle``), ``mpc`` and ``mpc_tuned`` (and, on the hard
+track, ``mpc_tuned`` under the navigation filter and the safety filter) plan
+by rolling candidate plans out over their horizon at every revision, about a
+hundred times the work of the other analytic policies. Their episodes are a
+pure function of what they are run on (and each episode of its seed alone:
+the policies seed their sampling from the episode, not from its row in the
+batch), so
 ``cpf-bench`` keeps each (policy, scenario) cell's metrics per seed in a JSON
 file keyed by a SHA-256 digest of:
 
@@ -49,7 +50,14 @@ from cpf_env.scenarios import Scenario
 __all__ = ["CACHED_POLICIES", "CACHE_DIRECTORY", "RUNNERS", "cell_key", "load_cell", "store_cell"]
 
 #: Policy names whose cells are cached (given by name, i.e. with their default gains).
-CACHED_POLICIES = ("oracle", "mpc", "mpc_tuned", "mpc_tuned_ekf")
+CACHED_POLICIES = (
+    "oracle",
+    "mpc",
+    "mpc_tuned",
+    "mpc_tuned_ekf",
+    "mpc_tuned_safe",
+    "mpc_tuned_ekf_safe",
+)
 #: The modules that build a policy by name, run its episodes and measure them.
 RUNNERS = (
     "cpf_bench.evaluate",

@@ -11,9 +11,11 @@ the final window (``cost_window``):
 * J_oracle, the mean cost of the headroom bound (``baselines.HEADROOM_REFERENCE``);
 * headroom = 1 - J_oracle / J_best: the share of the best deployable
   analytic design's cost that a controller told everything removes, i.e.
-  the room left to learning. It is negative where the bound is not below
-  the best deployable design (``oracle_not_lowest`` lists every policy that
-  beats the bound on a scenario).
+  the room left to learning, with its 95 % paired bootstrap interval over
+  the seeds both ran (``cpf_bench.stats.paired_headroom``). It is negative
+  where the bound is not below the best deployable design
+  (``oracle_not_lowest`` lists every policy that beats the bound on a
+  scenario).
 
 Example:
     >>> from cpf_bench.report import CellResult
@@ -35,6 +37,7 @@ import numpy as np
 
 from baselines import DEPLOYABLE, HEADROOM_REFERENCE
 from cpf_bench.report import CellResult
+from cpf_bench.stats import paired_headroom
 
 __all__ = ["headroom_rows", "headroom_table", "oracle_not_lowest"]
 
@@ -46,13 +49,27 @@ def _means(cells: Sequence[CellResult], metric: str) -> dict[tuple[str, str], fl
     return {(c.policy, c.scenario): float(np.mean(c.metrics[metric])) for c in cells}
 
 
+def _interval(
+    cells: Sequence[CellResult], best: str, name: str, metric: str
+) -> tuple[float, float]:
+    """The paired interval of the headroom over the seeds ``best`` and the bound share."""
+    by = {(c.policy, c.scenario): c for c in cells}
+    x, y = by[(best, name)], by[(HEADROOM_REFERENCE, name)]
+    shared = sorted(set(x.seeds) & set(y.seeds))
+    if not shared:
+        return float("nan"), float("nan")
+    pick = [[cell.seeds.index(seed) for seed in shared] for cell in (x, y)]
+    _, low, high = paired_headroom(x.metrics[metric][pick[0]], y.metrics[metric][pick[1]])
+    return low, high
+
+
 def headroom_rows(
     cells: Sequence[CellResult], reference: str = "nn_dsc", metric: str = "cost"
 ) -> list[dict[str, object]]:
     """One row per scenario where the bound and a deployable analytic policy ran.
 
     Keys: scenario, reference (J_ref or None), best (name), best_cost, oracle,
-    headroom (1 - J_oracle / J_best).
+    headroom (1 - J_oracle / J_best), interval (its 95 % paired bootstrap interval).
     """
     means = _means(cells, metric)
     rows: list[dict[str, object]] = []
@@ -70,6 +87,7 @@ def headroom_rows(
                 "best_cost": deployable[best],
                 "oracle": bound,
                 "headroom": 1.0 - bound / deployable[best] if deployable[best] else float("nan"),
+                "interval": _interval(cells, best, name, metric),
             }
         )
     return rows
@@ -96,16 +114,19 @@ def headroom_table(cells: Sequence[CellResult], reference: str = "nn_dsc") -> li
         return []
     lines = [
         f"| scenario | J {reference} | best deployable analytic | J best | J {HEADROOM_REFERENCE} "
-        "| headroom | J best, final window | J oracle, final window | headroom, final window |",
+        "| headroom (95 % paired interval) | J best, final window | J oracle, final window "
+        "| headroom, final window |",
         "|---|---|---|---|---|---|---|---|---|",
     ]
     by_name = {row["scenario"]: row for row in window}
     for row in whole:
         last = by_name[row["scenario"]]
         ref = "" if row["reference"] is None else f"{row['reference']:.4g}"
+        low, high = row["interval"]  # type: ignore[misc]
         lines.append(
             f"| {row['scenario']} | {ref} | {row['best']} | {row['best_cost']:.4g} | "
-            f"{row['oracle']:.4g} | {row['headroom']:.1%} | {last['best_cost']:.3g} "
+            f"{row['oracle']:.4g} | {row['headroom']:.1%} ({low:.1%} to {high:.1%}) | "
+            f"{last['best_cost']:.3g} "
             f"({last['best']}) | {last['oracle']:.3g} | {last['headroom']:.1%} |"
         )
     exceptions = [

@@ -27,6 +27,7 @@ from numpy.typing import NDArray
 from baselines import HEADROOM_REFERENCE
 from cpf_bench import stats
 from cpf_bench.episodes import METRICS
+from cpf_env.evaluation.fleet_metrics import UNSEPARATED
 from cpf_env.scenarios import splits
 
 __all__ = [
@@ -350,16 +351,33 @@ def episodes_csv(cells: Sequence[CellResult]) -> str:
     return _table(("policy", "scenario", "seed", "deterministic", *METRICS), rows)
 
 
+def _column(
+    rows: Sequence[dict[str, str]], metric: str, absent: Mapping[str, float]
+) -> NDArray[np.float64]:
+    """One metric of a cell's rows; an empty field is NaN, an absent column its fixed value."""
+    if metric in absent:
+        return np.full(len(rows), absent[metric])
+    return np.array([float(row[metric] or "nan") for row in rows])
+
+
 def read_episodes_csv(text: str) -> list[CellResult]:
     """The cells of an ``episodes.csv`` (``episodes_csv``'s inverse), in their first-row order.
+
+    A table written before the separation metrics existed (every scenario of its
+    time without a separation) reads with their values by construction
+    (``UNSEPARATED``: a zero term, an unmeasured closest approach).
 
     Raises:
         ValueError: A column of ``METRICS`` or of the row key is missing (the file is
             not a ``cpf-bench`` episodes table, or of another version of it).
     """
     reader = csv.DictReader(io.StringIO(text))
+    columns = reader.fieldnames or ()
+    absent = {c: UNSEPARATED[c] for c in UNSEPARATED if c not in columns}
+    if absent and len(absent) < len(UNSEPARATED):
+        absent = {}  # a partial set is a damaged table, not an older one
     missing = [c for c in ("policy", "scenario", "seed", "deterministic", *METRICS)
-               if c not in (reader.fieldnames or ())]  # fmt: skip
+               if c not in columns and c not in absent]  # fmt: skip
     if missing:
         raise ValueError(
             f"not a cpf-bench episodes.csv: missing column(s) {missing}; regenerate it "
@@ -374,7 +392,7 @@ def read_episodes_csv(text: str) -> list[CellResult]:
             scenario,
             tuple(int(row["seed"]) for row in rows),
             rows[0]["deterministic"] == "True",
-            {metric: np.array([float(row[metric] or "nan") for row in rows]) for metric in METRICS},
+            {metric: _column(rows, metric, absent) for metric in METRICS},
         )
         for (policy, scenario), rows in grouped.items()
     ]

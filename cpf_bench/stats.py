@@ -18,6 +18,8 @@ lines (rliable 1.2 does not import with pandas 3) and tested against scipy:
   and N/N, where a percentile bootstrap collapses to a point.
 * ``paired_difference``: the mean over seeds of (policy - reference) with a
   percentile bootstrap interval that resamples the pairs together.
+* ``paired_headroom``: 1 - mean(bound) / mean(best), the room a bound leaves
+  below the best deployable design, with a paired bootstrap interval.
 * ``gap_closed``: the share of the gap between the reference and a
   headroom reference that a policy closes, (ref - policy) / (ref - headroom)
   of the means, with a paired bootstrap interval (the seeds resampled
@@ -45,6 +47,7 @@ __all__ = [
     "gap_closed",
     "iqm",
     "paired_difference",
+    "paired_headroom",
     "probability_of_beating",
     "wilson_interval",
 ]
@@ -306,3 +309,41 @@ def gap_closed(
     tail = 100.0 * (1.0 - confidence) / 2.0
     low, high = np.percentile(shares, [tail, 100.0 - tail])
     return float((y.mean() - x.mean()) / gap), float(low), float(high)
+
+
+def paired_headroom(
+    best: ArrayLike,
+    bound: ArrayLike,
+    confidence: float = 0.95,
+    replicates: int = REPLICATES,
+    seed: int = BOOTSTRAP_SEED,
+) -> tuple[float, float, float]:
+    """The room 1 - mean(bound) / mean(best), with a paired bootstrap interval.
+
+    Each replicate resamples the N seeds once for both arrays (they ran the
+    same seeds), so the interval carries the seed-to-seed correlation of the
+    two costs.
+
+    Args:
+        best: The best deployable design's cost per seed (N,).
+        bound: The headroom bound's cost on the same seeds (N,).
+        confidence: Coverage of the interval.
+        replicates: Bootstrap replicates.
+        seed: Seed of the resampling generator.
+
+    Returns:
+        (room, low, high); one seed gives a zero-width interval.
+
+    Raises:
+        ValueError: Arrays of different shapes or empty.
+
+    Example:
+        >>> paired_headroom([10.0, 20.0], [5.0, 10.0])
+        (0.5, 0.5, 0.5)
+    """
+    x, y = _paired(bound, best)
+    (draw,) = _resample_indices((y.size,), replicates, seed)
+    rooms = 1.0 - x[draw].mean(axis=1) / y[draw].mean(axis=1)
+    tail = 100.0 * (1.0 - confidence) / 2.0
+    low, high = np.percentile(rooms, [tail, 100.0 - tail])
+    return float(1.0 - x.mean() / y.mean()), float(low), float(high)

@@ -15,6 +15,12 @@ number as it was, this tool renames each cache file to its new key instead:
    same numbers;
 4. the files are rewritten under their new keys (atomically), the old ones removed.
 
+A metric added to the bench after a file was written is filled in only where
+its value is fixed by construction: on a scenario without a separation the
+separation term is exactly zero and the closest approach is not measured
+(``UNSEPARATED``); the rerun of step 3 checks the filled values with the
+stored ones. A file that lacks any other metric is left alone and reported.
+
 Usage::
 
     python tools/rekey_bench_cache.py --from 78d33ea
@@ -35,6 +41,7 @@ sys.path.insert(0, str(ROOT))
 
 from cpf_bench import cache  # noqa: E402
 from cpf_bench.evaluate import run_cell  # noqa: E402
+from cpf_env.evaluation.fleet_metrics import METRICS, UNSEPARATED  # noqa: E402
 from cpf_env.infra import atomic  # noqa: E402
 from cpf_env.scenarios import list_scenarios, make_scenario  # noqa: E402
 
@@ -116,12 +123,19 @@ def main(argv: list[str] | None = None) -> int:
         if stored["key"] != before:
             print(f"stale (not the key of {args.revision}), left alone: {path.name}")
             continue
-        after = cache.cell_key(policy, make_scenario(name), steps)
-        plan.append((path, stored, after))
-    moved = [item for item in plan if item[1]["key"] != item[2]]
+        task = make_scenario(name)
+        missing = set(METRICS) - set(next(iter(stored["episodes"].values())))
+        if missing and (task.separation is not None or not missing <= set(UNSEPARATED)):
+            print(f"lacks {sorted(missing)}, which only a rerun gives, left alone: {path.name}")
+            continue
+        for episode in stored["episodes"].values():
+            episode.update({metric: UNSEPARATED[metric] for metric in sorted(missing)})
+        after = cache.cell_key(policy, task, steps)
+        plan.append((path, stored, after, bool(missing)))
+    moved = [item[:3] for item in plan if item[1]["key"] != item[2] or item[3]]
     print(f"{len(files)} files: {len(plan)} keyed by {args.revision}, {len(moved)} re-keyed here")
     if not args.no_check:
-        for path, stored, _ in plan:
+        for path, stored, _, _ in plan:
             if stored["scenario"] not in args.check:
                 continue
             seed = min(stored["episodes"], key=int)
@@ -130,7 +144,10 @@ def main(argv: list[str] | None = None) -> int:
             cell = run_cell(stored["policy"], stored["policy"], task, (int(seed),), steps)
             for metric, value in stored["episodes"][seed].items():
                 got = float(cell.metrics[metric][0])
-                if got != value and not (math.isnan(got) and math.isnan(value)):
+                same = (math.isnan(got) and math.isnan(value)) or (
+                    got == value and math.copysign(1.0, got) == math.copysign(1.0, value)
+                )
+                if not same:
                     print(f"{path.name} seed {seed}: {metric} {got!r} != stored {value!r}")
                     return 1
             print(f"{path.name} seed {seed}: every metric reproduced bit for bit")
@@ -141,7 +158,7 @@ def main(argv: list[str] | None = None) -> int:
         atomic.write_text(target, json.dumps({**stored, "key": after}, indent=1) + "\n")
         if target != path:
             path.unlink()
-    print(f"{len(moved)} files rewritten under their new keys")
+    print(f"{len(moved)} files rewritten under their new keys (or with filled metrics)")
     return 0
 
 

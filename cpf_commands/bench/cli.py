@@ -75,7 +75,7 @@ def _parser() -> argparse.ArgumentParser:
         help="baseline names, policies installed packages register, package.module:NAME of "
         "your own policy class or factory (docs/extending.md), cpf-train --out folders or "
         "cpf-export .onnx files, each once (default: every deployable baseline, with the "
-        "filtered designs nn_dsc_ekf and mpc_tuned_ekf on the hard track, and the headroom "
+        "navigation-filtered and safety-filtered designs on the hard track, and the headroom "
         "bound oracle, which plans on copies of the simulator: not deployable)",
     )
     add_scenarios_argument(

@@ -70,11 +70,13 @@ def default_policies(track: str = "core") -> list[str]:
     The headroom bound (``baselines.HEADROOM_REFERENCE``, ``oracle``, privileged,
     not deployable) is what the normalized score is measured against. On the
     hard track the designs under the navigation filter (``baselines.FILTERED``)
-    join: they are the analytic answer to its sensors.
+    and under the separation's safety filter (``baselines.SAFE``, which run
+    where the messages carry its broadcast) join: they are the analytic answer
+    to its sensors and its crossings.
     """
-    from baselines import FILTERED, HEADROOM_REFERENCE, POLICIES
+    from baselines import FILTERED, HEADROOM_REFERENCE, POLICIES, SAFE
 
-    hard = [*FILTERED] if track == "hard" else []
+    hard = [*FILTERED, *SAFE] if track == "hard" else []
     return [*POLICIES, *hard, HEADROOM_REFERENCE]
 
 

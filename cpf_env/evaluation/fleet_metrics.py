@@ -33,6 +33,8 @@ psi_d the path's tangent angle and |eta_d'| its speed dp/dtheta:
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numpy.typing import NDArray
 
@@ -42,7 +44,7 @@ from cpf_env.scenarios.reward_weights import REWARD_TERMS
 from cpf_env.sim import arrays
 from cpf_env.sim.fleet import FleetSim
 
-__all__ = ["METRICS", "WINDOW_FRACTION", "FleetMetrics", "path_relative"]
+__all__ = ["METRICS", "UNSEPARATED", "WINDOW_FRACTION", "FleetMetrics", "path_relative"]
 
 #: Fraction of the horizon, at its end, that the ``_window`` metrics use.
 WINDOW_FRACTION = 0.25
@@ -72,6 +74,7 @@ _MEASURES = (
     "speed_estimate_error_rms",
     "control_energy",
     "saturated_fraction",
+    "separation_min",
 )
 #: Every per-episode metric, in the column order of ``episodes.csv``.
 METRICS: tuple[str, ...] = (
@@ -83,6 +86,15 @@ METRICS: tuple[str, ...] = (
     "steps",
 )
 
+#: The separation metrics on a scenario without a ``Scenario.separation``: the term's cost
+#: (-0.0, the negated sum of zeros) and the closest approach (not measured: NaN). A table
+#: or a cache written before these metrics existed holds them by construction.
+UNSEPARATED = {
+    "cost_separation": -0.0,
+    "cost_separation_window": -0.0,
+    "separation_min": math.nan,
+    "separation_min_window": math.nan,
+}
 #: Per-step fleet series, each (S, T): sums over steps give totals, maxima give maxima.
 _SERIES = (
     "reward",
@@ -104,12 +116,25 @@ _SERIES = (
     "estimate_error_sq",
     "energy",
     "saturated",
+    "separation",
 )
 
 
 def _wrap(angle: Array) -> Array:
     """Angles wrapped to [-pi, pi)."""
     return (angle + np.pi) % (2.0 * np.pi) - np.pi
+
+
+def _closest_pair(eta: Array) -> Array:
+    """(K, S) the smallest distance between two vessels of each fleet (m).
+
+    ``eta`` is (K, S, n, 3).
+    """
+    position = eta[..., :2]
+    gap = np.linalg.norm(position[..., :, None, :] - position[..., None, :, :], axis=-1)
+    n = eta.shape[2]
+    gap[..., np.arange(n), np.arange(n)] = np.inf
+    return gap.min(axis=(2, 3))
 
 
 def path_relative(
@@ -162,6 +187,7 @@ class FleetMetrics:
         self.horizon = int(horizon)
         self._kinds, self._params = encode_paths(sim.scenario.paths)
         self._tau_scale = sim.constants.tau_scale
+        self._separated = sim.scenario.separation is not None
         self.series = {name: np.zeros((sim.num_fleets, self.horizon)) for name in _SERIES}
         self._start_thetap = np.zeros(sim.num_fleets)
         self._has_estimate = True
@@ -281,6 +307,7 @@ class FleetMetrics:
         energy = ((r["tau_applied"] / self._tau_scale) ** 2).sum(axis=3).mean(axis=2)
         put("energy", energy)
         put("saturated", (r["tau_command"] != r["tau_applied"]).any(axis=3).mean(axis=2))
+        put("separation", _closest_pair(r["eta"]))
         if self._has_estimate:
             put("estimate_error_sq", ((r["estimate"] - v0) ** 2).mean(axis=2))
         self._first += K
@@ -310,6 +337,9 @@ class FleetMetrics:
         if not self._has_estimate:
             for name in ("speed_estimate_error_rms", "speed_estimate_error_rms_window"):
                 metrics[name] = np.full(S, np.nan)
+        if not self._separated:
+            for name in ("separation_min", "separation_min_window"):
+                metrics[name] = np.full(S, UNSEPARATED[name])
         metrics["terminated"] = failed.astype(np.float64)
         metrics["steps"] = end.astype(np.float64)
         return {name: metrics[name] for name in METRICS}
@@ -355,4 +385,5 @@ class FleetMetrics:
             "speed_estimate_error_rms": rms("estimate_error_sq"),
             "control_energy": self.dt * total("energy"),
             "saturated_fraction": total("saturated") / count,
+            "separation_min": np.where(mask, x["separation"], np.inf).min(axis=1),
         }

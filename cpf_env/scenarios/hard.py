@@ -1,39 +1,49 @@
-"""The hard track: the core suite's tasks under the sensing and actuation of real vessels.
+"""The hard track: the suite's tasks under the sensing, actuation and traffic of real vessels.
 
 The core suite (``cpf_env.scenarios.suite``) observes the true state at every
-step and applies every force at once; there, the best deployable analytic
-design comes within a few per cent of the ``oracle``. The hard track puts the
-same tasks on the conditions a real surface vessel meets:
+step, applies every force at once and keeps the vessels 4 m apart; there,
+the best deployable analytic design comes within a few per cent of the
+``oracle``. The hard track puts the tasks on the conditions a real surface
+vessel meets:
 
 * **sensing** (``STANDALONE_FIX``, ``cpf_env.model.sensors``): a satellite fix
   and compass at model scale, 2 cm and 1 degree, every 4 steps (5 Hz), 5 % of
   fixes lost, no velocity sensor (docs/model.md, "Sensors");
 * **thruster dynamics** (``LAGGED_THRUSTERS``, ``cpf_env.model.actuators``): a
   0.5 s lag and slew limits that take about a second from zero to full force
-  (a few seconds at full scale, divided by Froude's 8.4).
+  (a few seconds at full scale, divided by Froude's 8.4);
+* **crossing paths with a separation constraint** (``crossing``,
+  ``cpf_env.scenarios.crossing``, ``CROSSING_SEPARATION``): pairs of vessels
+  whose synchronized formation brings them 0.21 m apart, a collision unless
+  one gives way; 1.5 m keep-out, 0.5 m collision; room in the messages for a
+  safety filter's broadcast (``baselines.safety``).
 
 ============================  ===============================================================
-name                          the core scenario it builds on, and what it adds
+name                          the task, and what the track adds
 ============================  ===============================================================
 ``hard_sensing``              ``bench_mild``: sensing
 ``hard_sensing_waves``        ``bench_current_waves``: sensing
 ``hard_thrusters``            ``bench_saturation``: thruster dynamics
-``hard_lossy_sensing``        ``bench_lossy_links``: sensing
+``hard_crossing``             two crossing pairs over links that lose 30 % of packets,
+                              5-step delay: separation
 ``hard_switching_thrusters``  ``bench_switching``: thruster dynamics
 ``hard_heterogeneous``        ``bench_heterogeneous``: sensing and thruster dynamics
-``hard_large_fleet``          ``bench_large_fleet``: sensing and thruster dynamics
+``hard_large_fleet``          five crossing pairs (n = 10, ring graph, 10 % packet loss):
+                              separation, sensing and thruster dynamics
 ============================  ===============================================================
 
 Each has a ``test`` and a ``shift`` split like the core suite's
-(``cpf_env.scenarios.splits``): the shift is its core scenario's shift with
-``SHIFTED_FIX`` (3 cm, 1.5 degrees, every 6 steps, 10 % lost) and
-``SHIFTED_THRUSTERS`` (a 0.8 s lag, slew limits x 0.7) where it has them.
-The cost is the core suite's, on the true state; its tolerances (1 cm of
-path error, 0.05 rad of heading) sit at what a filter makes of these sensors
-(about 1 cm and 0.01 rad), so the sensors do not make the cost unreachable.
-Not yet on the track: hulls without a sway actuator (``baselines.ilos``
-exists, the bound's feedback does not yet work without sway) and crossing
-paths with a separation constraint.
+(``cpf_env.scenarios.splits``). A scenario built on a core task shifts as its
+core scenario does; the crossing scenarios start from a wider spread
+(``SHIFTED_CROSSING_SPREAD``), lose twice the packets' delay and 20 % more
+packets. Both take ``SHIFTED_FIX`` (3 cm, 1.5 degrees, every 6 steps, 10 %
+lost) and ``SHIFTED_THRUSTERS`` (a 0.8 s lag, slew limits x 0.7) where they
+have the mechanism. The cost is the core suite's on the true state, plus the
+separation term where vessels cross; its tolerances (1 cm of path error,
+0.05 rad of heading) sit at what a filter makes of these sensors (about 1 cm
+and 0.01 rad), so the sensors do not make the cost unreachable. Not on the
+track: hulls without a sway actuator (``baselines.ilos`` exists; the
+planners' feedback, and so the bound, needs sway).
 
     >>> from cpf_env.scenarios.suite import list_suite
     >>> list_suite("hard")[0]
@@ -42,21 +52,33 @@ paths with a separation constraint.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 
 from cpf_env.model.actuators import Thrusters
+from cpf_env.model.links import LinkImpairments
 from cpf_env.model.sensors import Sensors
+from cpf_env.model.separation import Separation
 from cpf_env.scenarios import suite
+from cpf_env.scenarios.crossing import crossing_fleet
 from cpf_env.scenarios.registry import register
 from cpf_env.scenarios.scenario import Scenario
 
 __all__ = [
     "BASES",
+    "CROSSING_MESSAGE",
+    "CROSSING_MESSAGE_MAX",
+    "CROSSING_OFFSET",
+    "CROSSING_SEPARATION",
+    "CROSSING_SPREAD",
     "HARD_FACTORIES",
     "LAGGED_THRUSTERS",
+    "SHIFTED_CROSSING_SPREAD",
     "SHIFTED_FIX",
     "SHIFTED_THRUSTERS",
     "STANDALONE_FIX",
+    "crossing",
+    "crossing_shift",
 ]
 
 #: A standalone satellite fix and compass at Cybership II's scale (docs/model.md, "Sensors").
@@ -69,15 +91,91 @@ LAGGED_THRUSTERS = Thrusters(time_constant=0.5, rate_limit=(10.0, 5.0, 3.0))
 SHIFTED_FIX = Sensors(position_std=0.03, heading_std=0.026, period=6, dropout=0.1, velocity=False)
 #: The ``shift`` split's thrusters: a 0.8 s lag, slew limits x 0.7.
 SHIFTED_THRUSTERS = Thrusters(time_constant=0.8, rate_limit=(7.0, 3.5, 2.1))
-#: Each hard scenario's core scenario (its ``shift`` builds on the core one's).
+#: The crossing scenarios' separation: keep 1.5 m apart (a hull length and a beam), never 0.5 m.
+CROSSING_SEPARATION = Separation(safe_distance=1.5, hard_distance=0.5, weight=10.0)
+#: Message entries of the crossing scenarios: the designs' own, then a flag, position and
+#: velocity for a safety filter (``baselines.safety``), within +- 100 m.
+CROSSING_MESSAGE, CROSSING_MESSAGE_MAX = 6, 100.0
+#: Random starts of the crossing scenarios (m, rad, path-variable units): tighter than the
+#: core suite's 1 m, so that no fleet starts inside its collision distance.
+CROSSING_SPREAD = (0.3, 0.1, 0.3)
+#: How far a crossing pair's second vessel is behind the first in formation (m): the
+#: synchronized pair passes 0.21 m apart, a collision unless one of them gives way.
+CROSSING_OFFSET = 0.3
+#: The crossing scenarios' ``shift`` spread of the starts (m, rad, path-variable units).
+SHIFTED_CROSSING_SPREAD = (0.5, 0.17, 0.5)
+
+
+def crossing(name: str, pairs: int, description: str, **changes: object) -> Scenario:
+    """``pairs`` crossing pairs (``cpf_env.scenarios.crossing``) under ``CROSSING_SEPARATION``.
+
+    At v0 = 0.1 m/s for the core suite's 100 s, with random starts of ``CROSSING_SPREAD``;
+    ``changes`` adds the mechanisms.
+    """
+    paths, initial, topology = crossing_fleet(
+        pairs, offset=CROSSING_OFFSET, leaders=(0,) if pairs < 3 else (0, pairs)
+    )
+    position, heading, theta = CROSSING_SPREAD
+    return Scenario(
+        name=name,
+        paths=paths,
+        topology=topology,
+        initial=dataclasses.replace(
+            initial, position_std=position, heading_std=heading, theta_std=theta
+        ),
+        v0=0.1,
+        max_steps=suite.BENCH_STEPS,
+        separation=CROSSING_SEPARATION,
+        message_size=CROSSING_MESSAGE,
+        message_max=CROSSING_MESSAGE_MAX,
+        description=description,
+        **changes,  # type: ignore[arg-type]
+    )
+
+
+def crossing_shift(task: Scenario) -> Scenario:
+    """A crossing scenario outside its training ranges (``shift``): wider starts, worse links.
+
+    The starts spread by ``SHIFTED_CROSSING_SPREAD``; links lose 20 % more packets and
+    twice the delay; ``SHIFTED_FIX`` and ``SHIFTED_THRUSTERS`` where ``task`` has them.
+    """
+    position, heading, theta = SHIFTED_CROSSING_SPREAD
+    links = task.links
+    changes: dict[str, object] = {
+        "initial": dataclasses.replace(
+            task.initial, position_std=position, heading_std=heading, theta_std=theta
+        ),
+        "links": dataclasses.replace(
+            links,
+            loss_probability=round(min(links.loss_probability + 0.2, 0.9), 9),
+            delay_steps=2 * links.delay_steps,
+        ),
+    }
+    if not task.sensors.ideal:
+        changes["sensors"] = SHIFTED_FIX
+    if not task.thrusters.instant:
+        changes["thrusters"] = SHIFTED_THRUSTERS
+    return task.replace(**changes)
+
+
+def hard_crossing() -> Scenario:
+    """Two crossing pairs over links that lose 30 % of packets and delay them 0.25 s."""
+    return crossing(
+        "hard_crossing",
+        2,
+        "Two crossing pairs, 1.5 m keep-out, 30 % packet loss, 5-step delay. Hard track: "
+        "separation.",
+        links=LinkImpairments(loss_probability=0.3, delay_steps=5),
+    )
+
+
+#: The hard scenarios built on a core task, and that task (their ``shift`` builds on its).
 BASES = {
     "hard_sensing": "bench_mild",
     "hard_sensing_waves": "bench_current_waves",
     "hard_thrusters": "bench_saturation",
-    "hard_lossy_sensing": "bench_lossy_links",
     "hard_switching_thrusters": "bench_switching",
     "hard_heterogeneous": "bench_heterogeneous",
-    "hard_large_fleet": "bench_large_fleet",
 }
 
 
@@ -105,11 +203,6 @@ def hard_thrusters() -> Scenario:
     )
 
 
-def hard_lossy_sensing() -> Scenario:
-    """``bench_lossy_links`` seen through ``STANDALONE_FIX``."""
-    return _hard(suite.bench_lossy_links(), "hard_lossy_sensing", "sensing", sensors=STANDALONE_FIX)
-
-
 def hard_switching_thrusters() -> Scenario:
     """``bench_switching`` with ``LAGGED_THRUSTERS``."""
     return _hard(
@@ -132,11 +225,13 @@ def hard_heterogeneous() -> Scenario:
 
 
 def hard_large_fleet() -> Scenario:
-    """``bench_large_fleet`` with ``STANDALONE_FIX`` and ``LAGGED_THRUSTERS``."""
-    return _hard(
-        suite.bench_large_fleet(),
+    """Five crossing pairs (n = 10) with ``STANDALONE_FIX`` and ``LAGGED_THRUSTERS``."""
+    return crossing(
         "hard_large_fleet",
-        "sensing and thruster dynamics",
+        5,
+        "Five crossing pairs (n = 10, ring graph, leaders 0 and 5), 1.5 m keep-out, 10 % "
+        "packet loss. Hard track: separation, sensing and thruster dynamics.",
+        links=LinkImpairments(loss_probability=0.1),
         sensors=STANDALONE_FIX,
         thrusters=LAGGED_THRUSTERS,
     )
@@ -147,7 +242,7 @@ HARD_FACTORIES: tuple[Callable[[], Scenario], ...] = (
     hard_sensing,
     hard_sensing_waves,
     hard_thrusters,
-    hard_lossy_sensing,
+    hard_crossing,
     hard_switching_thrusters,
     hard_heterogeneous,
     hard_large_fleet,

@@ -26,7 +26,7 @@ __all__ = [
 ]
 
 #: Names of the reward terms, in the order of ``FleetSim.arrays.reward_terms``.
-REWARD_TERMS = ("position", "heading", "sync", "speed", "effort", "failure")
+REWARD_TERMS = ("position", "heading", "sync", "speed", "effort", "failure", "separation")
 #: Accepted values of ``RewardWeights.form``.
 REWARD_FORMS = ("log", "quadratic")
 

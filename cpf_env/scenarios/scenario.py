@@ -30,6 +30,7 @@ from cpf_env.model.graph import Graph, SwitchingTopology, as_switching
 from cpf_env.model.links import LinkImpairments
 from cpf_env.model.paths import Path
 from cpf_env.model.sensors import Sensors
+from cpf_env.model.separation import Separation
 from cpf_env.model.vessel import CYBERSHIP2, VesselModel
 from cpf_env.scenarios.checks import as_integer, as_real, check_plant_step
 from cpf_env.scenarios.reward_weights import RewardWeights
@@ -165,6 +166,8 @@ class Scenario:
         sensors: Noise, rate and dropouts of the pose fixes the observation is
             computed from, and whether velocity is measured (``cpf_env.model.sensors``);
             the default observes the true state every step.
+        separation: Keep-out and collision distances between the fleet's vessels
+            (``cpf_env.model.separation``); None (the default) constrains nothing.
         dt: Control period (s).
         substeps: RK4 plant steps per control period.
         max_steps: Episode length (control steps) before truncation.
@@ -189,6 +192,7 @@ class Scenario:
     links: LinkImpairments = field(default_factory=LinkImpairments)
     thrusters: Thrusters = field(default_factory=Thrusters)
     sensors: Sensors = field(default_factory=Sensors)
+    separation: Separation | None = None
     dt: float = 0.05
     substeps: int = 5
     max_steps: int = 3000
@@ -239,6 +243,7 @@ class Scenario:
             raise ValueError(
                 f"sensors must be a cpf_env.model.sensors.Sensors, got {self.sensors!r}."
             )
+        self._check_separation()
         if self.links.delay_steps >= self.max_steps:
             raise ValueError(
                 f"links.delay_steps = {self.links.delay_steps} is not shorter than the episode "
@@ -252,6 +257,26 @@ class Scenario:
             self.dt,
             self.substeps,
         )
+
+    def _check_separation(self) -> None:
+        """Refuse a separation the fleet's nominal start already violates."""
+        sep = self.separation
+        if sep is None:
+            return
+        if not isinstance(sep, Separation):
+            raise ValueError(
+                f"separation must be a cpf_env.model.separation.Separation or None, got {sep!r}."
+            )
+        start = np.array(self.initial.eta)[:, :2]
+        for i, j in itertools.combinations(range(self.n), 2):
+            gap = float(np.hypot(*(start[i] - start[j])))
+            if gap <= sep.safe_distance:
+                raise ValueError(
+                    f"vessels {i} and {j} start {gap:.3g} m apart (initial.eta), inside the "
+                    f"separation's safe_distance of {sep.safe_distance:.3g} m: the fleet would "
+                    "begin in its own keep-out zone. Use a safe_distance below the closest "
+                    "spacing at start, or place the vessels further apart."
+                )
 
     def _check_numbers(self) -> None:
         """Coerce the scalar fields to float / int (numpy scalars welcome) and check ranges."""

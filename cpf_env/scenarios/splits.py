@@ -21,10 +21,12 @@ training scenario          its ``shift`` (outside the training ranges)
 ``bench_switching``        the graph switches every 5 s (was 10 s)
 ``bench_heterogeneous``    models +- 45 % (was +- 30 %)
 ``bench_large_fleet``      n = 7 on a star graph (was n = 10 on a ring), 20 % loss (was 10 %)
-``hard_*``                 its core scenario's shift, with fixes of 3 cm and 1.5 degrees every
-                           6 steps, 10 % lost (were 2 cm, 1 degree, 4 steps, 5 %), and
-                           thrusters with a 0.8 s lag and slew limits x 0.7 (were 0.5 s), where
-                           it has them (``cpf_env.scenarios.hard``)
+``hard_*``                 its core scenario's shift (the crossing scenarios: starts spread
+                           0.5 m (was 0.3 m), 20 % more packets lost, twice the delay), with
+                           fixes of 3 cm and 1.5 degrees every 6 steps, 10 % lost (were 2 cm,
+                           1 degree, 4 steps, 5 %), and thrusters with a 0.8 s lag and slew
+                           limits x 0.7 (were 0.5 s), where it has them
+                           (``cpf_env.scenarios.hard``)
 =========================  ==================================================================
 
 Training code draws only from the training distribution:
@@ -149,8 +151,15 @@ CORE_SHIFTS: dict[str, Callable[[], Scenario]] = {
 
 
 def _hard_shift(name: str) -> Scenario:
-    """Hard scenario ``name``'s shift: its core scenario's, with the shifted mechanisms it has."""
-    task, base = get(name), CORE_SHIFTS[hard.BASES[name]]()
+    """Hard scenario ``name``'s shift, with the shifted mechanisms it has.
+
+    A scenario on a core task shifts as the core task does; a crossing scenario
+    by ``hard.crossing_shift``.
+    """
+    task = get(name)
+    if name not in hard.BASES:
+        return hard.crossing_shift(task)
+    base = CORE_SHIFTS[hard.BASES[name]]()
     changes: dict[str, object] = {}
     if not task.sensors.ideal:
         changes["sensors"] = hard.SHIFTED_FIX
@@ -162,7 +171,10 @@ def _hard_shift(name: str) -> Scenario:
 #: Every track's scenario -> its shifted variant's factory.
 SHIFTS: dict[str, Callable[[], Scenario]] = {
     **CORE_SHIFTS,
-    **{name: functools.partial(_hard_shift, name) for name in hard.BASES},
+    **{
+        factory.__name__: functools.partial(_hard_shift, factory.__name__)
+        for factory in hard.HARD_FACTORIES
+    },
 }
 
 

@@ -60,8 +60,10 @@ __all__ = [
 #: constant v0, and its final-window costs equalled ``bench_mild``'s).
 SUITE_VERSION = 2
 #: Version of the hard track's definitions (``cpf_env.scenarios.hard``). 1: sensing and
-#: thruster dynamics on the core suite's seven tasks.
-HARD_VERSION = 1
+#: thruster dynamics on the core suite's seven tasks. 2: crossing paths with a separation
+#: constraint (``hard_crossing`` in place of ``hard_lossy_sensing``; ``hard_large_fleet``
+#: five crossing pairs with every mechanism), and the planners' thruster-aware feedback.
+HARD_VERSION = 2
 
 #: Spread of the random starts (m, rad, path-variable units), common to the suite.
 POSITION_STD, HEADING_STD, THETA_STD = 1.0, 0.3, 0.5
@@ -173,15 +175,16 @@ _FACTORIES = (
 
 #: Names of the suite's scenarios, in the order the bench reports them.
 SUITE: tuple[str, ...] = tuple(factory.__name__ for factory in _FACTORIES)
-#: Each track's scenario names: ``core``, this suite; ``hard``, the same tasks under
-#: sensing and thruster dynamics (``cpf_env.scenarios.hard``, which registers them).
+#: Each track's scenario names: ``core``, this suite; ``hard``, its tasks under
+#: sensing, thruster dynamics and crossing traffic (``cpf_env.scenarios.hard``, which
+#: registers them).
 TRACKS: dict[str, tuple[str, ...]] = {
     "core": SUITE,
     "hard": (
         "hard_sensing",
         "hard_sensing_waves",
         "hard_thrusters",
-        "hard_lossy_sensing",
+        "hard_crossing",
         "hard_switching_thrusters",
         "hard_heterogeneous",
         "hard_large_fleet",

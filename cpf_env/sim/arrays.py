@@ -58,7 +58,7 @@ class FleetArrays(NamedTuple):
     history: np.ndarray  # (B, delay + 1, n, 1 + m) packets sent, ring buffer by step
     obs: np.ndarray  # (B, n, obs_dim) float32 observations
     reward: np.ndarray  # (B, n) reward of the last step
-    reward_terms: np.ndarray  # (B, n, 6) each term's part of the vessel's own reward
+    reward_terms: np.ndarray  # (B, n, 7) each term's part of the vessel's own reward
     errors: np.ndarray  # (B, n, 4) path, heading, sync, speed error after the last step
     terminated: np.ndarray  # (B,) bool: a vessel left its path (latched until reset)
     nonfinite: np.ndarray  # (B,) bool: the state became NaN/inf (the plant diverged)
@@ -78,6 +78,7 @@ class KernelConstants(NamedTuple):
     fix_period: int  # control steps between fixes
     fix_dropout: float  # probability that a scheduled fix is lost
     velocity_measured: bool  # False: the observation's nu reads 0
+    separation: np.ndarray  # (3,) safe distance (m), hard distance (m), weight; 0, 0, 0: none
     theta_dot_max: float
     message_max: float
     path_kinds: np.ndarray  # (n,) int64

@@ -109,6 +109,14 @@ def _ints(value: ArrayLike) -> NDArray[np.int64]:
     return np.ascontiguousarray(value, dtype=np.int64)
 
 
+def _separation(scenario: Scenario) -> tuple[float, float, float]:
+    """The separation constraint in kernel form: safe and hard distance (m), weight; zeros: none."""
+    sep = scenario.separation
+    if sep is None:
+        return (0.0, 0.0, 0.0)
+    return (sep.safe_distance, sep.hard_distance, sep.weight)
+
+
 def _constants(scenario: Scenario) -> arrays.KernelConstants:
     """The scenario in kernel form.
 
@@ -135,6 +143,7 @@ def _constants(scenario: Scenario) -> arrays.KernelConstants:
         fix_period=int(scenario.sensors.period),
         fix_dropout=float(scenario.sensors.dropout),
         velocity_measured=bool(scenario.sensors.velocity),
+        separation=_floats(_separation(scenario)),
         theta_dot_max=float(scenario.theta_dot_max),
         message_max=float(scenario.message_max),
         path_kinds=_ints(kinds),

@@ -80,7 +80,7 @@ from cpf_env.sim.observation import (
     Z1,
     path_frame,
 )
-from cpf_env.sim.reward import failure_penalty, step_reward
+from cpf_env.sim.reward import failure_penalty, separation_term, step_reward
 
 
 @numba.njit(cache=True, inline="always")
@@ -356,9 +356,16 @@ def observe_fleet(a: FleetArrays, c: KernelConstants, b: int, speed_reference: f
             c.tau_scale[i],
             a.reward_terms[b, i],
         )
+        collided = False
+        if c.separation[0] > 0.0:  # cpf_env.model.separation
+            term, collided = separation_term(c.separation, c.dt, a.eta[b], i)
+            a.reward_terms[b, i, 6] = term
+            reward += term
+        else:
+            a.reward_terms[b, i, 6] = 0.0
         a.reward[b, i] = reward
         total += reward
-        terminated = terminated or path_error > c.max_path_error
+        terminated = terminated or path_error > c.max_path_error or collided
     if terminated and not a.terminated[b]:  # the step the fleet leaves its path
         remaining = max(c.max_steps - step, 0) * c.dt
         penalty = failure_penalty(c.reward_params, remaining, c.max_path_error)

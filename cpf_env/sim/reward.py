@@ -3,7 +3,7 @@
 The weights, forms and scales are the scenario's ``RewardWeights``
 (``cpf_env.scenarios.reward_weights``); this module computes the reward in
 the compiled step. Reward of vessel i for one control step is minus dt times a weighted sum of
-five costs, one per term (``REWARD_TERMS``):
+costs, one per term (``REWARD_TERMS``):
 
     r_i = -dt * sum_k w_k c_k
 
@@ -18,6 +18,9 @@ speed      theta_dot_i - v0 (m/s)         rho(x / speed_scale)
 effort     ||tau_i / tau_max||            x^2 (always quadratic)
 failure    on the step the fleet          (T - t) / dt * w_position *
            terminates only                rho(max_path_error / position_scale)
+separation distances d_ij to the other    sum_j (max(0, d_safe - d_ij) /
+           vessels (m), with a            (d_safe - d_hard))^2, weight the
+           ``Scenario.separation`` only   ``Separation``'s (0 without one)
 =========  =============================  ======================================
 
 with z1 the body-frame path error after the step, tau_i the applied
@@ -39,9 +42,10 @@ the position term, so a 17-fold difference in tail path error between two
 controllers changes the cost by 1.6 %; residual PPO trained on it made every
 task metric worse.
 
-The failure term charges every vessel of a fleet that leaves its path
-(terminates) the position cost of sitting at the termination distance for
-the rest of the episode (T = max_steps * dt). Without it, ending an episode
+The failure term charges every vessel of a fleet that leaves its path or
+collides (two vessels closer than the separation's hard distance) the
+position cost of sitting at the termination distance for the rest of the
+episode (T = max_steps * dt). Without it, ending an episode
 early is cheaper than finishing it: PPO from scratch learned exactly that
 (every evaluation episode failed, at a lower return than ``nn_dsc``'s).
 
@@ -59,7 +63,7 @@ from numpy.typing import NDArray
 
 from cpf_env.scenarios.reward_weights import ENCODED_FAILURE, ENCODED_FORM, ENCODED_SCALES
 
-__all__ = ["failure_penalty", "step_reward"]
+__all__ = ["failure_penalty", "separation_term", "step_reward"]
 
 
 @numba.njit(cache=True, inline="always")
@@ -121,3 +125,34 @@ def failure_penalty(params: NDArray, remaining: float, max_path_error: float) ->
     """
     at_limit = params[0] * _shaped(params, 0, max_path_error * max_path_error)
     return -params[ENCODED_FAILURE] * remaining * at_limit
+
+
+@numba.njit(cache=True, inline="always")
+def separation_term(
+    separation: NDArray, dt: float, positions: NDArray, i: int
+) -> tuple[float, bool]:
+    """Vessel i's separation term and whether it is closer than the hard distance to another.
+
+    ``cpf_env.model.separation`` defines the cost; the term is -dt weight c_i.
+
+    Args:
+        separation: (3,) safe distance (m), hard distance (m), weight (``KernelConstants``).
+        dt: Control period (s).
+        positions: (n, 3) the fleet's true poses; columns 0 and 1 are x, y (m).
+        i: The vessel.
+
+    Returns:
+        (term (<= 0), collided).
+    """
+    safe, hard = separation[0], separation[1]
+    cost = 0.0
+    collided = False
+    for j in range(positions.shape[0]):
+        if j == i:
+            continue
+        d = math.hypot(positions[i, 0] - positions[j, 0], positions[i, 1] - positions[j, 1])
+        if d < safe:
+            intrusion = (safe - d) / (safe - hard)
+            cost += intrusion * intrusion
+        collided = collided or d < hard
+    return -dt * separation[2] * cost, collided

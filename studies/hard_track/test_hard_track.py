@@ -1,4 +1,4 @@
-"""The hard-track studies: the told-state variant and the bound's tightness check."""
+"""The hard-track studies: the room's decomposition and the bound's tightness check."""
 
 from __future__ import annotations
 
@@ -9,28 +9,41 @@ from conftest import ROOT, load_script
 
 from cpf_bench.report import METRICS, CellResult, episodes_csv
 from cpf_env import scenarios
+from cpf_env.model.links import LinkImpairments
 from cpf_env.model.sensors import Sensors
 
 
-def test_the_told_state_variant_is_the_hard_scenario_with_ideal_sensors() -> None:
-    script = load_script(ROOT / "studies/hard_track/told_state.py")
-    task, told = scenarios.get("hard_heterogeneous"), script.told_state("hard_heterogeneous")
-    assert told.sensors == Sensors() and not task.sensors.ideal
-    assert told.thrusters == task.thrusters  # the thrusters stay: only the observation changes
+def test_the_told_variants_replace_only_what_the_scenario_impairs() -> None:
+    script = load_script(ROOT / "studies/hard_track/decomposition.py")
+    task = scenarios.get("hard_heterogeneous")  # sensors, ideal links
+    assert set(script.variants("hard_heterogeneous")) == {"state"}
+    told = script.variants("hard_heterogeneous")["state"]
+    assert told.sensors == Sensors() and told.thrusters == task.thrusters
     assert dataclasses.replace(told, name=task.name, sensors=task.sensors) == task
+    large = scenarios.get("hard_large_fleet")  # sensors and a lossy ring
+    both = script.variants("hard_large_fleet")["both"]
+    assert both.links == LinkImpairments() and both.sensors == Sensors()
+    assert dataclasses.replace(both, name=large.name, sensors=large.sensors,
+                               links=large.links) == large  # fmt: skip
+    assert script.variants("hard_thrusters") == {}  # nothing a vessel lacks but the future
 
 
-def test_the_hard_bench_is_read_as_mean_costs_per_policy_and_scenario(tmp_path) -> None:
-    script = load_script(ROOT / "studies/hard_track/told_state.py")
+def test_the_decomposition_reads_the_best_design_and_the_bound_on_the_same_seeds(
+    tmp_path, capsys
+) -> None:
+    script = load_script(ROOT / "studies/hard_track/decomposition.py")
     cells = [
-        CellResult(policy, "hard_sensing", (10000, 10002), False,
-                   {m: np.array([cost, cost + 2.0]) for m in METRICS})
-        for policy, cost in (("mpc_tuned_ekf", 100.0), ("oracle", 60.0))
+        CellResult(policy, "hard_thrusters", (10000, 10001, 10002), False,
+                   {m: np.array([cost, cost + 2.0, cost + 100.0]) for m in METRICS})
+        for policy, cost in (("nn_dsc", 300.0), ("mpc_tuned", 100.0), ("oracle", 60.0))
     ]  # fmt: skip
     (tmp_path / "episodes.csv").write_text(episodes_csv(cells))
-    assert script._hard_costs(tmp_path) == {  # the mean over the two seeds
-        ("mpc_tuned_ekf", "hard_sensing"): 101.0, ("oracle", "hard_sensing"): 61.0
-    }  # fmt: skip
+    argv = ["--hard", str(tmp_path), "--num-seeds", "2", "--scenarios", "hard_thrusters"]
+    [row] = script.main(argv)
+    assert row["best"] == "mpc_tuned" and row["J_best"] == 101.0 and row["oracle"] == 61.0
+    assert "| hard_thrusters | mpc_tuned | 101.0 | - | - | - | 61.0 | 100% |" in (
+        capsys.readouterr().out
+    )
 
 
 def test_the_tightness_check_compares_the_oracle_with_more_samples(capsys) -> None:
@@ -39,3 +52,19 @@ def test_the_tightness_check_compares_the_oracle_with_more_samples(capsys) -> No
     [(name, base, more)] = script.main(argv)
     assert name == "hard_sensing" and base > 0 and more > 0
     assert "oracle_48_samples" in capsys.readouterr().out
+
+
+def test_the_crossing_bound_study_runs_its_oracle_variants(capsys) -> None:
+    script = load_script(ROOT / "studies/hard_track/crossing_bound.py")
+    costs = script.main(["--num-seeds", "1", "--max-steps", "20", "--scenarios", "hard_crossing"])
+    assert set(costs) == {(label, "hard_crossing") for label in script.VARIANTS}
+    assert all(cost > 0 for cost in costs.values())
+    assert "common rates, 1 cm (the oracle)" in capsys.readouterr().out
+
+
+def test_the_safety_tuning_study_sweeps_distance_and_gain(capsys) -> None:
+    script = load_script(ROOT / "studies/hard_track/safety_tuning.py")
+    argv = ["--num-seeds", "1", "--max-steps", "20", "--distances", "0.7", "--gains", "1.0"]
+    [(distance, gain, cost)] = script.main(argv)
+    assert (distance, gain) == (0.7, 1.0) and cost > 0
+    assert "| 0.7 | 1.0 |" in capsys.readouterr().out

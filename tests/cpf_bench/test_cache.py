@@ -19,7 +19,9 @@ def test_keys_change_with_the_scenario_the_horizon_and_the_policy():
     assert key != cache.cell_key("mpc", mild, 20)
     assert key != cache.cell_key("oracle", mild.replace(max_path_error=9.0), 20)
     with pytest.raises(
-        ValueError, match="only oracle, mpc, mpc_tuned, mpc_tuned_ekf are cached, not 'nn_dsc'"
+        ValueError,
+        match="only oracle, mpc, mpc_tuned, mpc_tuned_ekf, mpc_tuned_safe, "
+        "mpc_tuned_ekf_safe are cached, not 'nn_dsc'",
     ):
         cache.cell_key("nn_dsc", mild, 20)
 
@@ -83,8 +85,9 @@ def test_headroom_is_measured_against_the_best_deployable_analytic_design():
         ("a", "nn_dsc_privileged", 1.0, 6.0),
         ("b", "nn_dsc", 4.0, 5.0),
     ]
+    assert rows["a"]["interval"] == (0.25, 0.25)  # no spread over the seeds
     text = "\n".join(headroom_table(cells))
-    assert "| a | 10 | mpc | 8 | 6 | 25.0% |" in text
+    assert "| a | 10 | mpc | 8 | 6 | 25.0% (25.0% to 25.0%) |" in text
     assert "Lower mean cost than oracle: nn_dsc_privileged on a" in text
 
 
@@ -107,3 +110,16 @@ def test_a_score_above_one_is_flagged_in_the_summary():
     lines = "\n".join(gap_table(summarize(cells), cells, "cost", "nn_dsc"))
     assert "| mpc | 0.50 [0.50, 0.50] |" in lines  # (10 - 8) / (10 - 6), not flagged
     assert "| agent | 1.23 [1.18, 1.27] (above 1: beats the bound) |" in lines
+
+
+def test_the_headroom_interval_pairs_the_seeds_both_ran():
+    cells = [
+        CellResult("mpc", "a", (0, 1, 2, 3), False,
+                   {"cost": np.array([10.0, 20.0, 30.0, 40.0]), "cost_window": np.ones(4)}),
+        CellResult("oracle", "a", (3, 2, 1, 0), False,
+                   {"cost": np.array([20.0, 15.0, 10.0, 5.0]), "cost_window": np.ones(4)}),
+    ]  # fmt: skip
+    (row,) = headroom_rows(cells)
+    low, high = row["interval"]
+    # paired by seed the bound is half of the best on every seed: no spread
+    assert row["headroom"] == pytest.approx(0.5) and low == pytest.approx(0.5) == high

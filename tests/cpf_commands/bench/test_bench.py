@@ -9,7 +9,7 @@ import pytest
 from conftest import ROOT
 
 import agents
-from baselines import POLICIES, make_policy
+from baselines import POLICIES, SAFE, make_policy
 from cpf_bench import report as bench_report
 from cpf_bench.episodes import METRICS, run_episodes
 from cpf_commands.bench import run as bench_run
@@ -440,7 +440,7 @@ def test_default_bench_is_every_baseline_and_the_headroom_reference_on_the_suite
     assert HEADROOM_REFERENCE in PRIVILEGED and args.scenarios == suite.list_suite()
     hard = _arguments(_parser(), ["--track", "hard"])
     assert hard.scenarios == suite.list_suite("hard")
-    assert hard.policies == [*POLICIES, "nn_dsc_ekf", "mpc_tuned_ekf", HEADROOM_REFERENCE]
+    assert hard.policies == [*POLICIES, "nn_dsc_ekf", "mpc_tuned_ekf", *SAFE, HEADROOM_REFERENCE]
     assert args.num_seeds == 10
 
 

@@ -76,8 +76,8 @@ def test_an_unwritable_out_and_too_many_seeds_are_refused_before_the_run(
                         "bench_mild", "--out", str(tmp_path / "o"), "--quiet"], capsys)  # fmt: skip
     assert time.perf_counter() - start < 5.0
     # batch: 2 policies x 1e6 fleets x (2000 steps x 256 B + 5 vessels x 32 KiB) = 1.35e12 B;
-    # summary: 1e6 seeds x 54 metrics x 2000 replicates x 24 B = 2.592e12 B, the larger
-    assert "2 policies x --num-seeds 1000000 need about 2414.0 GiB" in message
+    # summary: 1e6 seeds x 58 metrics x 2000 replicates x 24 B = 2.784e12 B, the larger
+    assert "2 policies x --num-seeds 1000000 need about 2592.8 GiB" in message
     monkeypatch.setattr(atomic.shutil, "disk_usage", lambda path: type("U", (), {"free": 10}))
     assert "MiB free" in _refused([*QUICK, "--out", str(tmp_path / "o")], capsys)
     assert ran == []
@@ -160,12 +160,39 @@ def test_episodes_csv_reads_back_bit_for_bit() -> None:
         read_episodes_csv("policy,scenario,seed,cost\nmpc,bench_mild,0,1.0\n")
 
 
+def test_a_table_from_before_the_separation_metrics_reads_with_their_values() -> None:
+    """An older episodes.csv (no scenario of its time had a separation) reads; a damaged one not."""
+    import csv
+    import io
+    import math
+
+    import numpy as np
+
+    from cpf_bench.episodes import METRICS
+    from cpf_bench.report import CellResult, episodes_csv, read_episodes_csv
+    from cpf_env.evaluation.fleet_metrics import UNSEPARATED
+
+    cell = CellResult("nn_dsc", "bench_mild", (10000,), False, {m: np.ones(1) for m in METRICS})
+
+    def without(names: set[str]) -> str:
+        rows = list(csv.reader(io.StringIO(episodes_csv([cell]))))
+        keep = [k for k, name in enumerate(rows[0]) if name not in names]
+        return "\n".join(",".join(row[k] for k in keep) for row in rows) + "\n"
+
+    (old,) = read_episodes_csv(without(set(UNSEPARATED)))
+    assert old.metrics["cost"][0] == 1.0 and old.metrics["cost_separation"][0] == 0.0
+    assert math.copysign(1.0, old.metrics["cost_separation"][0]) == -1.0
+    assert math.isnan(old.metrics["separation_min_window"][0])
+    with pytest.raises(ValueError, match=r"missing column\(s\) \['separation_min'\]"):
+        read_episodes_csv(without({"separation_min"}))
+
+
 def test_track_hard_runs_the_hard_scenarios_and_names_the_track(tmp_path: Path) -> None:
     argv = ["--policies", "nn_dsc", "nn_dsc_ekf", "--track", "hard", "--num-seeds", "1",
             "--max-steps", "5", "--out", str(tmp_path), "--quiet", "--no-figures"]  # fmt: skip
     assert bench_main(argv) == 0
     summary = (tmp_path / "summary.md").read_text()
-    assert "hard track version 1" in summary and "benchmark suite version" not in summary
+    assert "hard track version 2" in summary and "benchmark suite version" not in summary
     rows = (tmp_path / "episodes.csv").read_text().splitlines()[1:]
     assert sorted({row.split(",")[1] for row in rows}) == sorted(list_suite("hard"))
 

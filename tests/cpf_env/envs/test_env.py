@@ -394,7 +394,7 @@ def expected_terms(w: RewardWeights, dt: float, errors: tuple[float, ...]) -> np
         costs = np.append(np.log1p((x[:4] / scales) ** 2), x[4] ** 2)
     else:
         costs = x**2
-    return np.append(-dt * weights * costs, 0.0)  # no failure: the episode goes on
+    return np.append(-dt * weights * costs, [0.0, 0.0])  # no failure, no separation
 
 
 def wrap(angle: float) -> float:

@@ -69,7 +69,7 @@ def _batch(t: int) -> SimpleNamespace:
 @pytest.fixture(scope="module")
 def measured() -> dict[str, np.ndarray]:
     sim = SimpleNamespace(
-        scenario=SimpleNamespace(dt=DT, paths=LINES),
+        scenario=SimpleNamespace(dt=DT, paths=LINES, separation=None),
         constants=SimpleNamespace(tau_scale=np.full((3, 3), 2.0)),
         num_fleets=2,
     )

@@ -10,11 +10,14 @@ from cpf_env import scenarios
 from cpf_env.scenarios import hard, splits, suite
 
 HARD = suite.list_suite("hard")
+ON_CORE = list(hard.BASES)
+CROSSING = [name for name in HARD if name not in hard.BASES]
 
 
 def test_the_tracks_list_their_scenarios_and_an_unknown_track_is_refused() -> None:
     assert suite.list_suite() == suite.list_suite("core") == list(suite.SUITE)
-    assert HARD == [factory.__name__ for factory in hard.HARD_FACTORIES] == list(hard.BASES)
+    assert HARD == [factory.__name__ for factory in hard.HARD_FACTORIES]
+    assert CROSSING == ["hard_crossing", "hard_large_fleet"]
     assert all(name in scenarios.list_scenarios() for name in HARD)
     with pytest.raises(ValueError, match=r"unknown track 'hardest'; choose one of \['core'"):
         suite.list_suite("hardest")
@@ -25,11 +28,32 @@ def test_each_mechanism_is_on_at_least_two_scenarios_and_all_on_the_large_fleet(
     tasks = [scenarios.get(name) for name in HARD]
     assert sum(not task.sensors.ideal for task in tasks) >= 2
     assert sum(not task.thrusters.instant for task in tasks) >= 2
+    assert sum(task.separation is not None for task in tasks) >= 2
     large = scenarios.get("hard_large_fleet")
     assert large.n >= 10 and not large.sensors.ideal and not large.thrusters.instant
+    assert large.separation == hard.CROSSING_SEPARATION
 
 
-@pytest.mark.parametrize("name", HARD)
+@pytest.mark.parametrize("name", CROSSING)
+def test_a_crossing_scenario_carries_the_separation_and_room_for_the_safety_broadcast(
+    name: str,
+) -> None:
+    task = scenarios.get(name)
+    assert task.separation == hard.CROSSING_SEPARATION
+    assert task.message_size == hard.CROSSING_MESSAGE and task.message_max == 100.0
+    assert task.max_steps == suite.BENCH_STEPS and task.n % 2 == 0
+    shifted = splits.split_scenario(name, "shift")
+    assert shifted.initial.position_std > task.initial.position_std
+    assert shifted.links.loss_probability == pytest.approx(task.links.loss_probability + 0.2)
+    assert shifted.links.delay_steps == 2 * task.links.delay_steps
+    assert shifted.paths == task.paths and shifted.separation == task.separation
+    if not task.sensors.ideal:
+        assert shifted.sensors == hard.SHIFTED_FIX
+    if not task.thrusters.instant:
+        assert shifted.thrusters == hard.SHIFTED_THRUSTERS
+
+
+@pytest.mark.parametrize("name", ON_CORE)
 def test_a_hard_scenario_is_its_core_task_with_the_mechanisms_only(name: str) -> None:
     task, core = scenarios.get(name), scenarios.get(hard.BASES[name])
     same = dataclasses.replace(
@@ -40,7 +64,7 @@ def test_a_hard_scenario_is_its_core_task_with_the_mechanisms_only(name: str) ->
     assert not (task.sensors.ideal and task.thrusters.instant)
 
 
-@pytest.mark.parametrize("name", HARD)
+@pytest.mark.parametrize("name", ON_CORE)
 def test_the_shift_split_shifts_the_core_task_and_the_mechanisms(name: str) -> None:
     task, shifted = scenarios.get(name), splits.split_scenario(name, "shift")
     core_shift = splits.split_scenario(hard.BASES[name], "shift")
