@@ -32,6 +32,7 @@ Example:
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import cast
 
 import numpy as np
 
@@ -122,7 +123,7 @@ def headroom_table(cells: Sequence[CellResult], reference: str = "nn_dsc") -> li
     for row in whole:
         last = by_name[row["scenario"]]
         ref = "" if row["reference"] is None else f"{row['reference']:.4g}"
-        low, high = row["interval"]  # type: ignore[misc]
+        low, high = cast(tuple[float, float], row["interval"])
         lines.append(
             f"| {row['scenario']} | {ref} | {row['best']} | {row['best_cost']:.4g} | "
             f"{row['oracle']:.4g} | {row['headroom']:.1%} ({low:.1%} to {high:.1%}) | "

@@ -15,7 +15,8 @@ Each prints the share of the room (J_best - J_oracle) it closes, and the rest
 is what the ``oracle`` has beyond both: the true model and future
 disturbances, and a centralized plan over the fleet. A negative share means
 the design does worse told the truth (a filter's smoothing can calm a
-feedback that a thruster lag makes ring). Usage::
+feedback that a thruster lag makes ring); where the bound is not below the
+design there is no room to split. Usage::
 
     python studies/hard_track/decomposition.py --hard results/hard_test --num-seeds 10
 """
@@ -95,13 +96,17 @@ def main(argv: Sequence[str] | None = None) -> list[dict[str, object]]:
             costs = {
                 kind: float(np.mean(c.metrics["cost"])) for kind, c in zip(told, ran, strict=True)
             }
-        closed = {kind: (j_best - cost) / room for kind, cost in costs.items()}
-        rest = 1.0 - max(closed.values(), default=0.0)
-        text = {kind: f"{costs[kind]:.1f} ({closed[kind]:+.0%})" for kind in costs}
+        if room > 0.0:
+            closed = {kind: f"{(j_best - cost) / room:+.0%}" for kind, cost in costs.items()}
+            rest = f"{1.0 - max((j_best - c) / room for c in [j_best, *costs.values()]):.0%}"
+        else:  # the bound is not below the design: no room to split
+            closed = dict.fromkeys(costs, "no room")
+            rest = "no room"
+        text = {kind: f"{costs[kind]:.1f} ({closed[kind]})" for kind in costs}
         print(
             f"| {name} | {best} | {j_best:.1f} | {text.get('state', '-')} | "
             f"{text.get('neighbours', '-')} | {text.get('both', '-')} | {j_oracle:.1f} | "
-            f"{rest:.0%} |"
+            f"{rest} |"
         )
         rows.append({"scenario": name, "best": best, "J_best": j_best, "oracle": j_oracle,
                      "told": costs})  # fmt: skip
