@@ -158,8 +158,8 @@ class SafetyFiltered(FleetPolicy):
         scenario = resolve_scenario(env)
         if scenario.message_size < SAFETY_MESSAGE:
             raise ValueError(
-                f"{self.name} broadcasts a flag, its position and its velocity in message "
-                f"entries 1-5, but {scenario.name!r} has message_size = "
+                "the safety filter broadcasts a flag, its position and its velocity in "
+                f"message entries 1-5, but {scenario.name!r} has message_size = "
                 f"{scenario.message_size}; use a scenario with message_size >= "
                 f"{SAFETY_MESSAGE} (the crossing scenarios of cpf_env.scenarios.hard have it)."
             )

@@ -66,6 +66,8 @@ def test_the_barrier_leaves_a_safe_command_and_an_absent_actuator_alone() -> Non
 def test_the_filter_needs_room_in_the_messages_and_a_barrier_outside_the_collision() -> None:
     with pytest.raises(ValueError, match=r"message_size = 1; use a scenario with message_size"):
         baselines.make_policy("nn_dsc_safe", scenarios.get("bench_mild"))
+    with pytest.raises(ValueError, match=r"^the safety filter broadcasts"):  # names no policy
+        baselines.make_policy("mpc_tuned_ekf_safe", scenarios.get("bench_mild"))
     with pytest.raises(ValueError, match=r"must exceed the separation's hard_distance of 0\.5"):
         baselines.make_policy("nn_dsc_safe", CROSSING, barrier_distance=0.5)
 
