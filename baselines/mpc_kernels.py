@@ -59,6 +59,7 @@ from cpf_env.sim.observation import (
     SLOTS,
     THETA,
     Z1,
+    frame_pose,
     path_frame,
 )
 from cpf_env.sim.reward import step_reward
@@ -466,11 +467,9 @@ def local_start(
             o = obs[b, i]
             theta = o[THETA]
             target = path_values(c.path_kinds[i], c.path_params[i], theta)[0]
-            psi = target[2] + o[Z1 + 2]
-            cs, sn = math.cos(psi), math.sin(psi)
-            start[b, i, 0] = target[0] + cs * o[Z1] - sn * o[Z1 + 1]
-            start[b, i, 1] = target[1] + sn * o[Z1] + cs * o[Z1 + 1]
-            start[b, i, 2] = psi
+            start[b, i, 0], start[b, i, 1], start[b, i, 2] = frame_pose(
+                target, o[Z1], o[Z1 + 1], o[Z1 + 2]
+            )
             for q in range(3):
                 start[b, i, 3 + q] = o[NU + q]
             start[b, i, 6] = theta

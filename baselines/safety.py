@@ -54,7 +54,16 @@ from baselines.policy import resolve_scenario
 from cpf_env.envs.policy import Array, FleetPolicy
 from cpf_env.model.paths import encode_paths, path_values
 from cpf_env.model.separation import Separation
-from cpf_env.sim.observation import NU, SLOT_AGE, SLOT_MSG, SLOT_WEIGHT, SLOTS, THETA, Z1
+from cpf_env.sim.observation import (
+    NU,
+    SLOT_AGE,
+    SLOT_MSG,
+    SLOT_WEIGHT,
+    SLOTS,
+    THETA,
+    Z1,
+    frame_pose,
+)
 
 __all__ = [
     "SAFETY_MESSAGE",
@@ -105,10 +114,8 @@ def filter_forces(
         for i in range(n):
             o = obs[b, i]
             point = path_values(kinds[i], paths[i], o[THETA])[0]
-            psi = point[2] + o[Z1 + 2]
+            x, y, psi = frame_pose(point, o[Z1], o[Z1 + 1], o[Z1 + 2])
             c, s = math.cos(psi), math.sin(psi)
-            x = point[0] + c * o[Z1] - s * o[Z1 + 1]
-            y = point[1] + s * o[Z1] + c * o[Z1 + 1]
             nu = o[NU : NU + 3]
             out = actions[b, i]
             out[5], out[6], out[7] = 1.0, x, y

@@ -302,13 +302,10 @@ def gap_closed(
     gap, gap_low, _ = paired_difference(y, h, confidence, replicates, seed)
     if not gap_low > 0.0:
         return None
-    (draw,) = _resample_indices((y.size,), replicates, seed)
-    shares = (y[draw].mean(axis=1) - x[draw].mean(axis=1)) / (
-        y[draw].mean(axis=1) - h[draw].mean(axis=1)
+    low, high = _paired_interval(
+        lambda ref, value, top: (ref - value) / (ref - top), (y, x, h), confidence, replicates, seed
     )
-    tail = 100.0 * (1.0 - confidence) / 2.0
-    low, high = np.percentile(shares, [tail, 100.0 - tail])
-    return float((y.mean() - x.mean()) / gap), float(low), float(high)
+    return float((y.mean() - x.mean()) / gap), low, high
 
 
 def paired_headroom(
@@ -342,8 +339,26 @@ def paired_headroom(
         (0.5, 0.5, 0.5)
     """
     x, y = _paired(bound, best)
-    (draw,) = _resample_indices((y.size,), replicates, seed)
-    rooms = 1.0 - x[draw].mean(axis=1) / y[draw].mean(axis=1)
+    low, high = _paired_interval(
+        lambda top, ref: 1.0 - top / ref, (x, y), confidence, replicates, seed
+    )
+    return float(1.0 - x.mean() / y.mean()), low, high
+
+
+def _paired_interval(
+    statistic: Callable[..., NDArray[np.float64]],
+    arrays: Sequence[NDArray[np.float64]],
+    confidence: float,
+    replicates: int,
+    seed: int,
+) -> tuple[float, float]:
+    """Percentile interval of ``statistic`` of the arrays' means, the seeds resampled together.
+
+    Each replicate draws the N seeds once and applies the draw to every array
+    (they ran the same seeds); ``statistic`` maps their (R,) means to (R,).
+    """
+    (draw,) = _resample_indices((arrays[0].size,), replicates, seed)
+    estimates = statistic(*(array[draw].mean(axis=1) for array in arrays))
     tail = 100.0 * (1.0 - confidence) / 2.0
-    low, high = np.percentile(rooms, [tail, 100.0 - tail])
-    return float(1.0 - x.mean() / y.mean()), float(low), float(high)
+    low, high = np.percentile(estimates, [tail, 100.0 - tail])
+    return float(low), float(high)

@@ -134,10 +134,11 @@ def crossing(name: str, pairs: int, description: str, **changes: object) -> Scen
 
 
 def crossing_shift(task: Scenario) -> Scenario:
-    """A crossing scenario outside its training ranges (``shift``): wider starts, worse links.
+    """A crossing scenario's task outside its training ranges: wider starts, worse links.
 
     The starts spread by ``SHIFTED_CROSSING_SPREAD``; links lose 20 % more packets and
-    twice the delay; ``SHIFTED_FIX`` and ``SHIFTED_THRUSTERS`` where ``task`` has them.
+    twice the delay. The ``shift`` split (``cpf_env.scenarios.splits``) then shifts the
+    mechanisms, as for every hard scenario.
     """
     position, heading, theta = SHIFTED_CROSSING_SPREAD
     links = task.links
@@ -151,10 +152,6 @@ def crossing_shift(task: Scenario) -> Scenario:
             delay_steps=2 * links.delay_steps,
         ),
     }
-    if not task.sensors.ideal:
-        changes["sensors"] = SHIFTED_FIX
-    if not task.thrusters.instant:
-        changes["thrusters"] = SHIFTED_THRUSTERS
     return task.replace(**changes)
 
 

@@ -153,13 +153,15 @@ CORE_SHIFTS: dict[str, Callable[[], Scenario]] = {
 def _hard_shift(name: str) -> Scenario:
     """Hard scenario ``name``'s shift, with the shifted mechanisms it has.
 
-    A scenario on a core task shifts as the core task does; a crossing scenario
-    by ``hard.crossing_shift``.
+    A scenario on a core task shifts as the core task does, a crossing scenario
+    by ``hard.crossing_shift``; then ``SHIFTED_FIX`` and ``SHIFTED_THRUSTERS``
+    replace its sensors and thrusters where it has them.
     """
     task = get(name)
-    if name not in hard.BASES:
-        return hard.crossing_shift(task)
-    base = CORE_SHIFTS[hard.BASES[name]]()
+    if name in hard.BASES:
+        base = CORE_SHIFTS[hard.BASES[name]]()
+    else:
+        base = hard.crossing_shift(task)
     changes: dict[str, object] = {}
     if not task.sensors.ideal:
         changes["sensors"] = hard.SHIFTED_FIX

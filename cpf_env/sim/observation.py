@@ -181,3 +181,21 @@ def path_frame(x: float, y: float, psi: float, point: tuple) -> tuple:
         (c * first[0] + s * first[1], -s * first[0] + c * first[1], first[2]),
         (c * second[0] + s * second[1], -s * second[0] + c * second[1], second[2]),
     )
+
+
+@numba.njit(cache=True, inline="always")
+def frame_pose(target: tuple, z1x: float, z1y: float, z1psi: float) -> tuple:
+    """The pose a body-frame path error puts a vessel at: ``path_frame``'s inverse for z1.
+
+    Args:
+        target: eta_d, the path point (x (m), y (m), psi (rad)).
+        z1x: Body-frame path error, x (m).
+        z1y: Body-frame path error, y (m).
+        z1psi: Heading error psi - psi_d (rad).
+
+    Returns:
+        (x, y, psi): the earth-frame position (m) and heading psi_d + z1psi (rad).
+    """
+    psi = target[2] + z1psi
+    c, s = math.cos(psi), math.sin(psi)
+    return target[0] + c * z1x - s * z1y, target[1] + s * z1x + c * z1y, psi
