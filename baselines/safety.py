@@ -131,7 +131,7 @@ def filter_forces(
                 heard[count, 1] = o[base + SLOT_MSG + 3] + age * jvy
                 heard[count, 2], heard[count, 3] = jvx, jvy
                 count += 1
-            barrier_filter(out[:3], x, y, psi, np.ascontiguousarray(nu), nominal[i], heard,
+            barrier_filter(out[:3], x, y, psi, nu, nominal[i], heard,
                            count, distance, gains[0], gains[1], tau_min[i], tau_max[i])  # fmt: skip
 
 

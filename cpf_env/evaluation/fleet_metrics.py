@@ -307,7 +307,8 @@ class FleetMetrics:
         energy = ((r["tau_applied"] / self._tau_scale) ** 2).sum(axis=3).mean(axis=2)
         put("energy", energy)
         put("saturated", (r["tau_command"] != r["tau_applied"]).any(axis=3).mean(axis=2))
-        put("separation", _closest_pair(r["eta"]))
+        if self._separated:  # the closest approach is measured where it is constrained
+            put("separation", _closest_pair(r["eta"]))
         if self._has_estimate:
             put("estimate_error_sq", ((r["estimate"] - v0) ** 2).mean(axis=2))
         self._first += K
