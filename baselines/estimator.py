@@ -27,8 +27,8 @@ filter's disturbance observer):
 ``Filtered`` runs the filter and hands its inner policy the observation
 rebuilt from the estimate (``nu``, ``z1``, ``t1``, ``t2``), everything else
 as observed. It is deployable: it uses only the vessel's observation and the
-scenario's known constants. ``nn_dsc_ekf`` and ``mpc_tuned_ekf`` are the
-filter under ``nn_dsc`` and ``mpc_tuned``.
+scenario's known constants. ``nn_dsc_ekf``, ``mpc_tuned_ekf`` and ``ilos_ekf``
+are the filter under ``nn_dsc``, ``mpc_tuned`` and ``ilos``.
 """
 
 from __future__ import annotations
@@ -40,6 +40,7 @@ import numba
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from baselines.ilos import ILOSPolicy
 from baselines.mpc_tuned import MPCTuned
 from baselines.nn_dsc import NNDSCPolicy
 from baselines.policy import resolve_scenario
@@ -48,7 +49,7 @@ from cpf_env.model.paths import encode_paths, path_values
 from cpf_env.model.plant import plant_rhs_given
 from cpf_env.sim.observation import NU, T1, T2, TAU, THETA, Z1, path_frame, wrap_angle
 
-__all__ = ["FILTER_NOISE", "Filtered", "MPCTunedFiltered", "NNDSCFiltered"]
+__all__ = ["FILTER_NOISE", "Filtered", "ILOSFiltered", "MPCTunedFiltered", "NNDSCFiltered"]
 
 #: Process noise spectral densities of the nine states (per second): pose (m^2/s, rad^2/s),
 #: velocity (m^2/s^3, rad^2/s^3), the acceleration bias (m^2/s^5, rad^2/s^5).
@@ -295,3 +296,10 @@ class MPCTunedFiltered(Filtered):
 
     name = "mpc_tuned_ekf"
     inner = MPCTuned
+
+
+class ILOSFiltered(Filtered):
+    """``ilos`` on the navigation filter's estimate."""
+
+    name = "ilos_ekf"
+    inner = ILOSPolicy

@@ -26,6 +26,12 @@ cancels the lumped force it is told)::
     z1'       = -r S z1 + nu - t1 theta_dot,   t1' = -r S t1 + t2 theta_dot
     tau       = M (alpha' - K2 (nu - alpha)) + f
 
+On hulls without a sway force the yaw component of z1 is taken against a
+line-of-sight heading, z1_psi + atan(y_e / Delta) with y_e the cross-track
+error in the path's frame (``RecedingHorizonGains.lookahead``): the hull turns
+toward its path, as integral LOS guidance does (``baselines.ilos``), instead
+of waiting for a sway force that never comes (its rate is left out of alpha').
+
 with f the lumped force (M nu' = tau - f) and d the vessel's weighted
 degree sum_j a_ij: capping the consensus gain at 1 / (dt d) keeps the
 discrete-time consensus theta+ = theta - dt k L theta stable on any graph
@@ -80,9 +86,10 @@ __all__ = [
 ]
 
 #: Layout of the feedback gains: K1 (3, 1/s), K2 (3, 1/s), k_sync (1/s), k_mu (1/s), the
-#: oracle's reference-speed ramp (m/s^2; inf: v0 itself) and the margin (m) its separation
-#: barrier keeps outside the collision distance.
-G_K1, G_K2, G_SYNC, G_MU, G_RAMP, G_BARRIER, GAINS_SIZE = 0, 3, 6, 7, 8, 9, 10
+#: oracle's reference-speed ramp (m/s^2; inf: v0 itself), the margin (m) its separation
+#: barrier keeps outside the collision distance and the line-of-sight lookahead (m; 0:
+#: the hulls have a sway force).
+G_K1, G_K2, G_SYNC, G_MU, G_RAMP, G_BARRIER, G_LOOKAHEAD, GAINS_SIZE = 0, 3, 6, 7, 8, 9, 10, 11
 #: Columns of a local rollout's start: x, y, psi, u, v, r, theta.
 LOCAL_STATE = 7
 
@@ -152,6 +159,11 @@ def tracking_feedback(
     r = nu[2]
     z1_dot = (r * z1[1] + nu[0] - t1[0] * rate, -r * z1[0] + nu[1] - t1[1] * rate,
               nu[2] - t1[2] * rate)  # fmt: skip
+    lookahead = gains[G_LOOKAHEAD]
+    if lookahead > 0.0:  # no sway force: steer toward the path (line of sight)
+        bearing = math.atan2(t1[1], t1[0])
+        cross = -math.sin(bearing) * z1[0] + math.cos(bearing) * z1[1]
+        z1 = (z1[0], z1[1], z1[2] + math.atan(cross / lookahead))
     t1_dot = (r * t1[1] + t2[0] * rate, -r * t1[0] + t2[1] * rate, t2[2] * rate)
     acc = np.empty(3)
     for k in range(3):

@@ -60,8 +60,14 @@ from cpf_env.scenarios import make_scenario
 for module in (cache, make_scenario):
     where = sys.modules[module.__module__ if callable(module) else module.__name__].__file__
     assert where.startswith(sys.argv[1]), f"{where} is not in the old tree"
+def key(policy, scenario, steps):
+    try:
+        task = make_scenario(scenario)
+    except ValueError:  # a scenario the old tree does not have
+        return None
+    return cache.cell_key(policy, task, steps)
 cells = json.loads(sys.stdin.read())
-print(json.dumps([cache.cell_key(p, make_scenario(s), n) for p, s, n in cells]))
+print(json.dumps([key(p, s, n) for p, s, n in cells]))
 """
 
 
@@ -70,8 +76,11 @@ def _cells(directory: Path) -> list[tuple[Path, dict]]:
     return [(path, json.loads(path.read_text())) for path in sorted(directory.glob("*.json"))]
 
 
-def _old_keys(revision: str, cells: list[tuple[str, str, int]]) -> list[str]:
-    """Each cell's key under the code of ``revision`` (a temporary worktree)."""
+def _old_keys(revision: str, cells: list[tuple[str, str, int]]) -> list[str | None]:
+    """Each cell's key under the code of ``revision`` (a temporary worktree).
+
+    None for a scenario that revision does not register.
+    """
     with tempfile.TemporaryDirectory() as scratch:
         tree = Path(scratch) / "tree"
         subprocess.run(
@@ -93,7 +102,7 @@ def _old_keys(revision: str, cells: list[tuple[str, str, int]]) -> list[str]:
             subprocess.run(
                 ["git", "-C", str(ROOT), "worktree", "remove", "--force", str(tree)], check=True
             )
-    keys: list[str] = json.loads(done.stdout)
+    keys: list[str | None] = json.loads(done.stdout)
     return keys
 
 
@@ -120,6 +129,9 @@ def main(argv: list[str] | None = None) -> int:
     old = _old_keys(args.revision, cells)
     plan = []
     for (path, stored), before, (policy, name, steps) in zip(files, old, cells, strict=True):
+        if before is None:
+            print(f"not a scenario of {args.revision}, left alone: {path.name}")
+            continue
         if stored["key"] != before:
             print(f"stale (not the key of {args.revision}), left alone: {path.name}")
             continue

@@ -88,8 +88,8 @@ def _parser() -> argparse.ArgumentParser:
         choices=sorted(TRACKS),
         default=None,
         help="the benchmark track to run when --scenarios is not given: core, the suite "
-        "bench_* (the default); hard, the same tasks under sensing and thruster dynamics, "
-        "hard_* (cpf_env.scenarios.hard)",
+        "bench_* (the default); hard, the tasks under sensing, hulls without sway, "
+        "thruster dynamics and crossing traffic, hard_* (cpf_env.scenarios.hard)",
     )
     parser.add_argument(
         "--num-seeds", type=int, default=10, help="episodes per policy and scenario (default: 10)"

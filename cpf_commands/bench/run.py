@@ -69,14 +69,15 @@ def default_policies(track: str = "core") -> list[str]:
 
     The headroom bound (``baselines.HEADROOM_REFERENCE``, ``oracle``, privileged,
     not deployable) is what the normalized score is measured against. On the
-    hard track the designs under the navigation filter (``baselines.FILTERED``)
-    and under the separation's safety filter (``baselines.SAFE``, which run
-    where the messages carry its broadcast) join: they are the analytic answer
-    to its sensors and its crossings.
+    hard track the designs for hulls without sway (``baselines.UNDERACTUATED``),
+    under the navigation filter (``baselines.FILTERED``) and under the
+    separation's safety filter (``baselines.SAFE``, which run where the
+    messages carry its broadcast) join: they are the analytic answer to its
+    hulls, its sensors and its crossings.
     """
-    from baselines import FILTERED, HEADROOM_REFERENCE, POLICIES, SAFE
+    from baselines import FILTERED, HEADROOM_REFERENCE, POLICIES, SAFE, UNDERACTUATED
 
-    hard = [*FILTERED, *SAFE] if track == "hard" else []
+    hard = [*UNDERACTUATED, *FILTERED, *SAFE] if track == "hard" else []
     return [*POLICIES, *hard, HEADROOM_REFERENCE]
 
 

@@ -205,8 +205,9 @@ def markdown(
         lines += [
             "",
             f"Hard-track scenarios: hard track version {suite.HARD_VERSION} "
-            "(`cpf_env.scenarios.suite.HARD_VERSION`; sensing and thruster dynamics, "
-            "`cpf_env.scenarios.hard`); results of another version do not compare.",
+            "(`cpf_env.scenarios.suite.HARD_VERSION`; sensing, hulls without sway, thruster "
+            "dynamics and crossing traffic, `cpf_env.scenarios.hard`); results of another "
+            "version do not compare.",
         ]
     if versions:
         lines += [

@@ -109,9 +109,14 @@ def action_bounds(scenario: Scenario) -> tuple[NDArray[np.float32], NDArray[np.f
     Returns:
         (low, high), each float32 of shape (n, 4 + m): the force limits (N, N, N m),
         +-theta_dot_max (1/s) and +-message_max. Forces beyond the limits are legal
-        (the plant saturates them); rate and message are clipped.
+        (the plant saturates them); rate and message are clipped. An axis without an
+        actuator (limits 0, an underactuated hull) is given +-1 N, its ``tau_scale``:
+        every command there applies nothing, and a Box whose bounds are equal breaks
+        samplers and Gymnasium's environment checker.
     """
     tau_min, tau_max = scenario.tau_limits
+    idle = (tau_min == 0.0) & (tau_max == 0.0)
+    tau_min, tau_max = np.where(idle, -1.0, tau_min), np.where(idle, 1.0, tau_max)
     n, m = scenario.n, scenario.message_size
     rate = np.full((n, 1), scenario.theta_dot_max)
     message = np.full((n, m), scenario.message_max)

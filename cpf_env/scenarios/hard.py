@@ -12,25 +12,30 @@ vessel meets:
 * **thruster dynamics** (``LAGGED_THRUSTERS``, ``cpf_env.model.actuators``): a
   0.5 s lag and slew limits that take about a second from zero to full force
   (a few seconds at full scale, divided by Froude's 8.4);
+* **hulls without a sway actuator** (``without_sway``): a propeller and a
+  rudder, the common case at sea; at the steerage speed of ``bench_saturation``
+  (0.5 m/s), where a rudder turns a hull (at the core suite's 0.1 m/s,
+  Cybership II's weak low-speed sway damping lets every turn set the hull
+  sliding for tens of seconds, and no design holds the path);
 * **crossing paths with a separation constraint** (``crossing``,
   ``cpf_env.scenarios.crossing``, ``CROSSING_SEPARATION``): pairs of vessels
   whose synchronized formation brings them 0.21 m apart, a collision unless
   one gives way; 1.5 m keep-out, 0.5 m collision; room in the messages for a
   safety filter's broadcast (``baselines.safety``).
 
-============================  ===============================================================
-name                          the task, and what the track adds
-============================  ===============================================================
-``hard_sensing``              ``bench_mild``: sensing
-``hard_sensing_waves``        ``bench_current_waves``: sensing
-``hard_thrusters``            ``bench_saturation``: thruster dynamics
-``hard_crossing``             two crossing pairs over links that lose 30 % of packets,
-                              5-step delay: separation
-``hard_switching_thrusters``  ``bench_switching``: thruster dynamics
-``hard_heterogeneous``        ``bench_heterogeneous``: sensing and thruster dynamics
-``hard_large_fleet``          five crossing pairs (n = 10, ring graph, 10 % packet loss):
-                              separation, sensing and thruster dynamics
-============================  ===============================================================
+==============================  ===========================================================
+name                            the task, and what the track adds
+==============================  ===========================================================
+``hard_sensing``                ``bench_mild``: sensing
+``hard_sensing_waves``          ``bench_current_waves``: sensing
+``hard_underactuated``          ``bench_saturation``: no sway actuator, thruster dynamics
+``hard_crossing``               two crossing pairs over links that lose 30 % of packets,
+                                5-step delay: separation
+``hard_underactuated_sensing``  ``bench_saturation``: no sway actuator, sensing
+``hard_heterogeneous``          ``bench_heterogeneous``: sensing and thruster dynamics
+``hard_large_fleet``            five crossing pairs (n = 10, ring graph, 10 % packet loss):
+                                separation, sensing and thruster dynamics
+==============================  ===========================================================
 
 Each has a ``test`` and a ``shift`` split like the core suite's
 (``cpf_env.scenarios.splits``). A scenario built on a core task shifts as its
@@ -38,12 +43,13 @@ core scenario does; the crossing scenarios start from a wider spread
 (``SHIFTED_CROSSING_SPREAD``), lose twice the packets' delay and 20 % more
 packets. Both take ``SHIFTED_FIX`` (3 cm, 1.5 degrees, every 6 steps, 10 %
 lost) and ``SHIFTED_THRUSTERS`` (a 0.8 s lag, slew limits x 0.7) where they
-have the mechanism. The cost is the core suite's on the true state, plus the
-separation term where vessels cross; its tolerances (1 cm of path error,
-0.05 rad of heading) sit at what a filter makes of these sensors (about 1 cm
-and 0.01 rad), so the sensors do not make the cost unreachable. Not on the
-track: hulls without a sway actuator (``baselines.ilos`` exists; the
-planners' feedback, and so the bound, needs sway).
+have the mechanism; a hull without sway keeps none in its shift. The cost is
+the core suite's on the true state, plus the separation term where vessels
+cross; its tolerances (1 cm of path error, 0.05 rad of heading) sit at what
+a filter makes of these sensors (about 1 cm and 0.01 rad), so the sensors do
+not make the cost unreachable. Not on the track yet: hulls without sway on
+the large fleet (a hull that cannot sidestep needs a safety filter that
+plans a turn, not a force).
 
     >>> from cpf_env.scenarios.suite import list_suite
     >>> list_suite("hard")[0]
@@ -79,6 +85,8 @@ __all__ = [
     "STANDALONE_FIX",
     "crossing",
     "crossing_shift",
+    "has_sway",
+    "without_sway",
 ]
 
 #: A standalone satellite fix and compass at Cybership II's scale (docs/model.md, "Sensors").
@@ -104,6 +112,26 @@ CROSSING_SPREAD = (0.3, 0.1, 0.3)
 CROSSING_OFFSET = 0.3
 #: The crossing scenarios' ``shift`` spread of the starts (m, rad, path-variable units).
 SHIFTED_CROSSING_SPREAD = (0.5, 0.17, 0.5)
+
+
+def without_sway(task: Scenario) -> Scenario:
+    """``task`` on hulls without a sway actuator: every vessel's sway force limits set to 0 N.
+
+    Example:
+        >>> from cpf_env.scenarios import suite
+        >>> has_sway(without_sway(suite.bench_saturation()))
+        False
+    """
+    tau_min, tau_max = task.tau_limits
+    tau_min[:, 1], tau_max[:, 1] = 0.0, 0.0
+    rows = lambda a: tuple(tuple(float(x) for x in row) for row in a)  # noqa: E731
+    return task.replace(tau_max=rows(tau_max), tau_min=rows(tau_min))
+
+
+def has_sway(task: Scenario) -> bool:
+    """Whether any vessel of ``task`` has a sway force (a sway limit other than 0 N)."""
+    tau_min, tau_max = task.tau_limits
+    return bool((tau_min[:, 1] != 0.0).any() or (tau_max[:, 1] != 0.0).any())
 
 
 def crossing(name: str, pairs: int, description: str, **changes: object) -> Scenario:
@@ -170,8 +198,8 @@ def hard_crossing() -> Scenario:
 BASES = {
     "hard_sensing": "bench_mild",
     "hard_sensing_waves": "bench_current_waves",
-    "hard_thrusters": "bench_saturation",
-    "hard_switching_thrusters": "bench_switching",
+    "hard_underactuated": "bench_saturation",
+    "hard_underactuated_sensing": "bench_saturation",
     "hard_heterogeneous": "bench_heterogeneous",
 }
 
@@ -193,20 +221,23 @@ def hard_sensing_waves() -> Scenario:
     )
 
 
-def hard_thrusters() -> Scenario:
-    """``bench_saturation`` with ``LAGGED_THRUSTERS``."""
+def hard_underactuated() -> Scenario:
+    """``bench_saturation`` on hulls without sway (``without_sway``) with ``LAGGED_THRUSTERS``."""
     return _hard(
-        suite.bench_saturation(), "hard_thrusters", "thruster dynamics", thrusters=LAGGED_THRUSTERS
+        without_sway(suite.bench_saturation()),
+        "hard_underactuated",
+        "no sway actuator, thruster dynamics",
+        thrusters=LAGGED_THRUSTERS,
     )
 
 
-def hard_switching_thrusters() -> Scenario:
-    """``bench_switching`` with ``LAGGED_THRUSTERS``."""
+def hard_underactuated_sensing() -> Scenario:
+    """``bench_saturation`` on hulls without sway (``without_sway``) through ``STANDALONE_FIX``."""
     return _hard(
-        suite.bench_switching(),
-        "hard_switching_thrusters",
-        "thruster dynamics",
-        thrusters=LAGGED_THRUSTERS,
+        without_sway(suite.bench_saturation()),
+        "hard_underactuated_sensing",
+        "no sway actuator, sensing",
+        sensors=STANDALONE_FIX,
     )
 
 
@@ -238,9 +269,9 @@ def hard_large_fleet() -> Scenario:
 HARD_FACTORIES: tuple[Callable[[], Scenario], ...] = (
     hard_sensing,
     hard_sensing_waves,
-    hard_thrusters,
+    hard_underactuated,
     hard_crossing,
-    hard_switching_thrusters,
+    hard_underactuated_sensing,
     hard_heterogeneous,
     hard_large_fleet,
 )

@@ -155,7 +155,8 @@ def _hard_shift(name: str) -> Scenario:
 
     A scenario on a core task shifts as the core task does, a crossing scenario
     by ``hard.crossing_shift``; then ``SHIFTED_FIX`` and ``SHIFTED_THRUSTERS``
-    replace its sensors and thrusters where it has them.
+    replace its sensors and thrusters where it has them, and a hull without
+    sway stays without.
     """
     task = get(name)
     if name in hard.BASES:
@@ -167,6 +168,8 @@ def _hard_shift(name: str) -> Scenario:
         changes["sensors"] = hard.SHIFTED_FIX
     if not task.thrusters.instant:
         changes["thrusters"] = hard.SHIFTED_THRUSTERS
+    if not hard.has_sway(task):
+        base = hard.without_sway(base)
     return base.replace(**changes)
 
 

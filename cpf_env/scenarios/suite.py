@@ -63,7 +63,9 @@ SUITE_VERSION = 2
 #: thruster dynamics on the core suite's seven tasks. 2: crossing paths with a separation
 #: constraint (``hard_crossing`` in place of ``hard_lossy_sensing``; ``hard_large_fleet``
 #: five crossing pairs with every mechanism), and the planners' thruster-aware feedback.
-HARD_VERSION = 2
+#: 3: hulls without a sway actuator (``hard_underactuated`` and ``hard_underactuated_sensing``
+#: in place of ``hard_thrusters`` and ``hard_switching_thrusters``).
+HARD_VERSION = 3
 
 #: Spread of the random starts (m, rad, path-variable units), common to the suite.
 POSITION_STD, HEADING_STD, THETA_STD = 1.0, 0.3, 0.5
@@ -176,16 +178,16 @@ _FACTORIES = (
 #: Names of the suite's scenarios, in the order the bench reports them.
 SUITE: tuple[str, ...] = tuple(factory.__name__ for factory in _FACTORIES)
 #: Each track's scenario names: ``core``, this suite; ``hard``, its tasks under
-#: sensing, thruster dynamics and crossing traffic (``cpf_env.scenarios.hard``, which
-#: registers them).
+#: sensing, hulls without sway, thruster dynamics and crossing traffic
+#: (``cpf_env.scenarios.hard``, which registers them).
 TRACKS: dict[str, tuple[str, ...]] = {
     "core": SUITE,
     "hard": (
         "hard_sensing",
         "hard_sensing_waves",
-        "hard_thrusters",
+        "hard_underactuated",
         "hard_crossing",
-        "hard_switching_thrusters",
+        "hard_underactuated_sensing",
         "hard_heterogeneous",
         "hard_large_fleet",
     ),

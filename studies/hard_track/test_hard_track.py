@@ -25,7 +25,7 @@ def test_the_told_variants_replace_only_what_the_scenario_impairs() -> None:
     assert both.links == LinkImpairments() and both.sensors == Sensors()
     assert dataclasses.replace(both, name=large.name, sensors=large.sensors,
                                links=large.links) == large  # fmt: skip
-    assert script.variants("hard_thrusters") == {}  # nothing a vessel lacks but the future
+    assert script.variants("hard_underactuated") == {}  # nothing a vessel lacks but the future
 
 
 def test_the_decomposition_reads_the_best_design_and_the_bound_on_the_same_seeds(
@@ -33,15 +33,15 @@ def test_the_decomposition_reads_the_best_design_and_the_bound_on_the_same_seeds
 ) -> None:
     script = load_script(ROOT / "studies/hard_track/decomposition.py")
     cells = [
-        CellResult(policy, "hard_thrusters", (10000, 10001, 10002), False,
+        CellResult(policy, "hard_underactuated", (10000, 10001, 10002), False,
                    {m: np.array([cost, cost + 2.0, cost + 100.0]) for m in METRICS})
         for policy, cost in (("nn_dsc", 300.0), ("mpc_tuned", 100.0), ("oracle", 60.0))
     ]  # fmt: skip
     (tmp_path / "episodes.csv").write_text(episodes_csv(cells))
-    argv = ["--hard", str(tmp_path), "--num-seeds", "2", "--scenarios", "hard_thrusters"]
+    argv = ["--hard", str(tmp_path), "--num-seeds", "2", "--scenarios", "hard_underactuated"]
     [row] = script.main(argv)
     assert row["best"] == "mpc_tuned" and row["J_best"] == 101.0 and row["oracle"] == 61.0
-    assert "| hard_thrusters | mpc_tuned | 101.0 | - | - | - | 61.0 | 100% |" in (
+    assert "| hard_underactuated | mpc_tuned | 101.0 | - | - | - | 61.0 | 100% |" in (
         capsys.readouterr().out
     )
 

@@ -82,3 +82,21 @@ def test_reset_fleets_restarts_only_their_filters_and_rows_act_for_their_fleets(
         policy.act_batch(obs[[0]], fleets=[5])
     with pytest.raises(ValueError, match=r"obs must be \(B, 5, obs_dim\)"):
         policy.act_batch(obs[:, :2])
+
+
+def test_integral_los_on_the_filter_beats_it_on_the_raw_fixes_without_sway() -> None:
+    """``ilos_ekf`` on ``hard_underactuated_sensing``: the bare design reads nu = 0.
+
+    Measured over 600 steps on 3 seeds: 510 against 619 (``nn_dsc``: 682).
+    """
+    task = scenarios.get("hard_underactuated_sensing")
+    cells = run_bench(["ilos", "ilos_ekf"], [task], num_seeds=3, max_steps=600)
+    bare, filtered = (float(np.mean(cell.metrics["cost"])) for cell in cells)
+    assert filtered < 0.9 * bare
+    sim = FleetSim(task, num_fleets=1)
+    policy = baselines.make_policy("ilos_ekf", task)
+    obs = sim.reset(seeds=[0])
+    for _ in range(20):
+        actions = policy.act_batch(obs)
+        assert np.all(actions[..., 1] == 0.0)  # no sway force asked of a hull without one
+        obs = sim.step(actions)

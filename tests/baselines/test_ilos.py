@@ -13,8 +13,9 @@ from cpf_env.model.paths import StraightLine
 from cpf_env.scenarios import InitialState, Scenario
 from cpf_env.sim.fleet import FleetSim
 
-#: Control steps of the straight-line runs: 3,000 s at dt = 0.05 s.
-STEPS = 60_000
+#: Control steps of the straight-line runs: 6,000 s at dt = 0.05 s (the integral settles
+#: over thousands of seconds at v0 = 0.2 m/s: studies/ilos/line_in_current.py).
+STEPS = 120_000
 #: The last 100 s, over which the steady state is judged.
 TAIL = 2_000
 

@@ -173,3 +173,30 @@ def test_the_oracle_takes_up_v0_at_its_ramp_and_mpc_keeps_v0_at_once():
     assert np.all(baselines.make_policy("mpc", "bench_mild").speed_step == math.inf)
     with pytest.raises(ValueError, match="speed_rate must be > 0"):
         baselines.make_policy("oracle", "bench_mild", speed_rate=0.0)
+
+
+def test_without_sway_the_feedback_turns_the_hull_toward_its_path():
+    """Line of sight on the yaw error (``RecedingHorizonGains.lookahead``), only without sway."""
+    from baselines.mpc_kernels import G_LOOKAHEAD, GAINS_SIZE, tracking_feedback
+
+    hull = OraclePolicy(scenarios.get("hard_underactuated"))._gain_vector
+    full = OraclePolicy(scenarios.get("hard_sensing"))._gain_vector
+    assert hull.shape == full.shape == (GAINS_SIZE,)
+    assert hull[G_LOOKAHEAD] == 2.0 and full[G_LOOKAHEAD] == 0.0
+    # on the path's heading, 1 m to the left of a straight path along x, at rest
+    nu, t1, t2 = np.zeros(3), (1.0, 0.0, 0.0), (0.0, 0.0, 0.0)
+    left = (0.0, 1.0, 0.0)
+    mass, lumped = np.eye(3), np.zeros(3)
+
+    def yaw(gains, z1):
+        return tracking_feedback(nu, z1, t1, t2, 0.0, 0.0, 0.0, lumped, mass, gains, 1.0, 0.05)[2]
+
+    bare = hull.copy()
+    bare[G_LOOKAHEAD] = 0.0  # the same gains, steering as if the hull had sway
+    assert yaw(bare, left) == 0.0  # a sway force would do the work
+    assert yaw(hull, left) < 0.0  # turn right, toward the path
+    assert yaw(hull, (0.0, -1.0, 0.0)) == pytest.approx(-yaw(hull, left))
+    # on the path the heading error is the same
+    assert yaw(hull, (0.0, 0.0, 0.1)) == yaw(bare, (0.0, 0.0, 0.1))
+    with pytest.raises(ValueError, match="lookahead must be > 0"):
+        OraclePolicy("hard_underactuated", lookahead=0.0)

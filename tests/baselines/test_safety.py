@@ -119,7 +119,7 @@ def test_the_filter_keeps_apart_the_hulls_the_bare_design_runs_into_each_other()
 def test_the_planners_cap_their_velocity_gain_at_the_thrusters_bandwidth() -> None:
     assert thruster_gain(6.0, 0.0) == 6.0 and thruster_gain(6.0, 0.5) == 1.0
     assert thruster_gain(0.5, 0.5) == 0.5
-    lagged = OraclePolicy(scenarios.get("hard_thrusters"))._gain_vector
+    lagged = OraclePolicy(scenarios.get("hard_underactuated"))._gain_vector
     instant = OraclePolicy(scenarios.get("bench_saturation"))._gain_vector
     assert np.array_equal(lagged[3:6], [1.0, 1.0, 1.0])
     assert np.array_equal(instant[3:6], [6.0, 6.0, 6.0])

@@ -440,7 +440,15 @@ def test_default_bench_is_every_baseline_and_the_headroom_reference_on_the_suite
     assert HEADROOM_REFERENCE in PRIVILEGED and args.scenarios == suite.list_suite()
     hard = _arguments(_parser(), ["--track", "hard"])
     assert hard.scenarios == suite.list_suite("hard")
-    assert hard.policies == [*POLICIES, "nn_dsc_ekf", "mpc_tuned_ekf", *SAFE, HEADROOM_REFERENCE]
+    assert hard.policies == [
+        *POLICIES,
+        "ilos",
+        "nn_dsc_ekf",
+        "mpc_tuned_ekf",
+        "ilos_ekf",
+        *SAFE,
+        HEADROOM_REFERENCE,
+    ]
     assert args.num_seeds == 10
 
 

@@ -13,7 +13,7 @@ import pytest
 from cpf_commands.bench import cli
 from cpf_commands.bench.cli import bench_main
 from cpf_env.infra import atomic
-from cpf_env.scenarios.suite import list_suite
+from cpf_env.scenarios.suite import HARD_VERSION, list_suite
 
 QUICK = ["--policies", "nn_dsc", "--scenarios", "wang2014", "--num-seeds", "1", "--max-steps", "3",
          "--quiet"]  # fmt: skip
@@ -192,7 +192,8 @@ def test_track_hard_runs_the_hard_scenarios_and_names_the_track(tmp_path: Path) 
             "--max-steps", "5", "--out", str(tmp_path), "--quiet", "--no-figures"]  # fmt: skip
     assert bench_main(argv) == 0
     summary = (tmp_path / "summary.md").read_text()
-    assert "hard track version 2" in summary and "benchmark suite version" not in summary
+    assert f"hard track version {HARD_VERSION}" in summary
+    assert "benchmark suite version" not in summary
     rows = (tmp_path / "episodes.csv").read_text().splitlines()[1:]
     assert sorted({row.split(",")[1] for row in rows}) == sorted(list_suite("hard"))
 

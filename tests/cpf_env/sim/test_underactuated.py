@@ -31,3 +31,16 @@ def test_no_sway_force_acts_whatever_the_policy_commands(policy: str) -> None:
 def test_an_axis_limited_on_one_side_only_is_refused_saying_what_to_give() -> None:
     with pytest.raises(ValueError, match="tau_min = tau_max = 0 on an axis without an actuator"):
         scenarios.get("bench_mild").replace(tau_max=(9.2, 0.0, 3.0), tau_min=(-9.2, -1.0, -3.0))
+
+
+def test_the_action_space_gives_an_axis_without_an_actuator_its_unit_scale() -> None:
+    """+-1 N (``tau_scale``), not a Box of equal bounds; a command there applies nothing."""
+    import cpf_env
+
+    env = cpf_env.parallel_env(UNDERACTUATED)
+    space = env.action_space(env.possible_agents[0])
+    np.testing.assert_array_equal(space.low[:3], np.float32([-9.2, -1.0, -3.0]))
+    np.testing.assert_array_equal(space.high[:3], np.float32([9.2, 1.0, 3.0]))
+    env.reset(seed=0)
+    env.step({agent: space.high.copy() for agent in env.agents})
+    assert np.all(env.core.sim.arrays.tau_applied[..., 1] == 0.0)
