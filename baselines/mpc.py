@@ -61,7 +61,6 @@ from baselines.policy import resolve_scenario
 from baselines.privileged import fleet_rows, simulator_of
 from cpf_env.envs.policy import FleetPolicy
 from cpf_env.evaluation.privileged import ideal_link_observations, true_dynamics
-from cpf_env.scenarios.hard import has_sway
 from cpf_env.sim.fleet import FleetSim, observation_layout
 from cpf_env.sim.observation import LEADER, NU, SLOT_MSG, SLOT_WEIGHT, SLOTS, TAU, V0
 
@@ -115,7 +114,7 @@ class RecedingHorizonGains:
         barrier_margin: Where the scenario has a separation, how far outside its collision
             distance the oracle's feedback keeps every pair of vessels (m, > 0;
             ``baselines.barrier``); ``mpc`` has no barrier (``baselines.safety`` adds one).
-        lookahead: Where no hull has a sway force (``cpf_env.scenarios.hard.has_sway``),
+        lookahead: Where no hull has a sway force (``Scenario.actuated``),
             the line-of-sight lookahead Delta (m, > 0) of the feedback's heading
             reference: the yaw error becomes psi - pi_p + atan(y_e / Delta), y_e the
             cross-track error, so the hull turns toward its path instead of asking for
@@ -241,7 +240,7 @@ class RecedingHorizon(FleetPolicy):
         self._gain_vector = self.gains.vector(
             ramp=self.gains.speed_rate * float(surge.min()),
             lag=s.thrusters.time_constant,
-            sway=has_sway(s),
+            sway=bool(s.actuated[:, 1].any()),
         )
         self._knots = max(1, round(self.gains.horizon / (s.dt * self.gains.knot)))
         self._tail = round(self.gains.tail / (s.dt * self.gains.knot))

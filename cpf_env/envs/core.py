@@ -115,8 +115,8 @@ def action_bounds(scenario: Scenario) -> tuple[NDArray[np.float32], NDArray[np.f
         samplers and Gymnasium's environment checker.
     """
     tau_min, tau_max = scenario.tau_limits
-    idle = (tau_min == 0.0) & (tau_max == 0.0)
-    tau_min, tau_max = np.where(idle, -1.0, tau_min), np.where(idle, 1.0, tau_max)
+    actuated = scenario.actuated
+    tau_min, tau_max = np.where(actuated, tau_min, -1.0), np.where(actuated, tau_max, 1.0)
     n, m = scenario.n, scenario.message_size
     rate = np.full((n, 1), scenario.theta_dot_max)
     message = np.full((n, m), scenario.message_max)

@@ -85,7 +85,6 @@ __all__ = [
     "STANDALONE_FIX",
     "crossing",
     "crossing_shift",
-    "has_sway",
     "without_sway",
 ]
 
@@ -119,19 +118,13 @@ def without_sway(task: Scenario) -> Scenario:
 
     Example:
         >>> from cpf_env.scenarios import suite
-        >>> has_sway(without_sway(suite.bench_saturation()))
-        False
+        >>> without_sway(suite.bench_saturation()).actuated[0].tolist()
+        [True, False, True]
     """
     tau_min, tau_max = task.tau_limits
     tau_min[:, 1], tau_max[:, 1] = 0.0, 0.0
     rows = lambda a: tuple(tuple(float(x) for x in row) for row in a)  # noqa: E731
     return task.replace(tau_max=rows(tau_max), tau_min=rows(tau_min))
-
-
-def has_sway(task: Scenario) -> bool:
-    """Whether any vessel of ``task`` has a sway force (a sway limit other than 0 N)."""
-    tau_min, tau_max = task.tau_limits
-    return bool((tau_min[:, 1] != 0.0).any() or (tau_max[:, 1] != 0.0).any())
 
 
 def crossing(name: str, pairs: int, description: str, **changes: object) -> Scenario:

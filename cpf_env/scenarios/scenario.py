@@ -322,6 +322,15 @@ class Scenario:
         return np.array(self.tau_min), np.array(self.tau_max)
 
     @property
+    def actuated(self) -> np.ndarray:
+        """(n, 3) bool: whether vessel i has an actuator on axis k (its limits not both 0).
+
+        An underactuated hull has ``actuated[:, 1]`` False: no sway force acts on it.
+        """
+        tau_min, tau_max = self.tau_limits
+        return (tau_min != 0.0) | (tau_max != 0.0)
+
+    @property
     def tau_scale(self) -> np.ndarray:
         """Per-axis force scale max(|tau_min|, |tau_max|) (n, 3), in N, N, N m.
 
@@ -329,8 +338,7 @@ class Scenario:
         forces divide by; 1 on an axis without an actuator, whose force is always 0.
         """
         tau_min, tau_max = self.tau_limits
-        scale = np.maximum(np.abs(tau_min), np.abs(tau_max))
-        return np.where(scale > 0.0, scale, 1.0)
+        return np.where(self.actuated, np.maximum(np.abs(tau_min), np.abs(tau_max)), 1.0)
 
     @property
     def switching(self) -> SwitchingTopology:

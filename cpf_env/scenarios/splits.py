@@ -168,7 +168,7 @@ def _hard_shift(name: str) -> Scenario:
         changes["sensors"] = hard.SHIFTED_FIX
     if not task.thrusters.instant:
         changes["thrusters"] = hard.SHIFTED_THRUSTERS
-    if not hard.has_sway(task):
+    if not task.actuated[:, 1].any():
         base = hard.without_sway(base)
     return base.replace(**changes)
 

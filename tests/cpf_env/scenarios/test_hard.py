@@ -30,7 +30,7 @@ def test_each_mechanism_is_on_at_least_two_scenarios() -> None:
     assert sum(not task.sensors.ideal for task in tasks) >= 2
     assert sum(not task.thrusters.instant for task in tasks) >= 2
     assert sum(task.separation is not None for task in tasks) >= 2
-    assert sum(not hard.has_sway(task) for task in tasks) >= 2
+    assert sum(not task.actuated[:, 1].any() for task in tasks) >= 2
     large = scenarios.get("hard_large_fleet")
     assert large.n >= 10 and not large.sensors.ideal and not large.thrusters.instant
     assert large.separation == hard.CROSSING_SEPARATION
@@ -58,14 +58,14 @@ def test_a_crossing_scenario_carries_the_separation_and_room_for_the_safety_broa
 @pytest.mark.parametrize("name", ON_CORE)
 def test_a_hard_scenario_is_its_core_task_with_the_mechanisms_only(name: str) -> None:
     task, core = scenarios.get(name), scenarios.get(hard.BASES[name])
-    if not hard.has_sway(task):  # the hull is a mechanism too
+    if not task.actuated[:, 1].any():  # the hull is a mechanism too
         core = hard.without_sway(core)
     same = dataclasses.replace(
         task, name=core.name, description=core.description,
         sensors=core.sensors, thrusters=core.thrusters,
     )  # fmt: skip
     assert same == core
-    assert not (task.sensors.ideal and task.thrusters.instant and hard.has_sway(task))
+    assert not (task.sensors.ideal and task.thrusters.instant and task.actuated[:, 1].any())
 
 
 def test_without_sway_zeroes_the_sway_limits_only() -> None:
@@ -75,8 +75,8 @@ def test_without_sway_zeroes_the_sway_limits_only() -> None:
     assert (low[:, 1] == 0.0).all() and (high[:, 1] == 0.0).all()
     assert (high[:, [0, 2]] == core_high[:, [0, 2]]).all()
     assert (low[:, [0, 2]] == core_low[:, [0, 2]]).all()
-    assert hard.has_sway(core) and not hard.has_sway(hull)
-    assert [name for name in HARD if not hard.has_sway(scenarios.get(name))] == [
+    assert core.actuated.all() and not hull.actuated[:, 1].any()
+    assert [name for name in HARD if not scenarios.get(name).actuated[:, 1].any()] == [
         "hard_underactuated", "hard_underactuated_sensing",
     ]  # fmt: skip
 
@@ -91,7 +91,7 @@ def test_the_shift_split_shifts_the_core_task_and_the_mechanisms(name: str) -> N
         assert shifted.sensors == hard.SHIFTED_FIX != task.sensors
     if not task.thrusters.instant:
         assert shifted.thrusters == hard.SHIFTED_THRUSTERS != task.thrusters
-    assert hard.has_sway(shifted) == hard.has_sway(task)
+    assert shifted.actuated[:, 1].any() == task.actuated[:, 1].any()
     assert splits.suite_version(shifted.name) == suite.HARD_VERSION
     with pytest.raises(ValueError, match="held-out shift split"):
         splits.check_training(shifted.name, range(4))

@@ -26,6 +26,7 @@ def test_no_sway_force_acts_whatever_the_policy_commands(policy: str) -> None:
         assert np.all(sim.arrays.tau_applied[..., 1] == 0.0)
         assert np.all(np.isfinite(obs)) and np.all(np.isfinite(sim.arrays.reward))
     assert UNDERACTUATED.tau_scale[0].tolist() == [9.2, 1.0, 3.0]  # 1 where there is no actuator
+    assert UNDERACTUATED.actuated[0].tolist() == [True, False, True]
 
 
 def test_an_axis_limited_on_one_side_only_is_refused_saying_what_to_give() -> None:
