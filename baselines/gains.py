@@ -48,7 +48,7 @@ from typing import Any, TypeVar
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["LEAKAGE_LAWS", "BacksteppingGains", "CooperativeGains", "NNDSCGains"]
+__all__ = ["LEAKAGE_LAWS", "BacksteppingGains", "CooperativeGains", "NNDSCGains", "scalar_gain"]
 
 #: Readings of the weight law [30] (see the module docstring).
 LEAKAGE_LAWS = ("gamma_scaled", "plain")
@@ -72,8 +72,8 @@ def _diagonal(name: str, value: object) -> Diagonal:
     return (float(diagonal[0]), float(diagonal[1]), float(diagonal[2]))
 
 
-def _scalar(name: str, value: object, allow_zero: bool = True) -> float:
-    """Check a scalar gain (>= 0, or > 0 without ``allow_zero``), or raise ValueError."""
+def scalar_gain(name: str, value: object, allow_zero: bool = True) -> float:
+    """A scalar gain checked (>= 0, or > 0 without ``allow_zero``), or ValueError naming it."""
     try:
         number = float(value)  # type: ignore[arg-type]
     except (TypeError, ValueError):
@@ -113,7 +113,7 @@ class CooperativeGains:
             if field.type == "Diagonal":
                 object.__setattr__(self, field.name, _diagonal(field.name, value))
             elif field.type == "float":
-                object.__setattr__(self, field.name, _scalar(field.name, value))
+                object.__setattr__(self, field.name, scalar_gain(field.name, value))
 
     @classmethod
     def option_names(cls) -> list[str]:
@@ -175,7 +175,7 @@ class NNDSCGains(BacksteppingGains):
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        _scalar("rho", self.rho, allow_zero=False)
+        scalar_gain("rho", self.rho, allow_zero=False)
         if self.leakage not in LEAKAGE_LAWS:
             raise ValueError(
                 f"option leakage must be one of {list(LEAKAGE_LAWS)}, got {self.leakage!r}."

@@ -68,7 +68,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from baselines.cooperative import LocalObservation
-from baselines.gains import CooperativeGains
+from baselines.gains import CooperativeGains, scalar_gain
 from baselines.kernel_types import CooperativeOutputs
 from baselines.policy import AnalyticPolicy
 from cpf_env.model.vessel import coriolis_matrix, damping_matrix
@@ -99,10 +99,9 @@ class ILOSGains(CooperativeGains):
     k_yaw: float = 3.0
 
     def __post_init__(self) -> None:
-        super().__post_init__()
         for name in ("lookahead", "k_surge", "k_heading", "k_yaw"):
-            if getattr(self, name) <= 0.0:
-                raise ValueError(f"gain {name} must be > 0, got {getattr(self, name)!r}.")
+            scalar_gain(name, getattr(self, name), allow_zero=False)
+        super().__post_init__()
 
 
 class ILOSPolicy(AnalyticPolicy):

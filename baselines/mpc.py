@@ -367,13 +367,18 @@ class _ReadsSimulator(RecedingHorizon):
 class OraclePolicy(_ReadsSimulator):
     """The headroom bound: centralized, told everything, planning on copies of the simulator.
 
-    Where the scenario has a separation (vessels that must give way), its
-    feedback keeps every pair of vessels ``barrier_margin`` (default
-    ``ORACLE_BARRIER_MARGIN``, a backstop just outside the collision) apart
-    and its path-rate samples are common to the fleet (``vessel_rate_share``
-    0 unless given): a vessel's own rate offset buys a pass by desynchronizing
-    the formation at the 1 mm sync scale, which the 10 s the planner sees
-    undercharge (docs/hard_track.md, "The bound").
+    Where the scenario has a separation (vessels that pass close), three
+    defaults change (docs/hard_track.md, "The bound"), none given explicitly:
+
+    - its rollouts see the whole episode from any step (``tail`` the episode's
+      length): with the 10 s of the core suite the cost of a pass always lay
+      partly beyond the view, and the planner put it off by stopping, even
+      backing, the fleet short of the crossings;
+    - its feedback keeps every pair of vessels ``barrier_margin`` (default
+      ``ORACLE_BARRIER_MARGIN``, a backstop just outside the collision) apart;
+    - its path-rate samples are common to the fleet (``vessel_rate_share`` 0):
+      a vessel's own rate offset bought passes by desynchronizing the formation
+      at the 1 mm sync scale.
     """
 
     name = "oracle"
@@ -386,7 +391,8 @@ class OraclePolicy(_ReadsSimulator):
     def __init__(self, env: object, **options: Any) -> None:
         scenario = resolve_scenario(env)
         if scenario.separation is not None:
-            options = {"vessel_rate_share": 0.0, **options}
+            whole_episode = scenario.max_steps * scenario.dt
+            options = {"vessel_rate_share": 0.0, "tail": whole_episode, **options}
         super().__init__(env, **options)
 
     def act_batch(self, obs: ArrayLike, fleets: ArrayLike | None = None) -> Array:

@@ -19,8 +19,10 @@ declared set of physical metrics (``GUARDED``), all on the same seeds:
   margin: not resolved by these seeds (``no difference (worse: ...)`` if a
   guarded metric regressed).
 
-A guarded metric regressed when its mean paired difference, oriented so
-that positive is worse, exceeds ``max(RELATIVE_TOLERANCE x |reference
+A guarded metric is read as its distance from a target where it has one
+(progress from 1: a fleet ahead of its schedule is as far off it as one
+behind), else as is (lower is better). It regressed when the mean paired
+difference of that distance exceeds ``max(RELATIVE_TOLERANCE x |reference
 mean|, floor)`` and the lower end of its 95 % bootstrap interval is above
 zero (a real, not a noisy, regression). The floors ignore differences
 below what matters physically on a 1.255 m model ship (1 mm, 1 mrad, 1 %
@@ -50,6 +52,7 @@ __all__ = [
     "RELATIVE_TOLERANCE",
     "Verdict",
     "check_margin",
+    "off_target",
     "suite_cost_difference",
     "verdict",
     "verdicts",
@@ -61,13 +64,14 @@ __all__ = [
 RELATIVE_TOLERANCE = 0.10
 #: Practical-equivalence margin of the cost, a fraction of the reference's mean cost.
 COST_MARGIN = 0.01
-#: Guarded physical metrics: name -> (short label, absolute floor, higher is better).
-GUARDED: dict[str, tuple[str, float, bool]] = {
-    "cross_track_error_rms_window": ("cross-track", 1e-3, False),
-    "heading_error_rms_window": ("heading", 1e-3, False),
-    "formation_error_rms_window": ("formation", 1e-3, False),
-    "progress_window": ("progress", 0.01, True),
-    "terminated": ("failures", 0.0, False),
+#: Guarded physical metrics: name -> (short label, absolute floor, target). A metric with a
+#: target is read as its distance from it; one without (None) is read as is, lower better.
+GUARDED: dict[str, tuple[str, float, float | None]] = {
+    "cross_track_error_rms_window": ("cross-track", 1e-3, None),
+    "heading_error_rms_window": ("heading", 1e-3, None),
+    "formation_error_rms_window": ("formation", 1e-3, None),
+    "progress_window": ("progress", 0.01, 1.0),
+    "terminated": ("failures", 0.0, None),
 }
 
 
@@ -100,13 +104,23 @@ class Verdict:
     label: str
 
 
+def off_target(metric: str, values: np.ndarray) -> np.ndarray:
+    """How bad each value of a guarded metric is: its distance from the target, if any.
+
+    Example:
+        >>> off_target("progress_window", np.array([0.9, 1.0, 1.2])).round(2).tolist()
+        [0.1, 0.0, 0.2]
+    """
+    target = GUARDED[metric][2]
+    return values if target is None else np.abs(values - target)
+
+
 def _regressed(cell: CellResult, base: CellResult) -> tuple[str, ...]:
     """The guarded metrics on which ``cell`` is worse than ``base`` beyond tolerance."""
     worse = []
-    for metric, (label, floor, higher_better) in GUARDED.items():
-        sign = -1.0 if higher_better else 1.0
+    for metric, (label, floor, _) in GUARDED.items():
         mean, low, _ = stats.paired_difference(
-            sign * cell.metrics[metric], sign * base.metrics[metric]
+            off_target(metric, cell.metrics[metric]), off_target(metric, base.metrics[metric])
         )
         tolerance = max(RELATIVE_TOLERANCE * abs(float(base.metrics[metric].mean())), floor)
         if mean > tolerance and low > 0.0:
@@ -115,20 +129,20 @@ def _regressed(cell: CellResult, base: CellResult) -> tuple[str, ...]:
 
 
 def worst_episode(metric: str, values: np.ndarray) -> float:
-    """A guarded metric's worst episode value: its largest, smallest if higher is better."""
-    return float(np.min(values) if GUARDED[metric][2] else np.max(values))
+    """A guarded metric's worst episode value: the one furthest off target (``off_target``)."""
+    return float(values[np.argmax(off_target(metric, values))])
 
 
 def worst_episode_regressed(cell: CellResult, base: CellResult) -> tuple[str, ...]:
     """The guarded metrics whose worst episode in ``cell`` is worse than ``base``'s worst.
 
-    Worse (``worst_episode``) by more than ``max(RELATIVE_TOLERANCE x |base's
-    worst|, floor)``. Not part of the verdict's label.
+    Further off target (``worst_episode``, ``off_target``) by more than
+    ``max(RELATIVE_TOLERANCE x |base's worst|, floor)``. Not part of the verdict's label.
     """
     worse = []
-    for metric, (label, floor, higher_better) in GUARDED.items():
+    for metric, (label, floor, _) in GUARDED.items():
         own, reference = (worst_episode(metric, c.metrics[metric]) for c in (cell, base))
-        excess = reference - own if higher_better else own - reference
+        excess = float(off_target(metric, np.array(own)) - off_target(metric, np.array(reference)))
         if excess > max(RELATIVE_TOLERANCE * abs(reference), floor):
             worse.append(label)
     return tuple(worse)

@@ -100,7 +100,8 @@ BREAKS: tuple[Break, ...] = (
     Break("distill-twin-labels-on-env-base", "agents/distill/dagger.py", "base = np.asarray(twin.act_batch(obs), dtype=np.float64)", "base = controller.base_actions", ("tests/agents/test_distill.py",)),  # noqa: E501
     Break("distill-twin-unseeded", "agents/distill/dagger.py", "twin.reset(seed=seeds[0])", "twin.reset()", ("tests/agents/test_distill.py",)),  # noqa: E501
     Break("distill-twin-not-restarted", "agents/distill/dagger.py", "group.twin.reset_fleets(ended)", "pass", ("tests/agents/test_distill.py",)),  # noqa: E501
-    Break("worst-episode-ignores-direction", "cpf_bench/verdict.py", "excess = reference - own if higher_better else own - reference", "excess = own - reference", ("tests/cpf_bench/test_verdict.py",)),  # noqa: E501
+    Break("worst-episode-is-the-largest", "cpf_bench/verdict.py", "return float(values[np.argmax(off_target(metric, values))])", "return float(np.max(values))", ("tests/cpf_bench/test_verdict.py",)),  # noqa: E501
+    Break("progress-ahead-counts-as-better", "cpf_bench/verdict.py", "return values if target is None else np.abs(values - target)", "return values if target is None else target - values", ("tests/cpf_bench/test_verdict.py",)),  # noqa: E501
     Break("curves-mean-not-iqm", "cpf_commands/curves.py", "iqm(values, axis=1)", "values.mean(axis=1)", ("tests/cpf_commands/test_curves.py",)),  # noqa: E501
     Break("line-of-sight-steers-away", "baselines/mpc_kernels.py", "z1[2] + math.atan(cross / lookahead)", "z1[2] - math.atan(cross / lookahead)", ("tests/baselines/test_mpc.py",)),  # noqa: E501
     Break("shift-gives-the-hull-sway", "cpf_env/scenarios/splits.py", "base = hard.without_sway(base)", "pass", ("tests/cpf_env/scenarios/test_hard.py",)),  # noqa: E501

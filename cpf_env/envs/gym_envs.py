@@ -370,12 +370,15 @@ class CentralizedFleetVectorEnv(VectorEnv[NDArray[np.float32], NDArray[np.float3
 
 #: Scenarios whose dynamics changed since their id was first registered -> their id's
 #: version (the version policy of CHANGELOG.md): suite version 2 changed bench_switching;
-#: hard-track version 2 made hard_large_fleet five crossing pairs.
+#: hard-track version 2 made hard_large_fleet five crossing pairs; version 4 moved the
+#: crossing pairs' formation (``hard.CROSSING_OFFSET``).
 ID_VERSIONS = {
     "bench_switching": 1,
     "bench_switching_shift": 1,
-    "hard_large_fleet": 1,
-    "hard_large_fleet_shift": 1,
+    "hard_crossing": 1,
+    "hard_crossing_shift": 1,
+    "hard_large_fleet": 2,
+    "hard_large_fleet_shift": 2,
 }
 
 

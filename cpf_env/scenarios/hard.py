@@ -19,9 +19,10 @@ vessel meets:
   sliding for tens of seconds, and no design holds the path);
 * **crossing paths with a separation constraint** (``crossing``,
   ``cpf_env.scenarios.crossing``, ``CROSSING_SEPARATION``): pairs of vessels
-  whose synchronized formation brings them 0.21 m apart, a collision unless
-  one gives way; 1.5 m keep-out, 0.5 m collision; room in the messages for a
-  safety filter's broadcast (``baselines.safety``).
+  whose synchronized formation brings them 0.57 m apart, deep inside a 1.5 m
+  keep-out and 7 cm outside a 0.5 m collision, so that a packet lost at the
+  wrong moment or a few centimetres of position error make a collision;
+  room in the messages for a safety filter's broadcast (``baselines.safety``).
 
 ==============================  ===========================================================
 name                            the task, and what the track adds
@@ -33,8 +34,9 @@ name                            the task, and what the track adds
                                 5-step delay: separation
 ``hard_underactuated_sensing``  ``bench_saturation``: no sway actuator, sensing
 ``hard_heterogeneous``          ``bench_heterogeneous``: sensing and thruster dynamics
-``hard_large_fleet``            five crossing pairs (n = 10, ring graph, 10 % packet loss):
-                                separation, sensing and thruster dynamics
+``hard_large_fleet``            five crossing pairs (n = 10, ring graph, 10 % packet loss)
+                                at 0.5 m/s: separation, no sway actuator, sensing and
+                                thruster dynamics
 ==============================  ===========================================================
 
 Each has a ``test`` and a ``shift`` split like the core suite's
@@ -47,9 +49,8 @@ have the mechanism; a hull without sway keeps none in its shift. The cost is
 the core suite's on the true state, plus the separation term where vessels
 cross; its tolerances (1 cm of path error, 0.05 rad of heading) sit at what
 a filter makes of these sensors (about 1 cm and 0.01 rad), so the sensors do
-not make the cost unreachable. Not on the track yet: hulls without sway on
-the large fleet (a hull that cannot sidestep needs a safety filter that
-plans a turn, not a force).
+not make the cost unreachable. Every mechanism
+meets on the large fleet.
 
     >>> from cpf_env.scenarios.suite import list_suite
     >>> list_suite("hard")[0]
@@ -79,6 +80,7 @@ __all__ = [
     "CROSSING_SPREAD",
     "HARD_FACTORIES",
     "LAGGED_THRUSTERS",
+    "LARGE_FLEET_SPEED",
     "SHIFTED_CROSSING_SPREAD",
     "SHIFTED_FIX",
     "SHIFTED_THRUSTERS",
@@ -107,8 +109,16 @@ CROSSING_MESSAGE, CROSSING_MESSAGE_MAX = 6, 100.0
 #: core suite's 1 m, so that no fleet starts inside its collision distance.
 CROSSING_SPREAD = (0.3, 0.1, 0.3)
 #: How far a crossing pair's second vessel is behind the first in formation (m): the
-#: synchronized pair passes 0.21 m apart, a collision unless one of them gives way.
-CROSSING_OFFSET = 0.3
+#: synchronized pair passes 0.57 m apart (offset / sqrt(2)), 7 cm outside the collision
+#: distance. Versions 2 and 3 had 0.3 m (0.21 m apart): a pass then took metres of
+#: desynchronization, which the sync term charges more than stopping, and the bound stopped
+#: the fleet short of the crossings (docs/findings).
+CROSSING_OFFSET = 0.8
+#: The large fleet's speed (m/s): its hulls have no sway actuator, and at the crossing
+#: scenarios' 0.1 m/s such a hull does not hold even a straight path (docs/findings); 0.5
+#: m/s is ``bench_saturation``'s, where a rudder steers. Its pairs meet after 40 s, as at
+#: 0.1 m/s.
+LARGE_FLEET_SPEED = 0.5
 #: The crossing scenarios' ``shift`` spread of the starts (m, rad, path-variable units).
 SHIFTED_CROSSING_SPREAD = (0.5, 0.17, 0.5)
 
@@ -127,14 +137,22 @@ def without_sway(task: Scenario) -> Scenario:
     return task.replace(tau_max=rows(tau_max), tau_min=rows(tau_min))
 
 
-def crossing(name: str, pairs: int, description: str, **changes: object) -> Scenario:
+def crossing(
+    name: str,
+    pairs: int,
+    description: str,
+    v0: float = 0.1,
+    lead: float = 4.0,
+    **changes: object,
+) -> Scenario:
     """``pairs`` crossing pairs (``cpf_env.scenarios.crossing``) under ``CROSSING_SEPARATION``.
 
-    At v0 = 0.1 m/s for the core suite's 100 s, with random starts of ``CROSSING_SPREAD``;
-    ``changes`` adds the mechanisms.
+    At ``v0`` (m/s) for the core suite's 100 s, the eastbound vessels ``lead`` metres
+    before their crossings (the pairs meet after lead / v0 seconds, 40 s by default), with
+    random starts of ``CROSSING_SPREAD``; ``changes`` adds the mechanisms.
     """
     paths, initial, topology = crossing_fleet(
-        pairs, offset=CROSSING_OFFSET, leaders=(0,) if pairs < 3 else (0, pairs)
+        pairs, lead=lead, offset=CROSSING_OFFSET, leaders=(0,) if pairs < 3 else (0, pairs)
     )
     position, heading, theta = CROSSING_SPREAD
     return Scenario(
@@ -144,7 +162,7 @@ def crossing(name: str, pairs: int, description: str, **changes: object) -> Scen
         initial=dataclasses.replace(
             initial, position_std=position, heading_std=heading, theta_std=theta
         ),
-        v0=0.1,
+        v0=v0,
         max_steps=suite.BENCH_STEPS,
         separation=CROSSING_SEPARATION,
         message_size=CROSSING_MESSAGE,
@@ -246,15 +264,24 @@ def hard_heterogeneous() -> Scenario:
 
 
 def hard_large_fleet() -> Scenario:
-    """Five crossing pairs (n = 10) with ``STANDALONE_FIX`` and ``LAGGED_THRUSTERS``."""
-    return crossing(
-        "hard_large_fleet",
-        5,
-        "Five crossing pairs (n = 10, ring graph, leaders 0 and 5), 1.5 m keep-out, 10 % "
-        "packet loss. Hard track: separation, sensing and thruster dynamics.",
-        links=LinkImpairments(loss_probability=0.1),
-        sensors=STANDALONE_FIX,
-        thrusters=LAGGED_THRUSTERS,
+    """Every mechanism: five crossing pairs (n = 10) on hulls without sway, 0.5 m/s.
+
+    ``without_sway`` hulls at ``LARGE_FLEET_SPEED``, with ``STANDALONE_FIX`` and
+    ``LAGGED_THRUSTERS``.
+    """
+    return without_sway(
+        crossing(
+            "hard_large_fleet",
+            5,
+            "Five crossing pairs (n = 10, ring graph, leaders 0 and 5) at 0.5 m/s, 1.5 m "
+            "keep-out, 10 % packet loss. Hard track: separation, no sway actuator, sensing "
+            "and thruster dynamics.",
+            v0=LARGE_FLEET_SPEED,
+            lead=LARGE_FLEET_SPEED * 40.0,
+            links=LinkImpairments(loss_probability=0.1),
+            sensors=STANDALONE_FIX,
+            thrusters=LAGGED_THRUSTERS,
+        )
     )
 
 

@@ -64,8 +64,11 @@ SUITE_VERSION = 2
 #: constraint (``hard_crossing`` in place of ``hard_lossy_sensing``; ``hard_large_fleet``
 #: five crossing pairs with every mechanism), and the planners' thruster-aware feedback.
 #: 3: hulls without a sway actuator (``hard_underactuated`` and ``hard_underactuated_sensing``
-#: in place of ``hard_thrusters`` and ``hard_switching_thrusters``).
-HARD_VERSION = 3
+#: in place of ``hard_thrusters`` and ``hard_switching_thrusters``). 4: crossing pairs 0.57 m
+#: apart in formation (``hard.CROSSING_OFFSET`` 0.8 m, was 0.3 m), ``hard_large_fleet`` with
+#: every mechanism (hulls without sway, at 0.5 m/s), and an ``oracle`` that sees the whole
+#: episode where vessels cross.
+HARD_VERSION = 4
 
 #: Spread of the random starts (m, rad, path-variable units), common to the suite.
 POSITION_STD, HEADING_STD, THETA_STD = 1.0, 0.3, 0.5

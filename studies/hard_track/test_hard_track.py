@@ -59,7 +59,7 @@ def test_the_crossing_bound_study_runs_its_oracle_variants(capsys) -> None:
     costs = script.main(["--num-seeds", "1", "--max-steps", "20", "--scenarios", "hard_crossing"])
     assert set(costs) == {(label, "hard_crossing") for label in script.VARIANTS}
     assert all(cost > 0 for cost in costs.values())
-    assert "common rates, 1 cm (the oracle)" in capsys.readouterr().out
+    assert "| the oracle | hard_crossing |" in capsys.readouterr().out
 
 
 def test_the_safety_tuning_study_sweeps_distance_and_gain(capsys) -> None:
@@ -68,3 +68,15 @@ def test_the_safety_tuning_study_sweeps_distance_and_gain(capsys) -> None:
     [(distance, gain, cost)] = script.main(argv)
     assert (distance, gain) == (0.7, 1.0) and cost > 0
     assert "| 0.7 | 1.0 |" in capsys.readouterr().out
+
+
+def test_the_crossing_geometry_study_moves_only_the_formation(capsys) -> None:
+    script = load_script(ROOT / "studies/hard_track/crossing_geometry.py")
+    task, moved = scenarios.get("hard_crossing"), script.with_offset(1.2)
+    assert moved.paths != task.paths and moved.initial.eta != task.initial.eta
+    same = dataclasses.replace(moved, name=task.name, paths=task.paths, initial=task.initial)
+    assert same == task
+    costs = script.main(["--num-seeds", "1", "--max-steps", "20", "--offsets", "1.2"])
+    assert set(costs[1.2]) == {"oracle", "mpc_tuned", "mpc_tuned_safe"}
+    assert "| 1.2 | 0.85 |" in capsys.readouterr().out
+    assert not list((ROOT / "results/bench_cache").glob("*offset*"))

@@ -103,8 +103,10 @@ def test_ilos_is_deterministic_and_batch_independent() -> None:
 
 @pytest.mark.parametrize(
     ("option", "value", "message"),
-    [("lookahead", 0.0, "lookahead must be > 0"), ("sigma", -1.0, "sigma must be"),
-     ("k_yaw", 0.0, "k_yaw must be > 0"), ("gain", 1.0, "unknown option")],
+    [("lookahead", 0.0, "lookahead must be a finite number > 0"),
+     ("sigma", -1.0, "sigma must be a finite number >= 0"),
+     ("k_surge", -1.0, "k_surge must be a finite number > 0"),
+     ("k_yaw", 0.0, "k_yaw must be a finite number > 0"), ("gain", 1.0, "unknown option")],
 )  # fmt: skip
 def test_bad_gains_are_refused_naming_the_gain(option: str, value: float, message: str) -> None:
     with pytest.raises(ValueError, match=message):

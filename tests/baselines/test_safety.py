@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -12,6 +13,7 @@ from baselines.barrier import BARRIER_GAINS, barrier_filter
 from baselines.mpc import OraclePolicy, thruster_gain
 from cpf_env import scenarios
 from cpf_env.model.vessel import CYBERSHIP2, coriolis_matrix, damping_matrix
+from cpf_env.scenarios.crossing import crossing_fleet
 from cpf_env.sim.fleet import FleetSim
 
 CROSSING = scenarios.get("hard_crossing")
@@ -91,11 +93,19 @@ def test_each_vessel_broadcasts_its_flag_position_and_velocity() -> None:
     assert np.all(actions[..., 5] == 1.0)
 
 
+#: ``hard_crossing`` with pairs whose formation passes 0.21 m apart: a collision unless one
+#: of them gives way.
+_paths, _initial, _ = crossing_fleet(2, offset=0.3)
+TIGHT = CROSSING.replace(
+    paths=_paths, initial=dataclasses.replace(CROSSING.initial, eta=_initial.eta)
+)
+
+
 def _closest(name: str, steps: int = 2000) -> tuple[float, bool]:
-    """Closest approach (m) and whether the fleet collided, one episode of ``hard_crossing``."""
-    sim = FleetSim(CROSSING, num_fleets=1)
+    """Closest approach (m) and whether the fleet collided, one episode of ``TIGHT``."""
+    sim = FleetSim(TIGHT, num_fleets=1)
     obs = sim.reset(seeds=[10_000])
-    policy = baselines.make_policy(name, CROSSING)
+    policy = baselines.make_policy(name, TIGHT)
     closest = math.inf
     for _ in range(steps):
         sim.step(policy.act_batch(obs))
@@ -109,7 +119,7 @@ def _closest(name: str, steps: int = 2000) -> tuple[float, bool]:
 
 
 def test_the_filter_keeps_apart_the_hulls_the_bare_design_runs_into_each_other() -> None:
-    """One whole episode of ``hard_crossing`` (2,000 steps), on a test seed."""
+    """One whole episode (2,000 steps) of pairs that meet unless they give way, a test seed."""
     bare, collided = _closest("nn_dsc")
     safe, safe_collided = _closest("nn_dsc_safe")
     assert collided and bare < CROSSING.separation.hard_distance

@@ -46,12 +46,22 @@ def test_a_heading_regression_makes_it_mixed_and_names_it():
 
 @pytest.mark.parametrize("metric", sorted(GUARDED))
 def test_every_guarded_metric_can_regress(metric):
-    _, floor, higher_better = GUARDED[metric]
+    _, floor, _ = GUARDED[metric]
     base = REFERENCE.metrics[metric]
     step = max(0.5 * abs(float(base.mean())), 2 * floor, 0.5)
-    changed = base - step if higher_better else base + step
+    changed = base + step  # further from any target: the reference's progress is 0.9
     v = verdict(_cell("p", BASE_COST - 5.0, **{metric: changed}), REFERENCE)
     assert v.regressed == (GUARDED[metric][0],)
+
+
+def test_progress_is_judged_by_its_distance_from_the_schedule():
+    """The reference is 10 % behind (0.9): 30 % ahead is further off, 5 % ahead closer."""
+    ahead = verdict(_cell("p", BASE_COST - 5.0, progress_window=np.full(10, 1.3)), REFERENCE)
+    assert ahead.label == "mixed (worse: progress)"
+    near = verdict(_cell("p", BASE_COST - 5.0, progress_window=np.full(10, 1.05)), REFERENCE)
+    assert near.label == "beats"
+    worst = verdicts_module.worst_episode("progress_window", np.array([0.6, 1.0, 1.3]))
+    assert worst == 0.6
 
 
 def test_within_tolerance_or_below_the_floor_is_not_a_regression():

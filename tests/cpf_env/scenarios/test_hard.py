@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 
+import numpy as np
 import pytest
 
 from cpf_env import scenarios
@@ -24,8 +25,7 @@ def test_the_tracks_list_their_scenarios_and_an_unknown_track_is_refused() -> No
     assert suite.track_of("hard_sensing_shift") == "hard" and suite.track_of("wang2014") is None
 
 
-def test_each_mechanism_is_on_at_least_two_scenarios() -> None:
-    """Hulls without sway are not on the large fleet yet (docs/hard_track.md says why)."""
+def test_each_mechanism_is_on_at_least_two_scenarios_and_all_on_the_large_fleet() -> None:
     tasks = [scenarios.get(name) for name in HARD]
     assert sum(not task.sensors.ideal for task in tasks) >= 2
     assert sum(not task.thrusters.instant for task in tasks) >= 2
@@ -33,7 +33,9 @@ def test_each_mechanism_is_on_at_least_two_scenarios() -> None:
     assert sum(not task.actuated[:, 1].any() for task in tasks) >= 2
     large = scenarios.get("hard_large_fleet")
     assert large.n >= 10 and not large.sensors.ideal and not large.thrusters.instant
-    assert large.separation == hard.CROSSING_SEPARATION
+    assert large.separation == hard.CROSSING_SEPARATION and not large.actuated[:, 1].any()
+    assert large.v0.at(0.0) == hard.LARGE_FLEET_SPEED
+    assert not splits.split_scenario("hard_large_fleet", "shift").actuated[:, 1].any()
 
 
 @pytest.mark.parametrize("name", CROSSING)
@@ -53,6 +55,20 @@ def test_a_crossing_scenario_carries_the_separation_and_room_for_the_safety_broa
         assert shifted.sensors == hard.SHIFTED_FIX
     if not task.thrusters.instant:
         assert shifted.thrusters == hard.SHIFTED_THRUSTERS
+
+
+@pytest.mark.parametrize("name", CROSSING)
+def test_a_synchronized_crossing_pair_passes_between_the_collision_and_the_keep_out(
+    name: str,
+) -> None:
+    """Partners at a common path variable come offset / sqrt(2) close: 0.57 m, inside 1.5 m."""
+    task = scenarios.get(name)
+    theta = np.linspace(0.0, 60.0, 600_001)
+    for k in range(task.n // 2):
+        east, north = (task.paths[2 * k + j].evaluate(theta)[:, 0, :2] for j in (0, 1))
+        closest = np.linalg.norm(east - north, axis=1).min()
+        assert closest == pytest.approx(hard.CROSSING_OFFSET / np.sqrt(2.0), abs=1e-4)
+        assert task.separation.hard_distance < closest < task.separation.safe_distance
 
 
 @pytest.mark.parametrize("name", ON_CORE)
@@ -77,7 +93,7 @@ def test_without_sway_zeroes_the_sway_limits_only() -> None:
     assert (low[:, [0, 2]] == core_low[:, [0, 2]]).all()
     assert core.actuated.all() and not hull.actuated[:, 1].any()
     assert [name for name in HARD if not scenarios.get(name).actuated[:, 1].any()] == [
-        "hard_underactuated", "hard_underactuated_sensing",
+        "hard_underactuated", "hard_underactuated_sensing", "hard_large_fleet",
     ]  # fmt: skip
 
 
