@@ -49,8 +49,7 @@ have the mechanism; a hull without sway keeps none in its shift. The cost is
 the core suite's on the true state, plus the separation term where vessels
 cross; its tolerances (1 cm of path error, 0.05 rad of heading) sit at what
 a filter makes of these sensors (about 1 cm and 0.01 rad), so the sensors do
-not make the cost unreachable. Every mechanism
-meets on the large fleet.
+not make the cost unreachable. The large fleet has every mechanism.
 
     >>> from cpf_env.scenarios.suite import list_suite
     >>> list_suite("hard")[0]
