@@ -219,6 +219,8 @@ class Filtered(FleetPolicy):
         scenario = resolve_scenario(env)
         self.policy = self.inner(env, **options)  # type: ignore[call-arg]
         self.n = scenario.n
+        self.obs_dim, self.act_dim = self.policy.obs_dim, self.policy.act_dim
+        self.agents = self.policy.agents
         kinds, paths = encode_paths(scenario.paths)
         self._kinds = np.ascontiguousarray(kinds, dtype=np.int64)
         self._paths = np.ascontiguousarray(paths, dtype=np.float64)

@@ -17,6 +17,14 @@ the final window (``cost_window``):
   (``oracle_not_lowest`` lists every policy that beats the bound on a
   scenario).
 
+``room_closed`` scores every other policy (a trained agent, a policy of
+one's own) against that room: (J_best - J) / (J_best - J_oracle), 0 at the
+best deployable design of the scenario and 1 at the bound, per scenario and
+as the IQM of the per-episode scores over the scenarios (each episode's cost
+against the two means), with a bootstrap interval stratified by scenario:
+the normalized score of the hard track, beside the one against the
+reference (``report.normalized_score``).
+
 Example:
     >>> from cpf_bench.report import CellResult
     >>> import numpy as np
@@ -36,11 +44,11 @@ from typing import cast
 
 import numpy as np
 
-from baselines import DEPLOYABLE, HEADROOM_REFERENCE
+from baselines import ALL_POLICIES, DEPLOYABLE, HEADROOM_REFERENCE
 from cpf_bench.report import CellResult
-from cpf_bench.stats import paired_headroom
+from cpf_bench.stats import bootstrap_interval, iqm, paired_headroom
 
-__all__ = ["headroom_rows", "headroom_table", "oracle_not_lowest"]
+__all__ = ["headroom_rows", "headroom_table", "oracle_not_lowest", "room_closed", "room_table"]
 
 #: The costs the table reads: (metric, label).
 COSTS = (("cost", "whole episode"), ("cost_window", "final window"))
@@ -137,4 +145,55 @@ def headroom_table(cells: Sequence[CellResult], reference: str = "nn_dsc") -> li
     ]
     if exceptions:
         lines += ["", f"Lower mean cost than {HEADROOM_REFERENCE}: " + "; ".join(exceptions) + "."]
+    return lines
+
+
+def room_closed(cells: Sequence[CellResult], metric: str = "cost") -> dict[str, dict[str, object]]:
+    """Each policy outside ``baselines``: the share of the room it closes (module docstring).
+
+    Returns:
+        policy -> ``scenarios`` (scenario -> (J_best - J) / (J_best - J_oracle) of the
+        means), ``iqm`` and ``interval`` (IQM over every episode of the scenarios with a
+        room, each scored against its scenario's two means, and its 95 % bootstrap
+        interval stratified by scenario). Scenarios where the bound is not below the
+        best deployable design have no room and are left out.
+    """
+    rooms = {
+        row["scenario"]: (float(row["best_cost"]), float(row["oracle"]))  # type: ignore[arg-type]
+        for row in headroom_rows(cells, metric=metric)
+        if float(row["oracle"]) < float(row["best_cost"])  # type: ignore[arg-type]
+    }
+    scored: dict[str, dict[str, object]] = {}
+    strata: dict[str, list[np.ndarray]] = {}
+    for cell in cells:
+        if cell.policy in ALL_POLICIES or cell.scenario not in rooms:
+            continue
+        best, bound = rooms[cell.scenario]
+        episodes = (best - cell.metrics[metric]) / (best - bound)
+        entry = scored.setdefault(cell.policy, {"scenarios": {}})
+        cast(dict[str, float], entry["scenarios"])[cell.scenario] = float(
+            (best - np.mean(cell.metrics[metric])) / (best - bound)
+        )
+        strata.setdefault(cell.policy, []).append(episodes)
+    for policy, entry in scored.items():
+        entry["iqm"] = float(iqm(np.concatenate(strata[policy])))
+        entry["interval"] = bootstrap_interval(strata[policy], statistic=iqm)
+    return scored
+
+
+def room_table(cells: Sequence[CellResult]) -> list[str]:
+    """Markdown lines of ``room_closed`` (whole-episode cost), or none without such a policy."""
+    scored = room_closed(cells)
+    if not scored:
+        return []
+    names = list(dict.fromkeys(s for e in scored.values() for s in e["scenarios"]))  # type: ignore[attr-defined]
+    lines = [
+        "| policy | IQM (95 % interval) | " + " | ".join(names) + " |",
+        "|---|---|" + "---|" * len(names),
+    ]
+    for policy, entry in scored.items():
+        low, high = cast(tuple[float, float], entry["interval"])
+        per = cast(dict[str, float], entry["scenarios"])
+        values = " | ".join(f"{per[n]:.2f}" if n in per else "" for n in names)
+        lines.append(f"| {policy} | {entry['iqm']:.2f} ({low:.2f} to {high:.2f}) | {values} |")
     return lines

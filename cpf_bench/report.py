@@ -27,7 +27,7 @@ from numpy.typing import NDArray
 from baselines import HEADROOM_REFERENCE
 from cpf_bench import stats
 from cpf_bench.episodes import METRICS
-from cpf_env.evaluation.fleet_metrics import UNSEPARATED
+from cpf_env.evaluation.fleet_metrics import COURSE_UNMEASURED, UNSEPARATED
 from cpf_env.scenarios import splits
 
 __all__ = [
@@ -365,7 +365,9 @@ def read_episodes_csv(text: str) -> list[CellResult]:
 
     A table written before the separation metrics existed (every scenario of its
     time without a separation) reads with their values by construction
-    (``UNSEPARATED``: a zero term, an unmeasured closest approach).
+    (``UNSEPARATED``: a zero term, an unmeasured closest approach); one written
+    before the course metrics existed (every hull of its time with a sway
+    actuator) reads them as not measured (``COURSE_UNMEASURED``).
 
     Raises:
         ValueError: A column of ``METRICS`` or of the row key is missing (the file is
@@ -373,9 +375,10 @@ def read_episodes_csv(text: str) -> list[CellResult]:
     """
     reader = csv.DictReader(io.StringIO(text))
     columns = reader.fieldnames or ()
-    absent = {c: UNSEPARATED[c] for c in UNSEPARATED if c not in columns}
-    if absent and len(absent) < len(UNSEPARATED):
-        absent = {}  # a partial set is a damaged table, not an older one
+    absent: dict[str, float] = {}
+    for group in (UNSEPARATED, COURSE_UNMEASURED):  # a partial group: a damaged table
+        if not any(c in columns for c in group):
+            absent.update(group)
     missing = [c for c in ("policy", "scenario", "seed", "deterministic", *METRICS)
                if c not in columns and c not in absent]  # fmt: skip
     if missing:

@@ -19,6 +19,15 @@ declared set of physical metrics (``GUARDED``), all on the same seeds:
   margin: not resolved by these seeds (``no difference (worse: ...)`` if a
   guarded metric regressed).
 
+Where no hull of the fleet has a sway actuator (the scenarios whose course
+is measured, ``cpf_env.evaluation.fleet_metrics``) no direction is guarded:
+such a hull steers its position with its heading, holding the path in a
+cross current only with its bow turned into the drift and converging to it
+only on a course off the tangent, so neither offset is a regression in
+itself; what it buys is judged by the cross-track, formation and progress
+guards. A metric the scenario does not measure (NaN in the reference) is
+not guarded.
+
 A guarded metric is read as its distance from a target where it has one
 (progress from 1: a fleet ahead of its schedule is as far off it as one
 behind), else as is (lower is better). It regressed when the mean paired
@@ -52,6 +61,7 @@ __all__ = [
     "RELATIVE_TOLERANCE",
     "Verdict",
     "check_margin",
+    "guarded",
     "off_target",
     "suite_cost_difference",
     "verdict",
@@ -115,10 +125,23 @@ def off_target(metric: str, values: np.ndarray) -> np.ndarray:
     return values if target is None else np.abs(values - target)
 
 
+def guarded(base: CellResult) -> list[str]:
+    """The ``GUARDED`` metrics that apply on the reference cell's scenario (module docstring).
+
+    Those it measures (not NaN), without the heading where no hull has a sway
+    actuator (where the course is measured).
+    """
+    measured = [m for m in GUARDED if not np.isnan(base.metrics[m]).all()]
+    if not np.isnan(base.metrics["course_error_rms_window"]).all():
+        measured.remove("heading_error_rms_window")
+    return measured
+
+
 def _regressed(cell: CellResult, base: CellResult) -> tuple[str, ...]:
     """The guarded metrics on which ``cell`` is worse than ``base`` beyond tolerance."""
     worse = []
-    for metric, (label, floor, _) in GUARDED.items():
+    for metric in guarded(base):
+        label, floor, _ = GUARDED[metric]
         mean, low, _ = stats.paired_difference(
             off_target(metric, cell.metrics[metric]), off_target(metric, base.metrics[metric])
         )
@@ -140,7 +163,8 @@ def worst_episode_regressed(cell: CellResult, base: CellResult) -> tuple[str, ..
     ``max(RELATIVE_TOLERANCE x |base's worst|, floor)``. Not part of the verdict's label.
     """
     worse = []
-    for metric, (label, floor, _) in GUARDED.items():
+    for metric in guarded(base):
+        label, floor, _ = GUARDED[metric]
         own, reference = (worst_episode(metric, c.metrics[metric]) for c in (cell, base))
         excess = float(off_target(metric, np.array(own)) - off_target(metric, np.array(reference)))
         if excess > max(RELATIVE_TOLERANCE * abs(reference), floor):

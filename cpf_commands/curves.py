@@ -12,13 +12,14 @@ writes to ``--out``:
   or ``wall_clock_seconds``), ``x``, ``iqm`` (interquartile mean over the runs
   of the mean evaluation cost), ``ci_low``, ``ci_high`` (95 % percentile
   bootstrap over the runs, ``cpf_bench.stats``), ``runs`` and
-  ``base_cost``;
-- ``curves.png``: both curves with their intervals, each run faint, the base
-  policy's cost as a dashed line;
+  ``base_cost`` (the first line to beat), then ``<name>_cost`` of every
+  further line (``--base-policy A B``);
+- ``curves.png``: both curves with their intervals, each run faint, each
+  line to beat dashed;
 
-and prints the time to beat the base: the first vessel-step count (and
-wall-clock second) at which the IQM is below the base's cost, and at which
-the whole interval is. One run has no interval: it prints and draws its cost
+and prints the time to beat each line: the first vessel-step count (and
+wall-clock second) at which the IQM is below its cost, and at which the
+whole interval is. One run has no interval: it prints and draws its cost
 alone (``curves.csv`` then has ci_low = ci_high = iqm = the run's cost).
 
 Vessel-steps axis: the evaluation points every run has (runs with one
@@ -26,14 +27,17 @@ schedule evaluate at the same counts). Wall-clock axis: every time at which
 some run evaluated, between the latest first evaluation and the earliest last
 one; each run's cost at time t is its latest evaluation at or before t.
 
-The base's cost: with ``--base-policy NAME``, that analytic policy run by the
-benchmark on the runs' evaluation settings (``run.json``); without it, the
-runs' evaluation at 0 vessel-steps, which for a residual agent is exactly its
-base policy (the correction starts at zero).
+The lines to beat: with ``--base-policy NAME [NAME ...]``, those analytic
+policies run by the benchmark on the runs' evaluation settings
+(``run.json``): the reference and the best deployable design, say, for the
+time to beat each; without it, the runs' evaluation at 0 vessel-steps,
+which for a residual agent is exactly its base policy (the correction
+starts at zero).
 
 Example::
 
     cpf-curves runs/lossy_s0 runs/lossy_s1 runs/lossy_s2 --out runs/curves_lossy
+    cpf-curves runs/sensing_s* --base-policy nn_dsc mpc_tuned_ekf --out runs/curves_sensing
 """
 
 from __future__ import annotations
@@ -193,21 +197,24 @@ def first_below(curve: Curve, level: float) -> tuple[float | None, float | None]
     )
 
 
-def curves_csv(curves: Sequence[Curve], base_cost: float, runs: int) -> str:
-    """``curves.csv`` text."""
+def curves_csv(curves: Sequence[Curve], lines: dict[str, float], runs: int) -> str:
+    """``curves.csv`` text; ``lines``: name -> cost of each line to beat, the first the base."""
     buffer = io.StringIO()
     writer = csv.writer(buffer, lineterminator="\n")
-    writer.writerow(["axis", "x", "iqm", "ci_low", "ci_high", "runs", "base_cost"])
+    names = list(lines)
+    writer.writerow(["axis", "x", "iqm", "ci_low", "ci_high", "runs", "base_cost",
+                     *(f"{name}_cost" for name in names[1:])])  # fmt: skip
+    costs = [repr(lines[name]) for name in names]
     for curve in curves:
         for i, x in enumerate(curve.x):
             writer.writerow(
                 [curve.axis, repr(float(x)), repr(float(curve.iqm[i])), repr(float(curve.low[i])),
-                 repr(float(curve.high[i])), runs, repr(base_cost)]
+                 repr(float(curve.high[i])), runs, *costs]
             )  # fmt: skip
     return buffer.getvalue()
 
 
-def figure(curves: Sequence[Curve], base_cost: float, names: Sequence[str]) -> Figure:
+def figure(curves: Sequence[Curve], lines: dict[str, float], names: Sequence[str]) -> Figure:
     """Both learning curves side by side (Agg figure, no time stamp)."""
     drawing = Figure(figsize=(11, 4.2))
     labels = {"vessel_steps": "vessel-steps", "wall_clock_seconds": "wall-clock seconds"}
@@ -223,7 +230,8 @@ def figure(curves: Sequence[Curve], base_cost: float, names: Sequence[str]) -> F
             axes.fill_between(curve.x, curve.low, curve.high, color="tab:blue", alpha=0.2,
                               step="post" if style == "steps-post" else None,
                               label="95 % bootstrap interval")  # fmt: skip
-        axes.axhline(base_cost, color="k", ls="--", lw=1.2, label="base policy")
+        for k, (line, cost) in enumerate(lines.items()):
+            axes.axhline(cost, color=f"C{k + 1}" if k else "k", ls="--", lw=1.2, label=line)
         axes.set_xlabel(labels[curve.axis])
         axes.xaxis.set_major_formatter(FuncFormatter(_tick))
         axes.set_ylabel("evaluation cost (test split, lower is better)")
@@ -235,25 +243,30 @@ def figure(curves: Sequence[Curve], base_cost: float, names: Sequence[str]) -> F
     return drawing
 
 
-def _base_cost(folders: Sequence[Path], runs: Sequence[RunCurve], base: str | None) -> float:
-    """The base policy's evaluation cost (see the module docstring)."""
+def _lines(
+    folders: Sequence[Path], runs: Sequence[RunCurve], bases: Sequence[str] | None
+) -> dict[str, float]:
+    """Name -> evaluation cost of each line to beat (see the module docstring)."""
     from agents.training.config import config_from_record
     from agents.training.evaluation import DEFAULT_EVAL_NUM_SEEDS
 
     records = [json.loads((folder / "run.json").read_text()) for folder in folders]
     configs = [config_from_record(record["config"]) for record in records]
-    if base is not None:
+    if bases:
         evaluation = records[0].get("evaluation") or {}
         # "seeds", "steps": a run written before they were named num_seeds, max_steps
         num_seeds = evaluation.get("num_seeds", evaluation.get("seeds", DEFAULT_EVAL_NUM_SEEDS))
         cells = run_bench(
-            [base],
+            list(bases),
             evaluation.get("scenarios") or list(configs[0].scenarios),
             num_seeds=int(num_seeds),
             max_steps=evaluation.get("max_steps", evaluation.get("steps")),
             split="test",
         )
-        return float(np.mean([np.mean(cell.metrics["cost"]) for cell in cells]))
+        return {
+            base: float(np.mean([np.mean(c.metrics["cost"]) for c in cells if c.policy == base]))
+            for base in dict.fromkeys(bases)
+        }
     if any(config.base_policy == "none" for config in configs):
         raise ValueError(
             "runs trained from scratch have no base to compare with; give --base-policy NAME."
@@ -263,7 +276,7 @@ def _base_cost(folders: Sequence[Path], runs: Sequence[RunCurve], base: str | No
         raise ValueError(
             "a run has no evaluation at 0 vessel-steps (its base); give --base-policy NAME."
         )
-    return float(iqm(np.array([start[0] for start in starts])))
+    return {"base policy": float(iqm(np.array([start[0] for start in starts])))}
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -283,9 +296,10 @@ def _parser() -> argparse.ArgumentParser:
     )  # fmt: skip
     parser.add_argument("--out", required=True, help="output folder (curves.csv, curves.png)")
     parser.add_argument(
-        "--base-policy", default=None,
-        help="analytic policy whose test-split cost is the line to beat (default: the runs' "
-        "evaluation at 0 vessel-steps, their base policy)",
+        "--base-policy", default=None, nargs="+", metavar="NAME",
+        help="analytic policies whose test-split costs are the lines to beat, the first "
+        "curves.csv's base_cost (default: the runs' evaluation at 0 vessel-steps, their base "
+        "policy)",
     )  # fmt: skip
     return parser
 
@@ -309,29 +323,28 @@ def curves_main(argv: Sequence[str] | None = None) -> int:
     folders = [Path(run) for run in args.runs]
     try:
         runs = [read_run(folder) for folder in folders]
-        base_cost = _base_cost(folders, runs, args.base_policy)
+        lines = _lines(folders, runs, args.base_policy)
         curves = [steps_curve(runs), time_curve(runs)]
     except (ValueError, OSError, KeyError, json.JSONDecodeError) as error:
         parser.error(str(error))
     with atomic.staged_folder(args.out) as staging:
-        atomic.write_text(staging / "curves.csv", curves_csv(curves, base_cost, len(runs)))
-        drawing = figure(curves, base_cost, [run.name for run in runs])
+        atomic.write_text(staging / "curves.csv", curves_csv(curves, lines, len(runs)))
+        drawing = figure(curves, lines, [run.name for run in runs])
         drawing.savefig(staging / "curves.png", dpi=100, metadata={"Software": None})
     steps, seconds = curves
-    print(
-        f"cpf-curves: {len(runs)} run{'s' if len(runs) != 1 else ''}; "
-        f"base policy cost {base_cost:.6g}"
-    )
+    costs = ", ".join(f"{line} {cost:.6g}" for line, cost in lines.items())
+    print(f"cpf-curves: {len(runs)} run{'s' if len(runs) != 1 else ''}; cost of {costs}")
     single = len(runs) == 1  # one training seed: a cost, no IQM and no interval
-    for curve, unit in ((steps, "vessel-steps"), (seconds, "s")):
-        below, surely = first_below(curve, base_cost)
-        if single:
-            print(f"  cost below the base {_when(below, float(curve.x[-1]), unit)}")
-        else:
-            print(
-                f"  IQM below the base {_when(below, float(curve.x[-1]), unit)}; whole 95 % "
-                f"interval below {_when(surely, float(curve.x[-1]), unit)}"
-            )
+    for line, cost in lines.items():
+        for curve, unit in ((steps, "vessel-steps"), (seconds, "s")):
+            below, surely = first_below(curve, cost)
+            if single:
+                print(f"  cost below {line} {_when(below, float(curve.x[-1]), unit)}")
+            else:
+                print(
+                    f"  IQM below {line} {_when(below, float(curve.x[-1]), unit)}; whole 95 % "
+                    f"interval below {_when(surely, float(curve.x[-1]), unit)}"
+                )
     final = (
         f"  final cost {steps.iqm[-1]:.6g} (one run: no interval; train several seeds for one)"
         if single

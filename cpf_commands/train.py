@@ -82,7 +82,7 @@ def _scenarios(names: list[str]) -> str | tuple[str, ...]:
 
 def _parser() -> argparse.ArgumentParser:
     from agents.training.config import INIT_LOG_STD, TrainConfig
-    from baselines import POLICIES
+    from baselines import DEPLOYABLE
 
     defaults = TrainConfig()
     parser = argparse.ArgumentParser(
@@ -112,7 +112,7 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument(
         "--base-policy",
         default=defaults.base_policy,
-        choices=[*sorted(POLICIES), "none"],
+        choices=[*sorted(DEPLOYABLE), "none"],
         help="base policy the agent corrects; none: the agent commands forces and rate",
     )
     parser.add_argument(

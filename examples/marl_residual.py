@@ -212,6 +212,12 @@ def main() -> None:
         "--eval-max-steps", type=int, default=None, help="evaluation episode length (scenario's)"
     )
     parser.add_argument(
+        "--device",
+        default="cpu",
+        help="torch device BenchMARL samples and trains on: cpu, cuda or cuda:N (the simulator "
+        "and the base policy run on the CPU whatever it is; the saved policy loads on the CPU)",
+    )
+    parser.add_argument(
         "--keep-best",
         action="store_true",
         help="save the actor of the best fixed-seed evaluation (the one before training "
@@ -252,6 +258,9 @@ def train(args: argparse.Namespace, scratch: str) -> None:
         "checkpoint_at_end": False,
         "create_json": False,
         "save_folder": scratch,
+        "sampling_device": args.device,
+        "train_device": args.device,
+        "buffer_device": args.device,
     }
     for key, value in settings.items():
         setattr(config, key, value)

@@ -16,10 +16,12 @@ number as it was, this tool renames each cache file to its new key instead:
 4. the files are rewritten under their new keys (atomically), the old ones removed.
 
 A metric added to the bench after a file was written is filled in only where
-its value is fixed by construction: on a scenario without a separation the
-separation term is exactly zero and the closest approach is not measured
-(``UNSEPARATED``); the rerun of step 3 checks the filled values with the
-stored ones. A file that lacks any other metric is left alone and reported.
+its value is fixed by construction (``fleet_metrics.unmeasured``): on a
+scenario without a separation the separation term is exactly zero and the
+closest approach is not measured; where a hull has a sway actuator the
+course is not measured. The rerun of step 3 checks the filled values with
+the stored ones. A file that lacks any other metric is left alone and
+reported.
 
 Usage::
 
@@ -41,7 +43,7 @@ sys.path.insert(0, str(ROOT))
 
 from cpf_bench import cache  # noqa: E402
 from cpf_bench.evaluate import run_cell  # noqa: E402
-from cpf_env.evaluation.fleet_metrics import METRICS, UNSEPARATED  # noqa: E402
+from cpf_env.evaluation.fleet_metrics import METRICS, unmeasured  # noqa: E402
 from cpf_env.infra import atomic  # noqa: E402
 from cpf_env.scenarios import list_scenarios, make_scenario  # noqa: E402
 
@@ -137,11 +139,12 @@ def main(argv: list[str] | None = None) -> int:
             continue
         task = make_scenario(name)
         missing = set(METRICS) - set(next(iter(stored["episodes"].values())))
-        if missing and (task.separation is not None or not missing <= set(UNSEPARATED)):
+        fixed = unmeasured(task)
+        if not missing <= set(fixed):
             print(f"lacks {sorted(missing)}, which only a rerun gives, left alone: {path.name}")
             continue
         for episode in stored["episodes"].values():
-            episode.update({metric: UNSEPARATED[metric] for metric in sorted(missing)})
+            episode.update({metric: fixed[metric] for metric in sorted(missing)})
         after = cache.cell_key(policy, task, steps)
         plan.append((path, stored, after, bool(missing)))
     moved = [item[:3] for item in plan if item[1]["key"] != item[2] or item[3]]

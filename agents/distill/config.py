@@ -57,7 +57,7 @@ __all__ = [
 LABEL_MODES = ("force", "force_and_rate")
 
 
-#: Names a teacher may have: ``baselines.POLICIES`` and ``baselines.PRIVILEGED``.
+#: Names a teacher may have: every policy of ``baselines`` (deployable or privileged).
 TEACHERS = tuple(sorted(ALL_POLICIES))
 #: The base a label is taken on (``DistillConfig.label_base``).
 LABEL_BASES = ("env", "twin")
@@ -111,7 +111,7 @@ class DistillConfig:
     def __post_init__(self) -> None:
         if self.teacher not in TEACHERS:
             raise ValueError(
-                f"teacher must be a policy of baselines.POLICIES or baselines.PRIVILEGED, one of "
+                f"teacher must be a policy of baselines (deployable or privileged), one of "
                 f"{list(TEACHERS)}; got {self.teacher!r}."
             )
         for name in ("rounds", "steps", "epochs", "batch_size"):

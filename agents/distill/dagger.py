@@ -1,7 +1,7 @@
 """Teacher and student: DAgger of a local residual student from a teacher policy.
 
 The teacher is any policy of ``baselines``: a deployable one of
-``baselines.POLICIES`` (e.g. ``mpc``, receding-horizon control per vessel)
+``baselines.DEPLOYABLE`` (e.g. ``mpc``, receding-horizon control per vessel)
 or a privileged reference of ``baselines.PRIVILEGED`` (e.g. ``oracle``,
 centralized, told the true model and the coming disturbances; default
 ``nn_dsc_privileged``). It acts on the fleet's true observations (a

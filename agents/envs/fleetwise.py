@@ -17,15 +17,26 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from baselines import POLICIES, MPCPolicy, make_policy
+from baselines import DEPLOYABLE, MPCPolicy, make_policy
 from cpf_env.envs.policy import FleetPolicy
 from cpf_env.scenarios import Scenario
 
 __all__ = ["WHOLE_BATCH_BASES", "FleetwiseBase"]
 
+
+def _innermost(cls: type[FleetPolicy]) -> type[FleetPolicy]:
+    """The design a filter wraps (``inner``, through every layer), or ``cls`` itself."""
+    while hasattr(cls, "inner"):
+        cls = cls.inner
+    return cls
+
+
 #: Bases that act for every row they are given (no ``act_batch(obs, fleets)``): ``mpc`` and
-#: every deployable design built on it (``mpc_tuned``).
-WHOLE_BATCH_BASES = tuple(name for name, cls in POLICIES.items() if issubclass(cls, MPCPolicy))
+#: every deployable design built on it (``mpc_tuned``, and it under the navigation filter,
+#: the safety filter or both).
+WHOLE_BATCH_BASES = tuple(
+    name for name, cls in DEPLOYABLE.items() if issubclass(_innermost(cls), MPCPolicy)
+)
 
 
 class FleetwiseBase(FleetPolicy):
@@ -37,7 +48,7 @@ class FleetwiseBase(FleetPolicy):
     batched call (B calls a step); for training only.
 
     Args:
-        name: A policy name of ``baselines.POLICIES``.
+        name: A policy name of ``baselines.DEPLOYABLE``.
         scenario: The scenario the fleets run.
         num_fleets: B.
         options: Options (gains) for ``baselines.make_policy``.
@@ -46,15 +57,23 @@ class FleetwiseBase(FleetPolicy):
     def __init__(
         self, name: str, scenario: Scenario, num_fleets: int, options: dict[str, Any] | None = None
     ) -> None:
-        self.policies = [make_policy(name, scenario, **(options or {})) for _ in range(num_fleets)]
+        self._build = lambda: make_policy(name, scenario, **(options or {}))
+        self.policies = [self._build() for _ in range(num_fleets)]
         first = self.policies[0]
         self.name, self.n, self.obs_dim = name, first.n, first.obs_dim
         self.act_dim, self.agents = first.act_dim, first.agents
         self.diagnostics: dict[str, NDArray[np.float64]] = {}
 
     def act_batch(self, obs: Any, fleets: Any = None) -> NDArray[np.float64]:
-        """Actions (rows, n, 4 + m) of all fleets, or of the listed ``fleets`` (index array)."""
+        """Actions (rows, n, 4 + m) of all fleets, or of the listed ``fleets`` (index array).
+
+        A whole batch of another size than the last starts that many fresh instances,
+        as a batched policy starts fresh states (the input statistics of a learner's
+        env are estimated on a batch of their own before its fleets run).
+        """
         given = np.asarray(obs, dtype=np.float64)
+        if fleets is None and given.shape[0] != len(self.policies):
+            self.policies = [self._build() for _ in range(given.shape[0])]
         rows = range(len(self.policies)) if fleets is None else np.asarray(fleets).tolist()
         actions = [self.policies[k].act_batch(given[i : i + 1]) for i, k in enumerate(rows)]
         keys = self.policies[0].diagnostics.keys()

@@ -6,7 +6,7 @@ its episodes through ``make_core``:
 
 - the scenario: a registered name or a ``Scenario``, with field overrides
   (``cpf_env.scenarios.make_scenario``);
-- the base policy: a name of ``baselines.POLICIES`` (built with
+- the base policy: a name of ``baselines.DEPLOYABLE`` (built with
   ``policy_options``; a base of ``agents.envs.fleetwise.WHOLE_BATCH_BASES``, ``mpc``,
   as a ``FleetwiseBase``, one instance per fleet, since the vector envs restart
   single fleets), ``None`` or ``"none"`` (no base: the learner commands
@@ -32,13 +32,13 @@ from __future__ import annotations
 from typing import Any
 
 from agents.envs.fleetwise import WHOLE_BATCH_BASES, FleetwiseBase
-from baselines import POLICIES, make_policy
+from baselines import DEPLOYABLE, make_policy
 from cpf_env.envs.core import EpisodeCore
 from cpf_env.envs.policy import FleetPolicy
 from cpf_env.envs.residual import ResidualConfig
 from cpf_env.scenarios import Scenario, make_scenario
 
-__all__ = ["make_core", "resolve_base_policy"]
+__all__ = ["learner_base", "make_core", "resolve_base_policy"]
 
 
 def resolve_base_policy(
@@ -46,7 +46,7 @@ def resolve_base_policy(
     scenario: Scenario,
     policy_options: dict[str, Any] | None = None,
 ) -> FleetPolicy | None:
-    """A base policy from a name of ``baselines.POLICIES``, an object, or None/``"none"``.
+    """A base policy from a name of ``baselines.DEPLOYABLE``, an object, or None/``"none"``.
 
     Raises:
         ValueError: An unknown name (the valid ones are listed).
@@ -55,9 +55,9 @@ def resolve_base_policy(
     if base_policy is None or base_policy == "none":
         return None
     if isinstance(base_policy, str):
-        if base_policy not in POLICIES:
+        if base_policy not in DEPLOYABLE:
             raise ValueError(
-                f"unknown base policy {base_policy!r}; choose one of {sorted(POLICIES)} "
+                f"unknown base policy {base_policy!r}; choose one of {sorted(DEPLOYABLE)} "
                 "or None (the agent commands everything)."
             )
         return make_policy(base_policy, scenario, **(policy_options or {}))
@@ -67,6 +67,22 @@ def resolve_base_policy(
             f"reset_fleets, diagnostics); got {type(base_policy).__name__}."
         )
     return base_policy
+
+
+def learner_base(
+    base_policy: str | FleetPolicy | None,
+    scenario: Scenario,
+    num_fleets: int,
+    policy_options: dict[str, Any] | None = None,
+) -> FleetPolicy | None:
+    """The base of a learner's env of ``num_fleets`` fleets, which restarts single fleets.
+
+    A name of ``WHOLE_BATCH_BASES`` runs as a ``FleetwiseBase`` (one instance per
+    fleet); anything else as ``resolve_base_policy`` gives it.
+    """
+    if isinstance(base_policy, str) and base_policy in WHOLE_BATCH_BASES:
+        return FleetwiseBase(base_policy, scenario, num_fleets, policy_options)
+    return resolve_base_policy(base_policy, scenario, policy_options)
 
 
 def make_core(
@@ -80,9 +96,6 @@ def make_core(
 ) -> EpisodeCore:
     """The episode core of a learning route: always the residual form (see the module)."""
     resolved = make_scenario(scenario, **overrides)
-    if isinstance(base_policy, str) and base_policy in WHOLE_BATCH_BASES:
-        base: FleetPolicy | None = FleetwiseBase(base_policy, resolved, num_fleets, policy_options)
-    else:
-        base = resolve_base_policy(base_policy, resolved, policy_options)
+    base = learner_base(base_policy, resolved, num_fleets, policy_options)
     config = ResidualConfig() if residual is None else residual
     return EpisodeCore(resolved, num_fleets, base, config, stagger)

@@ -82,7 +82,7 @@ class FleetVecEnv(VecEnv):
     Args:
         scenario: A name of ``cpf_env.scenarios.list_scenarios()`` or a ``Scenario``.
         num_fleets: B, the number of fleets simulated together.
-        base_policy: A name of ``baselines.POLICIES`` (e.g. ``"nn_dsc"``), a policy
+        base_policy: A name of ``baselines.DEPLOYABLE`` (e.g. ``"nn_dsc"``), a policy
             object (``act_batch``, ``reset``, ``reset_fleets``), or None (default,
             as on every route): the agent outputs the whole command (forces and
             path-variable rate, as fractions of their limits; messages are zero).

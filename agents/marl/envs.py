@@ -15,7 +15,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from agents.envs.resolve import resolve_base_policy
+from agents.envs.resolve import learner_base
 from cpf_env.envs.core import DEFAULT_INFO_LEVEL, check_flag
 from cpf_env.envs.input_statistics import InputStatistics, estimate_input_statistics
 from cpf_env.envs.policy import FleetPolicy
@@ -45,7 +45,7 @@ def make_env(
     Args:
         scenario: A registered name or a ``Scenario``.
         num_fleets: B.
-        base_policy: A name of ``baselines.POLICIES``, a policy object, or None /
+        base_policy: A name of ``baselines.DEPLOYABLE``, a policy object, or None /
             ``"none"``: the learner commands forces and theta_dot itself, as
             fractions of their limits (``cpf_env.envs.residual.learner_config``).
         residual: The residual composition (default: forces, scale 0.2, no extras).
@@ -79,7 +79,7 @@ def make_env(
     if privileged_state:
         own["extra_state"] = StateFeatures(UNOBSERVED_SIZE, unobserved_state)
     resolved = make_scenario(scenario, **overrides)
-    base = resolve_base_policy(base_policy, resolved, policy_options)
+    base = learner_base(base_policy, resolved, num_fleets, policy_options)
     residual = ResidualConfig() if residual is None else residual
     if shared_slot_statistics:
         if own.get("normalize") is not True:

@@ -163,7 +163,8 @@ def save_marl_policy(
         tensors[f"hidden.{i}.weight"], tensors[f"hidden.{i}.bias"] = w, b
     tensors["output.weight"], tensors["output.bias"] = weight[:k], bias[:k]
     tensors = {
-        name: value.detach().to(torch.float32).contiguous() for name, value in tensors.items()
+        name: value.detach().to("cpu", torch.float32).contiguous()  # trained on any device
+        for name, value in tensors.items()
     }
     record["sizes"] = [first, *(int(w.shape[0]) for w, _ in layers[:-1]), k]
     record.update(

@@ -1,9 +1,10 @@
 """BenchMARL tasks for ``cpf_env``: ``CpfTask``, its ``CpfTaskClass`` and the task configs.
 
 Each member of ``CpfTask`` is a training scenario: the paper's scenarios
-(``cpf_env.scenarios.paper``) and the benchmark suite (``suite.SUITE``); the
-suite's ``_shift`` variants and evaluation seeds are held out
-(``cpf_env.scenarios.splits``: the env refuses them). The env is the native
+(``cpf_env.scenarios.paper``), the benchmark suite (``suite.SUITE``) and the
+hard track (``list_suite("hard")``: residual over each scenario's best
+deployable design, whole episodes); the ``_shift`` variants and evaluation
+seeds are held out (``cpf_env.scenarios.splits``: the env refuses them). The env is the native
 batched ``TorchRLFleetEnv`` (BenchMARL's ``num_envs`` is the number of fleets,
 no ``SerialEnv``), in the residual form over a named base policy, with the
 global state for centralized critics and frozen input statistics.
@@ -11,8 +12,10 @@ global state for centralized critics and frozen input statistics.
 The default configuration of each task is ``conf/task/cpf/<task>.yaml`` beside
 this module (``CpfTaskConfig`` lists and checks its fields); episodes are 200
 control periods (10 s) there, short enough for an on-policy batch to hold
-whole episodes. Importing this module also registers every task as
-``cpf/<task>`` in BenchMARL's registry, so its Hydra loader finds them
+whole episodes, except on the hard track, whose episodes are the scenario's
+own (its crossings come after 40 s; a batch then holds parts of episodes).
+Importing this module also registers every task as ``cpf/<task>`` in
+BenchMARL's registry, so its Hydra loader finds them
 (``cpf-marl algorithm=mappo task=cpf/bench_lossy_links``).
 
 Example::
@@ -68,7 +71,7 @@ class CpfTaskConfig:
     Attributes:
         scenario: The registered scenario (a training scenario, not a ``_shift``).
         max_steps: Episode length in control periods (the scenario's ``max_steps``).
-        base_policy: Base policy name (``baselines.POLICIES``), or ``"none"``.
+        base_policy: Base policy name (``baselines.DEPLOYABLE``), or ``"none"``.
         mode: Residual mode (``RESIDUAL_MODES``).
         scale: Residual range as a fraction of the limits.
         extras: Local extras of the learner's input (``EXTRAS``).
@@ -268,6 +271,13 @@ class CpfTask(CpfTaskEnum):
     BENCH_SWITCHING = None
     BENCH_HETEROGENEOUS = None
     BENCH_LARGE_FLEET = None
+    HARD_SENSING = None
+    HARD_SENSING_WAVES = None
+    HARD_UNDERACTUATED = None
+    HARD_CROSSING = None
+    HARD_UNDERACTUATED_SENSING = None
+    HARD_HETEROGENEOUS = None
+    HARD_LARGE_FLEET = None
 
     @staticmethod
     def associated_class() -> type[TaskClass]:

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from agents.envs.history import history_size
-from baselines import POLICIES
+from baselines import DEPLOYABLE
 from cpf_env import scenarios
 from cpf_env.envs.residual import EXTRAS, ResidualConfig, learner_config
 from cpf_env.scenarios.reward_weights import REWARD_FORMS
@@ -71,7 +71,7 @@ class TrainConfig:
         scenario: A registered scenario name, or several (a tuple): a mixture, one
             group of fleets per scenario (``agents.envs.mixture_env``). The first is the
             agent's default evaluation scenario (``home_scenario``).
-        base_policy: A name of ``baselines.POLICIES``, or ``"none"``: the agent commands
+        base_policy: A name of ``baselines.DEPLOYABLE``, or ``"none"``: the agent commands
             forces and path-variable rate itself (learning from scratch).
         residual: How the learner's action enters (``cpf_env.envs.residual.ResidualConfig``:
             ``mode``, ``scale``, ``kinematic_scale``, ``extras``,
@@ -156,9 +156,9 @@ class TrainConfig:
             degrees = [observation_layout(scenarios.get(n)).n_slots for n in self.scenarios]
             residual = dataclasses.replace(residual, neighbour_slots=max(degrees))
         object.__setattr__(self, "residual", residual)
-        if self.base_policy != "none" and self.base_policy not in POLICIES:
+        if self.base_policy != "none" and self.base_policy not in DEPLOYABLE:
             raise ValueError(
-                f"base_policy must be one of {sorted(POLICIES)} or 'none' (learn from "
+                f"base_policy must be one of {sorted(DEPLOYABLE)} or 'none' (learn from "
                 f"scratch), got {self.base_policy!r}."
             )
         if self.reward_form is not None and self.reward_form not in REWARD_FORMS:

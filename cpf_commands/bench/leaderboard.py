@@ -1,18 +1,23 @@
-"""Regenerate the leaderboard: ``python -m cpf_commands.bench.leaderboard``.
+"""Regenerate the leaderboard: ``python -m cpf_commands.bench.leaderboard [--track hard]``.
 
-Runs cpf-bench's default policies (every deployable baseline and the
-headroom bound ``oracle``) and the reference agents of ``results/agents/``
-(``AGENTS``: one per learning method, and the encoder student that runs
-on fleets of any degree) on the suite's ``test`` split (20
-seeds) and ``shift`` split (10 seeds) with ``run_bench``, and writes
+Runs cpf-bench's default policies of the track (every deployable baseline
+and the headroom bound ``oracle``) and the track's reference agents of
+``results/agents/`` (``TRACKS``: on the core suite ``AGENTS``, one per
+learning method and the encoder student that runs on fleets of any degree;
+on the hard track ``HARD_AGENTS``, one per learning method) on the track's
+``test`` split (20 seeds) and ``shift`` split (10 seeds) with
+``run_bench``, and writes
 
-* both results folders (``results/bench_test/``, ``results/bench_shift/``);
-* ``results/leaderboard.json``: every episode of both splits in marl-eval's
-  JSON format (``cpf_commands.bench.marl_eval``; the shift split's tasks are
-  the ``*_shift`` scenarios);
-* the text between ``docs/results.md``'s ``<!-- bench:begin -->`` and
-  ``<!-- bench:end -->`` markers: tables built from those runs, the
-  machine's core count and load, and the wall time.
+* both results folders (``results/bench_test/`` and ``bench_shift/``, or
+  ``hard_test/`` and ``hard_shift/``);
+* the marl-eval JSON of every episode of both splits (``leaderboard.json``,
+  ``leaderboard_hard.json``; ``cpf_commands.bench.marl_eval``; the shift
+  split's tasks are the ``*_shift`` scenarios);
+* the text between the track's markers in ``docs/results.md``
+  (``<!-- bench:begin -->``, ``<!-- hard:begin -->`` and their ends):
+  tables built from those runs, the machine's core count and load, and the
+  wall time. The hard track's tables judge each agent against the best
+  deployable design of each scenario, the target a learner must pass there.
 
 Every file is written atomically.
 """
@@ -25,21 +30,23 @@ import os
 import platform
 import shlex
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from statistics import NormalDist
 
 import numpy as np
 
+from cpf_bench.headroom import headroom_rows, headroom_table, room_table
 from cpf_bench.report import CellResult, summarize
-from cpf_bench.verdict import verdicts
+from cpf_bench.verdict import verdict, verdicts
 from cpf_commands.bench.marl_eval import write_marl_eval
 from cpf_commands.bench.run import default_policies, run_bench
 from cpf_commands.bench.views import display_name, gap_table, markdown_table
 from cpf_env.infra import atomic
 from cpf_env.scenarios.suite import list_suite
 
-__all__ = ["AGENTS", "LEADERBOARD_JSON", "PAGE", "main"]
+__all__ = ["AGENTS", "HARD_AGENTS", "LEADERBOARD_JSON", "PAGE", "TRACKS", "Track", "main"]
 
 #: The reference agents (folder -> the label the tables give it), one per learning method;
 #: results/README.md has the command that trained each.
@@ -49,6 +56,14 @@ AGENTS = {
     "results/agents/student_s0": "student distilled from the oracle",
     "results/agents/student_deepsets_s0": "student with a neighbour encoder, any degree",
     "results/agents/mappo_s0": "residual MAPPO, lossy links",
+}
+#: The hard track's reference agents, one per learning method, trained on ``hard_sensing``
+#: with one budget of vessel-steps; results/README.md has the command that trained each.
+HARD_AGENTS = {
+    "results/agents/hard_sensing_ppo_scratch_s0": "PPO from scratch, hard_sensing",
+    "results/agents/hard_sensing_ppo_residual_s0": "residual PPO on mpc_tuned_ekf, hard_sensing",
+    "results/agents/hard_sensing_student_s0": "student of the oracle, hard_sensing",
+    "results/agents/hard_sensing_mappo_s0": "residual MAPPO on mpc_tuned_ekf, hard_sensing",
 }
 #: The marl-eval JSON of both splits, under the results folder.
 LEADERBOARD_JSON = "leaderboard.json"
@@ -69,7 +84,8 @@ PHYSICAL = (
 
 
 def _label(policy: str) -> str:
-    return AGENTS[policy] if policy in AGENTS else display_name(policy)
+    labels = {**AGENTS, **HARD_AGENTS}
+    return labels[policy] if policy in labels else display_name(policy)
 
 
 def _physical_table(cells: Sequence[CellResult], scenario: str) -> list[str]:
@@ -125,16 +141,40 @@ def _power_table(cells: Sequence[CellResult], policy: str = "backstepping") -> l
     return markdown_table(header, body)
 
 
-def _gap_lines(cells: Sequence[CellResult], metric: str) -> list[str]:
-    lines = gap_table(summarize(cells, "nn_dsc"), cells, metric, "nn_dsc")
-    for folder, label in AGENTS.items():
+def _labelled(lines: list[str]) -> list[str]:
+    """Table lines with each agent folder replaced by its label."""
+    for folder, label in {**AGENTS, **HARD_AGENTS}.items():
         lines = [line.replace(f"| {folder} |", f"| {label} |") for line in lines]
     return lines
 
 
-def _section(test: Sequence[CellResult], shift: Sequence[CellResult], note: str) -> str:
+def _gap_lines(cells: Sequence[CellResult], metric: str) -> list[str]:
+    return _labelled(gap_table(summarize(cells, "nn_dsc"), cells, metric, "nn_dsc"))
+
+
+def _against_best(cells: Sequence[CellResult], agents: Sequence[str]) -> list[str]:
+    """Each agent's mean cost and verdict against the best deployable design of each scenario."""
+    best = {row["scenario"]: row["best"] for row in headroom_rows(cells)}
+    by_key = {(c.policy, c.scenario): c for c in cells}
+    names = [name for name in dict.fromkeys(c.scenario for c in cells) if name in best]
+    body = []
+    for agent in agents:
+        row = [_label(agent)]
+        for name in names:
+            cell = by_key.get((agent, name))
+            if cell is None:
+                row.append("not run (layout)")
+                continue
+            base = by_key[(str(best[name]), name)]
+            judged = verdict(cell, base).label
+            row.append(f"{np.mean(cell.metrics['cost']):.4g} {judged}")
+        body.append(row)
+    header = ["agent", *(f"{name} (vs {best[name]})" for name in names)]
+    return markdown_table(header, body)
+
+
+def _core_section(test: Sequence[CellResult], shift: Sequence[CellResult], note: str) -> str:
     lines = [
-        BEGIN,
         "",
         note,
         "",
@@ -175,9 +215,78 @@ def _section(test: Sequence[CellResult], shift: Sequence[CellResult], note: str)
         "",
         *_power_table(test),
         "",
-        END,
     ]
     return "\n".join(lines)
+
+
+def _hard_section(test: Sequence[CellResult], shift: Sequence[CellResult], note: str) -> str:
+    agents = list(HARD_AGENTS)
+    lines = [
+        "",
+        note,
+        "",
+        "`test` split (20 evaluation seeds): the room each scenario leaves, 1 - J oracle / "
+        "J best, with its 95 % paired interval:",
+        "",
+        *headroom_table(test),
+        "",
+        "Each agent against the best deployable design of each scenario, `test` split: mean "
+        "cost and verdict (`beats` needs the whole cost interval below zero and no guarded "
+        "physical regression):",
+        "",
+        *_against_best(test, agents),
+        "",
+        "The share of each room an agent closes, (J best - J) / (J best - J oracle), "
+        "`test` split (0: the best deployable design, 1: the bound):",
+        "",
+        *_labelled(room_table(test)),
+        "",
+        "The same against the best deployable design, `shift` split (10 seeds):",
+        "",
+        *_against_best(shift, agents),
+        "",
+        "Every policy, `test` split: mean cost and verdict against `nn_dsc`:",
+        "",
+        *_suite_table(test),
+        "",
+        "`shift` split: mean cost and verdict against `nn_dsc`:",
+        "",
+        *_suite_table(shift),
+        "",
+    ]
+    return "\n".join(lines)
+
+
+@dataclass(frozen=True)
+class Track:
+    """What the leaderboard of one track runs and writes.
+
+    Attributes:
+        agents: The reference agents (folder -> label).
+        prefix: The results folders' prefix (``<prefix>_test``, ``<prefix>_shift``).
+        json: The marl-eval JSON's file name, under the results folder.
+        markers: The page's begin and end markers of the track's section.
+        section: Builds the section's text from the test cells, the shift cells and the note.
+    """
+
+    agents: dict[str, str]
+    prefix: str
+    json: str
+    markers: tuple[str, str]
+    section: Callable[[Sequence[CellResult], Sequence[CellResult], str], str]
+
+
+#: The tracks: the core suite and the hard track.
+TRACKS = {
+    "core": Track(AGENTS, "bench", LEADERBOARD_JSON, (BEGIN, END), _core_section),
+    "hard": Track(
+        HARD_AGENTS,
+        "hard",
+        "leaderboard_hard.json",
+        ("<!-- hard:begin -->", "<!-- hard:end -->"),
+        _hard_section,
+    ),
+}
 
 
 def _load() -> str:
@@ -189,43 +298,50 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m cpf_commands.bench.leaderboard")
     parser.add_argument("--page", default=PAGE, help=f"the page to rewrite (default: {PAGE})")
     parser.add_argument("--results", default="results")
+    parser.add_argument(
+        "--track", choices=sorted(TRACKS), default="core", help="the track (default: core)"
+    )
     args = parser.parse_args(argv)
+    track = TRACKS[args.track]
+    begin, end = track.markers
     page = Path(args.page)
     text = page.read_text()
-    if text.count(BEGIN) != 1 or text.count(END) != 1:
-        parser.error(f"{page} needs exactly one {BEGIN} and one {END} marker.")
-    policies = [*default_policies(), *AGENTS]
+    if text.count(begin) != 1 or text.count(end) != 1:
+        parser.error(f"{page} needs exactly one {begin} and one {end} marker.")
+    policies = [*default_policies(args.track), *track.agents]
     results = Path(args.results)
     load_before, start = _load(), time.perf_counter()
     runs = {}
     for split, seeds in (("test", 20), ("shift", 10)):
         command = shlex.join(
-            ["cpf-bench", "--policies", *policies, "--split", split, "--num-seeds", str(seeds)]
-        )
+            ["cpf-bench", "--policies", *policies, "--track", args.track, "--split", split,
+             "--num-seeds", str(seeds)]
+        )  # fmt: skip
         runs[split] = run_bench(
             policies,
-            list_suite(),
+            list_suite(args.track),
             num_seeds=seeds,
-            out=results / f"bench_{split}",
+            out=results / f"{track.prefix}_{split}",
             command=command,
             split=split,
         )
     elapsed = time.perf_counter() - start
+    flag = "" if args.track == "core" else f" --track {args.track}"
+    folders = f"`{results}/{track.prefix}_test/`, `{results}/{track.prefix}_shift/`"
     note = (
-        "Regenerated by `python -m cpf_commands.bench.leaderboard` (both splits, results in "
-        f"`{results}/bench_test/`, `{results}/bench_shift/` and `{results}/{LEADERBOARD_JSON}`) "
+        f"Regenerated by `python -m cpf_commands.bench.leaderboard{flag}` (both splits, results "
+        f"in {folders} and `{results}/{track.json}`) "
         f"in {elapsed / 60:.1f} min on "
         f"{os.cpu_count()} cores ({platform.machine()}, {platform.python_implementation()} "
         f"{platform.python_version()}), load average (1, 5, 15 min) {load_before} before "
         f"and {_load()} after: the machine was shared."
     )
-    head, rest = text.split(BEGIN)
-    _, tail = rest.split(END)
-    write_marl_eval([*runs["test"], *runs["shift"]], results / LEADERBOARD_JSON)
-    atomic.write_text(page, head + _section(runs["test"], runs["shift"], note) + tail)
-    print(
-        f"wrote {page}, {results}/bench_test/, {results}/bench_shift/, {results}/{LEADERBOARD_JSON}"
-    )
+    head, rest = text.split(begin)
+    _, tail = rest.split(end)
+    write_marl_eval([*runs["test"], *runs["shift"]], results / track.json)
+    section = track.section(runs["test"], runs["shift"], note)
+    atomic.write_text(page, head + begin + "\n" + section + "\n" + end + tail)
+    print(f"wrote {page}, {folders.replace('`', '')}, {results}/{track.json}")
     return 0
 
 

@@ -14,7 +14,7 @@ from matplotlib.figure import Figure
 from matplotlib.ticker import FuncFormatter
 
 from baselines import HEADROOM_REFERENCE, PRIVILEGED
-from cpf_bench.headroom import headroom_table
+from cpf_bench.headroom import headroom_table, room_table
 from cpf_bench.report import GAP_METRICS, HEADLINE, CellResult
 from cpf_bench.verdict import (
     COST_MARGIN,
@@ -253,6 +253,19 @@ def markdown(
             f"headroom = 1 - J {HEADROOM_REFERENCE} / J best (docs/benchmark.md).",
             "",
             *room,
+        ]
+    closed = room_table(cells)
+    if closed:
+        lines += [
+            "",
+            "## Room closed",
+            "",
+            "Each policy outside baselines against its scenario's room: (J best - J) / (J best - "
+            f"J {HEADROOM_REFERENCE}), 0 at the best deployable analytic design and 1 at the "
+            "bound; IQM of the per-episode scores over the scenarios with a 95 % bootstrap "
+            "interval stratified by scenario (docs/benchmark.md).",
+            "",
+            *closed,
         ]
     if HEADROOM_REFERENCE in policies and len(policies) > 2:
         for metric in GAP_METRICS:

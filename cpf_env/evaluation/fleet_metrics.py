@@ -26,9 +26,19 @@ psi_d the path's tangent angle and |eta_d'| its speed dp/dtheta:
     along_i  =  cos psi_d (x_i - x_d) + sin psi_d (y_i - y_d)        (m)
     cross_i  = -sin psi_d (x_i - x_d) + cos psi_d (y_i - y_d)        (m)
     heading_i = wrap(psi_i - psi_d) in [-pi, pi)                       (rad)
+    course_i = wrap(psi_i + atan2(v_i, u_i) - psi_d)                   (rad)
     sog_i    = u_i cos(psi_i - psi_d) - v_i sin(psi_i - psi_d)        (m/s)
     thetap_i = theta_i + along_i / |eta_d'|  (the vessel's position projected
                onto its path, to first order, as a path variable)
+
+The course is the direction of the velocity over ground (u, v are body
+velocities over ground). A hull without a sway actuator holds a path in a
+cross current only by crabbing, its heading off the tangent by the drift
+angle atan2(v, u), so on such a fleet the course error, not the heading
+error, says whether it steers along its path: the course metrics are
+measured where no hull of the fleet has a sway actuator, and are NaN
+elsewhere (``COURSE_UNMEASURED``), like the separation metrics where no
+separation is required (``UNSEPARATED``). ``unmeasured`` gives both sets.
 """
 
 from __future__ import annotations
@@ -41,10 +51,20 @@ from numpy.typing import NDArray
 from cpf_env.evaluation.recording import CHUNK, RECORDED, StepRecord, new_record
 from cpf_env.model.paths import encode_paths, evaluate_paths
 from cpf_env.scenarios.reward_weights import REWARD_TERMS
+from cpf_env.scenarios.scenario import Scenario
 from cpf_env.sim import arrays
 from cpf_env.sim.fleet import FleetSim
 
-__all__ = ["METRICS", "UNSEPARATED", "WINDOW_FRACTION", "FleetMetrics", "path_relative"]
+__all__ = [
+    "COURSE_UNMEASURED",
+    "METRICS",
+    "UNSEPARATED",
+    "WINDOW_FRACTION",
+    "FleetMetrics",
+    "measures_course",
+    "path_relative",
+    "unmeasured",
+]
 
 #: Fraction of the horizon, at its end, that the ``_window`` metrics use.
 WINDOW_FRACTION = 0.25
@@ -64,6 +84,8 @@ _MEASURES = (
     "cross_track_error_max",
     "heading_error_rms",
     "heading_error_max",
+    "course_error_rms",
+    "course_error_max",
     "formation_error_rms",
     "formation_error_max",
     "speed_along_path",
@@ -95,6 +117,13 @@ UNSEPARATED = {
     "separation_min": math.nan,
     "separation_min_window": math.nan,
 }
+#: The course metrics where a hull of the fleet has a sway actuator: not measured (NaN).
+COURSE_UNMEASURED = {
+    "course_error_rms": math.nan,
+    "course_error_max": math.nan,
+    "course_error_rms_window": math.nan,
+    "course_error_max_window": math.nan,
+}
 #: Per-step fleet series, each (S, T): sums over steps give totals, maxima give maxima.
 _SERIES = (
     "reward",
@@ -106,6 +135,8 @@ _SERIES = (
     "cross_max",
     "heading_sq",
     "heading_max",
+    "course_sq",
+    "course_max",
     "formation",
     "sog",
     "sog_error_sq",
@@ -118,6 +149,23 @@ _SERIES = (
     "saturated",
     "separation",
 )
+
+
+def measures_course(task: Scenario) -> bool:
+    """Whether a scenario's course metrics are measured: no hull of its fleet has a sway actuator.
+
+    Example:
+        >>> from cpf_env.scenarios import make_scenario
+        >>> [measures_course(make_scenario(name)) for name in ("bench_mild", "hard_underactuated")]
+        [False, True]
+    """
+    return not bool(task.actuated[:, 1].any())
+
+
+def unmeasured(task: Scenario) -> dict[str, float]:
+    """The metrics a scenario does not measure, with their fixed values (module docstring)."""
+    fixed = {} if task.separation is not None else dict(UNSEPARATED)
+    return fixed if measures_course(task) else {**fixed, **COURSE_UNMEASURED}
 
 
 def _wrap(angle: Array) -> Array:
@@ -150,7 +198,7 @@ def path_relative(
         params: (n, PATH_PARAM_SIZE) encoded paths.
 
     Returns:
-        ``along``, ``cross`` (m), ``heading`` (rad), ``sog`` (m/s), ``path_speed``
+        ``along``, ``cross`` (m), ``heading``, ``course`` (rad), ``sog`` (m/s), ``path_speed``
         (|eta_d'|, m per unit theta) and ``thetap`` (projected path variable),
         each (S, n); formulas in the module docstring.
     """
@@ -168,6 +216,7 @@ def path_relative(
         "along": along,
         "cross": -s * dx + c * dy,
         "heading": _wrap(relative),
+        "course": _wrap(relative + np.arctan2(nu[..., 1], nu[..., 0])),
         "sog": nu[..., 0] * np.cos(relative) - nu[..., 1] * np.sin(relative),
         "path_speed": path_speed,
         "thetap": theta + along / path_speed,
@@ -188,6 +237,7 @@ class FleetMetrics:
         self._kinds, self._params = encode_paths(sim.scenario.paths)
         self._tau_scale = sim.constants.tau_scale
         self._separated = sim.scenario.separation is not None
+        self._unmeasured = unmeasured(sim.scenario)
         self.series = {name: np.zeros((sim.num_fleets, self.horizon)) for name in _SERIES}
         self._start_thetap = np.zeros(sim.num_fleets)
         self._has_estimate = True
@@ -295,6 +345,8 @@ class FleetMetrics:
         put("cross_max", np.abs(rel["cross"]).max(axis=2))
         put("heading_sq", (rel["heading"] ** 2).mean(axis=2))
         put("heading_max", np.abs(rel["heading"]).max(axis=2))
+        put("course_sq", (rel["course"] ** 2).mean(axis=2))
+        put("course_max", np.abs(rel["course"]).max(axis=2))
         thetap = rel["thetap"]
         spread = thetap.max(axis=2) - thetap.min(axis=2)
         put("formation", spread * rel["path_speed"].mean(axis=2))
@@ -338,9 +390,8 @@ class FleetMetrics:
         if not self._has_estimate:
             for name in ("speed_estimate_error_rms", "speed_estimate_error_rms_window"):
                 metrics[name] = np.full(S, np.nan)
-        if not self._separated:
-            for name in ("separation_min", "separation_min_window"):
-                metrics[name] = np.full(S, UNSEPARATED[name])
+        for name, value in self._unmeasured.items():
+            metrics[name] = np.full(S, value)
         metrics["terminated"] = failed.astype(np.float64)
         metrics["steps"] = end.astype(np.float64)
         return {name: metrics[name] for name in METRICS}
@@ -376,6 +427,8 @@ class FleetMetrics:
             "cross_track_error_max": peak("cross_max"),
             "heading_error_rms": rms("heading_sq"),
             "heading_error_max": peak("heading_max"),
+            "course_error_rms": rms("course_sq"),
+            "course_error_max": peak("course_max"),
             "formation_error_rms": np.sqrt(np.where(mask, x["formation"] ** 2, 0.0).sum(1) / count),
             "formation_error_max": peak("formation"),
             "speed_along_path": total("sog") / count,

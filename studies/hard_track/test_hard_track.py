@@ -80,3 +80,28 @@ def test_the_crossing_geometry_study_moves_only_the_formation(capsys) -> None:
     assert set(costs[1.2]) == {"oracle", "mpc_tuned", "mpc_tuned_safe"}
     assert "| 1.2 | 0.85 |" in capsys.readouterr().out
     assert not list((ROOT / "results/bench_cache").glob("*offset*"))
+
+
+def test_the_learners_study_groups_runs_by_method_and_pools_their_episodes(tmp_path) -> None:
+    script = load_script(ROOT / "studies/hard_track/learners.py")
+    for name in ("ppo_s0", "ppo_s1", "student_s2", "notes"):
+        (tmp_path / name).mkdir()
+    (tmp_path / "ppo_s1.log").touch()
+    for name in ("ppo_s0", "ppo_s1", "student_s2"):
+        (tmp_path / name / "manifest.json").write_text("{}")
+    runs = script.methods(tmp_path)
+    assert runs == {"ppo": [str(tmp_path / "ppo_s0"), str(tmp_path / "ppo_s1")],
+                    "student": [str(tmp_path / "student_s2")]}  # fmt: skip
+    seeds = (10000, 10001)
+
+    def cell(policy, costs):
+        return CellResult(policy, "hard_sensing", seeds, True,
+                          {m: np.array(costs, dtype=float) for m in METRICS})  # fmt: skip
+
+    cells = [cell("mpc_tuned_ekf", [100.0, 100.0]), cell("oracle", [60.0, 60.0]),
+             cell(runs["ppo"][0], [80.0, 90.0]), cell(runs["ppo"][1], [100.0, 110.0]),
+             cell(runs["student"][0], [60.0, 60.0])]  # fmt: skip
+    lines = script.summary(cells, runs, "mpc_tuned_ekf")
+    # scores 0.5, 0.25, 0, -0.25: the IQM of four drops one at each end
+    assert any("ppo: room closed, IQM over 2 seeds x 2 episodes 0.125" in line for line in lines)
+    assert any("student: room closed, IQM over 1 seeds x 2 episodes 1.000" in x for x in lines)

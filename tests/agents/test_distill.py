@@ -69,7 +69,7 @@ def _env_after(steps: int, residual: ResidualConfig, base: str = "nn_dsc") -> Fl
 def test_teacher_names_are_checked() -> None:
     for name in ("mpc", "oracle", "nn_dsc_privileged", "nn_dsc"):
         assert DistillConfig(teacher=name).teacher == name
-    with pytest.raises(ValueError, match=r"baselines.POLICIES or baselines.PRIVILEGED.*'mpc'"):
+    with pytest.raises(ValueError, match=r"baselines \(deployable or privileged\).*'mpc'"):
         DistillConfig(teacher="mpc_oracle")
     with pytest.raises(ValueError, match="procedural must be an integer >= 0"):
         DistillConfig(procedural=-1)

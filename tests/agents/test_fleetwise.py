@@ -52,9 +52,40 @@ def test_an_env_with_base_mpc_restarts_single_fleets() -> None:
 
 
 def test_every_mpc_design_is_run_fleet_by_fleet() -> None:
-    assert set(WHOLE_BATCH_BASES) == {"mpc", "mpc_tuned"}
+    filtered = {"mpc_tuned_ekf", "mpc_tuned_safe", "mpc_tuned_ekf_safe"}  # the hard track's
+    assert set(WHOLE_BATCH_BASES) == {"mpc", "mpc_tuned", *filtered}
     env = FleetVecEnv(
         "bench_current_waves", num_fleets=2, base_policy="mpc_tuned", residual=ResidualConfig()
     )
     assert isinstance(env.controller.base, FleetwiseBase)
     assert env.controller.base.name == "mpc_tuned"
+
+
+def test_a_filtered_design_run_fleet_by_fleet_acts_as_the_batched_one() -> None:
+    """The navigation and safety filters keep per-fleet state: fleet by fleet, the same actions."""
+    scenario = scenarios.get("hard_crossing").replace(sensors=scenarios.get("hard_sensing").sensors)
+    env = FleetVecEnv(scenario, num_fleets=2, base_policy="mpc_tuned_ekf_safe")
+    assert isinstance(env.controller.base, FleetwiseBase)
+    base = env.controller.base
+    assert (base.obs_dim, base.act_dim) == (env.sim.arrays.obs.shape[-1], env.sim.act_dim)
+    env.seed(2)
+    env.reset()
+    batched = make_policy("mpc_tuned_ekf_safe", scenario)
+    fleetwise = FleetwiseBase("mpc_tuned_ekf_safe", scenario, 2)
+    for _ in range(12):  # fixes every 4 steps: the filters predict, then correct
+        obs = env.sim.arrays.obs
+        np.testing.assert_array_equal(fleetwise.act_batch(obs), batched.act_batch(obs))
+        env.step(np.zeros((env.num_envs, env.action_space.shape[0]), dtype=np.float32))
+
+
+def test_a_whole_batch_of_another_size_starts_fresh_instances() -> None:
+    """Input statistics are estimated on a batch of their own before the env's fleets run."""
+    scenario = scenarios.get("bench_current_waves")
+    obs = _env_after(2).sim.arrays.obs
+    fleetwise = FleetwiseBase("mpc", scenario, 2)
+    fleetwise.act_batch(obs)
+    wider = np.concatenate([obs, obs, obs])
+    np.testing.assert_array_equal(
+        fleetwise.act_batch(wider), make_policy("mpc", scenario).act_batch(wider)
+    )
+    assert len(fleetwise.policies) == 6

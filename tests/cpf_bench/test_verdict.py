@@ -12,13 +12,15 @@ from cpf_bench.report import CellResult
 from cpf_bench.verdict import GUARDED, verdict
 from cpf_commands.bench.cli import bench_main
 from cpf_commands.bench.run import run_bench
-from cpf_env.evaluation.fleet_metrics import METRICS
+from cpf_env.evaluation.fleet_metrics import COURSE_UNMEASURED, METRICS
 
 SEEDS = tuple(range(10))
 
 
 def _cell(policy: str, cost: np.ndarray, **changes: np.ndarray) -> CellResult:
+    """A cell on hulls with a sway actuator (the course not measured), changes applied."""
     metrics = {name: np.full(len(SEEDS), 0.01) for name in METRICS}
+    metrics.update({name: np.full(len(SEEDS), value) for name, value in COURSE_UNMEASURED.items()})
     metrics["progress_window"] = np.full(len(SEEDS), 0.9)
     metrics["terminated"] = np.zeros(len(SEEDS))
     metrics["cost"] = cost
@@ -28,6 +30,9 @@ def _cell(policy: str, cost: np.ndarray, **changes: np.ndarray) -> CellResult:
 
 BASE_COST = 100.0 + np.arange(10.0)
 REFERENCE = _cell("nn_dsc", BASE_COST)
+COURSE = {name: np.full(len(SEEDS), 0.01) for name in COURSE_UNMEASURED}
+#: The reference on hulls without a sway actuator: its course is measured.
+SWAYLESS = _cell("nn_dsc", BASE_COST, **COURSE)
 
 
 def test_lower_cost_and_no_regression_beats():
@@ -52,6 +57,18 @@ def test_every_guarded_metric_can_regress(metric):
     changed = base + step  # further from any target: the reference's progress is 0.9
     v = verdict(_cell("p", BASE_COST - 5.0, **{metric: changed}), REFERENCE)
     assert v.regressed == (GUARDED[metric][0],)
+
+
+def test_without_a_sway_actuator_the_direction_is_not_guarded_the_position_is():
+    """A crabbing, converging hull's heading and course offsets are how it holds its path."""
+    off = np.full(10, 0.01 * 30)
+    steering = {"heading_error_rms_window": off, "course_error_rms_window": off}
+    held = verdict(_cell("p", BASE_COST - 5.0, **{**COURSE, **steering}), SWAYLESS)
+    assert held.label == "beats"
+    astray_cell = _cell("p", BASE_COST - 5.0, **{**COURSE, "cross_track_error_rms_window": off})
+    assert verdict(astray_cell, SWAYLESS).label == "mixed (worse: cross-track)"
+    with_sway = verdict(_cell("p", BASE_COST - 5.0, heading_error_rms_window=off), REFERENCE)
+    assert with_sway.label == "mixed (worse: heading)"
 
 
 def test_progress_is_judged_by_its_distance_from_the_schedule():

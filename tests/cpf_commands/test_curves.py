@@ -68,9 +68,9 @@ def test_iqm_over_seeds_matches_the_hand_calculation(
     assert [r["x"] for r in seconds] == [2.0, 2.5, 3.0]
     assert [r["iqm"] for r in seconds] == [10.0, 9.5, 10.5]
     printed = capsys.readouterr().out
-    assert "IQM below the base from 200 vessel-steps" in printed
+    assert "IQM below base policy from 200 vessel-steps" in printed
     assert "whole 95 % interval below from 200 vessel-steps" in printed
-    assert "IQM below the base from 2.5 s" in printed
+    assert "IQM below base policy from 2.5 s" in printed
     assert (out / "curves.png").read_bytes()[:4] == b"\x89PNG"
 
 
@@ -88,6 +88,22 @@ def test_the_base_line_of_an_analytic_policy_is_the_benchmark_number(tmp_path: P
     cells = run_bench(["dsc"], ["bench_mild"], num_seeds=2, max_steps=20, split="test")
     expected = float(np.mean(cells[0].metrics["cost"]))
     assert _curves(tmp_path / "c")["vessel_steps"][0]["base_cost"] == expected
+
+
+def test_several_lines_to_beat_each_have_their_cost_and_time(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    evaluation = {"split": "test", "scenarios": ["bench_mild"], "num_seeds": 2, "max_steps": 20}
+    folders = _write_runs(tmp_path / "runs", base="none", evaluation=evaluation)
+    argv = [*folders, "--out", str(tmp_path / "c"), "--base-policy", "dsc", "nn_dsc"]
+    assert curves_main(argv) == 0
+    cells = run_bench(["dsc", "nn_dsc"], ["bench_mild"], num_seeds=2, max_steps=20, split="test")
+    dsc, nn_dsc = (float(np.mean(cell.metrics["cost"])) for cell in cells)
+    row = _curves(tmp_path / "c")["vessel_steps"][0]
+    assert (row["base_cost"], row["nn_dsc_cost"]) == (dsc, nn_dsc)
+    printed = capsys.readouterr().out
+    assert f"cost of dsc {dsc:.6g}, nn_dsc {nn_dsc:.6g}" in printed
+    assert "IQM below dsc" in printed and "IQM below nn_dsc" in printed
 
 
 def test_a_run_without_evaluations_is_refused(
@@ -108,7 +124,7 @@ def test_one_run_prints_its_cost_without_an_interval(
     printed = capsys.readouterr().out
     assert "interval below" not in printed and "95 % interval" not in printed
     assert "[5, 5]" not in printed and "IQM" not in printed
-    assert "cost below the base from 100 vessel-steps" in printed  # s0: 8 < 10
+    assert "cost below base policy from 100 vessel-steps" in printed  # s0: 8 < 10
     assert "final cost 5 (one run: no interval; train several seeds for one)" in printed
 
 
@@ -153,7 +169,7 @@ def test_cpf_curves_reads_cpf_distill_runs(
     assert [int(r["vessel_steps"]) for r in rows] == [0, 100, 200]  # labelled vessel-steps
     capsys.readouterr()
     assert curves_main([*logs, "--out", str(tmp_path / "c")]) == 0  # the base: row 0
-    assert "2 runs; base policy cost" in capsys.readouterr().out
+    assert "2 runs; cost of base policy" in capsys.readouterr().out
     assert curves_main([*logs, "--out", str(tmp_path / "d"), "--base-policy", "nn_dsc"]) == 0
     by_row, by_name = _curves(tmp_path / "c"), _curves(tmp_path / "d")
     assert [r["x"] for r in by_row["vessel_steps"]] == [0, 100, 200]

@@ -76,8 +76,8 @@ def test_an_unwritable_out_and_too_many_seeds_are_refused_before_the_run(
                         "bench_mild", "--out", str(tmp_path / "o"), "--quiet"], capsys)  # fmt: skip
     assert time.perf_counter() - start < 5.0
     # batch: 2 policies x 1e6 fleets x (2000 steps x 256 B + 5 vessels x 32 KiB) = 1.35e12 B;
-    # summary: 1e6 seeds x 58 metrics x 2000 replicates x 24 B = 2.784e12 B, the larger
-    assert "2 policies x --num-seeds 1000000 need about 2592.8 GiB" in message
+    # summary: 1e6 seeds x 62 metrics x 2000 replicates x 24 B = 2.976e12 B, the larger
+    assert "2 policies x --num-seeds 1000000 need about 2771.6 GiB" in message
     monkeypatch.setattr(atomic.shutil, "disk_usage", lambda path: type("U", (), {"free": 10}))
     assert "MiB free" in _refused([*QUICK, "--out", str(tmp_path / "o")], capsys)
     assert ran == []

@@ -45,6 +45,23 @@ def test_suite_table_labels_a_cell_that_did_not_run():
     assert "not run (layout)" in lines[-1] and "beats" in lines[-1]
 
 
+def test_agents_are_judged_against_each_scenarios_best_deployable_design():
+    """Scenario a: mpc is the best deployable design; b: nn_dsc (mpc did not run)."""
+    agent = next(iter(leaderboard.HARD_AGENTS))
+    cells = [
+        _cell("nn_dsc", "a", [10.0, 11.0, 12.0, 13.0]),
+        _cell("mpc", "a", [8.0, 9.0, 10.0, 11.0]),
+        _cell("oracle", "a", [4.0] * 4),
+        _cell(agent, "a", [6.0, 7.0, 8.0, 9.0]),
+        _cell("nn_dsc", "b", [10.0, 11.0, 12.0, 13.0]),
+        _cell("oracle", "b", [4.0] * 4),
+        _cell(agent, "b", [11.0, 12.0, 13.0, 14.0]),
+    ]
+    header, _, row = leaderboard._against_best(cells, [agent])
+    assert "a (vs mpc)" in header and "b (vs nn_dsc)" in header
+    assert row.split(" | ")[1:] == ["7.5 beats", "12.5 loses |"]
+
+
 def test_page_without_markers_is_refused_before_running(tmp_path, capsys):
     page = tmp_path / "results.md"
     page.write_text("# no markers\n")
@@ -54,9 +71,10 @@ def test_page_without_markers_is_refused_before_running(tmp_path, capsys):
     assert page.read_text() == "# no markers\n"
 
 
-def test_the_default_page_has_the_markers():
+def test_the_default_page_has_the_markers_of_every_track():
     text = (ROOT / leaderboard.PAGE).read_text()
-    assert text.count(leaderboard.BEGIN) == 1 and text.count(leaderboard.END) == 1
+    for track in leaderboard.TRACKS.values():
+        assert all(text.count(marker) == 1 for marker in track.markers)
 
 
 def test_every_reference_agent_is_committed_loads_acts_and_is_listed() -> None:
@@ -66,10 +84,11 @@ def test_every_reference_agent_is_committed_loads_acts_and_is_listed() -> None:
     from cpf_env.sim.fleet import FleetSim
 
     index = (ROOT / "results" / "README.md").read_text()
-    assert sorted(leaderboard.AGENTS) == sorted(
+    agents = [*leaderboard.AGENTS, *leaderboard.HARD_AGENTS]
+    assert sorted(agents) == sorted(
         f"results/agents/{p.name}" for p in (ROOT / "results" / "agents").iterdir()
     )
-    for folder in leaderboard.AGENTS:
+    for folder in agents:
         assert f"`{folder.removeprefix('results/')}/`" in index, folder
         policy = load_policy(ROOT / folder)
         sim = FleetSim(policy.scenario, num_fleets=2)

@@ -66,10 +66,12 @@ def _batch(t: int) -> SimpleNamespace:
     )
 
 
-@pytest.fixture(scope="module")
-def measured() -> dict[str, np.ndarray]:
+def _measure(sway: bool) -> dict[str, np.ndarray]:
+    """The metrics of the two recorded fleets, on hulls with or without a sway actuator."""
+    actuated = np.ones((3, 3), dtype=bool)
+    actuated[:, 1] = sway
     sim = SimpleNamespace(
-        scenario=SimpleNamespace(dt=DT, paths=LINES, separation=None),
+        scenario=SimpleNamespace(dt=DT, paths=LINES, separation=None, actuated=actuated),
         constants=SimpleNamespace(tau_scale=np.full((3, 3), 2.0)),
         num_fleets=2,
     )
@@ -82,6 +84,11 @@ def measured() -> dict[str, np.ndarray]:
     for t in range(T):
         meter.record(t, _batch(t), V0, np.full((2, 3), V0 - 0.05))  # type: ignore[arg-type]
     return meter.reduce(np.array([T, FAIL_STEP]), np.array([False, True]))
+
+
+@pytest.fixture(scope="module")
+def measured() -> dict[str, np.ndarray]:
+    return _measure(sway=True)
 
 
 def test_every_metric_is_returned(measured: dict[str, np.ndarray]) -> None:
@@ -102,6 +109,38 @@ def test_path_relative_in_a_rotated_frame() -> None:
     assert rel["heading"][0, 0] == pytest.approx(0.1)
     assert rel["sog"][0, 0] == pytest.approx(2.0 * math.cos(0.1) - 0.5 * math.sin(0.1))
     assert rel["thetap"][0, 0] == pytest.approx(4.2)
+    assert rel["course"][0, 0] == pytest.approx(0.1 + math.atan2(0.5, 2.0))
+
+
+def test_a_crabbing_hull_is_on_course_and_off_heading() -> None:
+    """Sliding sideways at v = -0.05 m/s while surging at 0.5 m/s, the hull holds its line
+    only with its bow turned into the drift by beta = atan(0.1): heading error beta, course 0."""
+    (line,) = LINES[:1]
+    from cpf_env.model.paths import encode_paths
+
+    kinds, params = encode_paths((line,))
+    beta = math.atan2(0.05, 0.5)
+    eta = np.array([[[3.0, 0.0, beta]]])
+    rel = path_relative(eta, np.array([[[0.5, -0.05, 0.0]]]), np.array([[3.0]]), kinds, params)
+    assert rel["heading"][0, 0] == pytest.approx(beta)
+    assert rel["course"][0, 0] == pytest.approx(0.0, abs=1e-15)
+    assert rel["sog"][0, 0] == pytest.approx(math.hypot(0.5, 0.05))
+
+
+def test_course_is_measured_only_where_no_hull_has_a_sway_actuator(
+    measured: dict[str, np.ndarray],
+) -> None:
+    for name in ("course_error_rms", "course_error_max", "course_error_rms_window"):
+        assert np.isnan(measured[name]).all()
+    swayless = _measure(sway=False)
+    course = np.array([h + math.atan2(V, U) for h in HEADING])
+    assert swayless["course_error_rms"][0] == pytest.approx(math.sqrt(np.mean(course**2)))
+    assert swayless["course_error_max"][0] == pytest.approx(np.abs(course).max())
+    assert all(
+        np.array_equal(swayless[name], measured[name], equal_nan=True)
+        for name in METRICS
+        if not name.startswith("course_")
+    )
 
 
 def test_path_errors(measured: dict[str, np.ndarray]) -> None:
