@@ -1,12 +1,15 @@
-"""benchmarks/numpy_plant_baseline.py: its numpy RK4 integrates the simulator's own plant."""
+"""The benchmark scripts: numpy_plant_baseline.py's RK4 integrates the simulator's own plant;
+gpu_check.py says when there is no GPU and reports the vessel-steps it trained."""
 
 from __future__ import annotations
 
 import importlib.util
+import re
 from pathlib import Path
 
 import numpy as np
 import pytest
+import torch
 
 from cpf_env import scenarios
 from cpf_env.model.disturbances import D_SCALE
@@ -15,9 +18,9 @@ from cpf_env.sim.fleet import FleetSim
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def _load_example():
-    path = ROOT / "benchmarks" / "numpy_plant_baseline.py"
-    spec = importlib.util.spec_from_file_location("numpy_plant_baseline", path)
+def _load_example(name: str = "numpy_plant_baseline"):
+    path = ROOT / "benchmarks" / f"{name}.py"
+    spec = importlib.util.spec_from_file_location(name, path)
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module
@@ -66,3 +69,20 @@ def test_numpy_baseline_prints_both_rates_and_their_ratio(capsys):
     assert row["ratio"] == pytest.approx(row["simulator"] / row["numpy"])
     out = capsys.readouterr().out
     assert "FleetSim.step" in out and "numpy RK4" in out and f"{row['ratio']:.2f}x" in out
+
+
+def test_without_a_cuda_device_the_gpu_check_says_so_and_trains_nothing(monkeypatch, capsys):
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: False)
+    assert _load_example("gpu_check").main(["--device", "cuda"]) == {}
+    assert "no CUDA device" in capsys.readouterr().out
+
+
+def test_the_gpu_check_reports_the_vessel_steps_it_trained(capsys):
+    rates = _load_example("gpu_check").main(
+        ["--device", "cpu", "--timesteps", "1000", "--fleets", "4"]
+    )
+    assert set(rates) == {"cpu"} and rates["cpu"] > 0.0
+    out = capsys.readouterr().out
+    trained = re.search(r"for ([\d,]+) vessel-steps \(-n 1,000 rounded up", out)  # cpf-train's
+    assert trained is not None and f"cpu: {trained.group(1)} vessel-steps in" in out
+    assert trained.group(1) != "1,000"  # whole rollouts: the count is read, not the budget
