@@ -40,6 +40,7 @@ Example:
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
 from typing import cast
 
 import numpy as np
@@ -48,7 +49,14 @@ from baselines import ALL_POLICIES, DEPLOYABLE, HEADROOM_REFERENCE
 from cpf_bench.report import CellResult
 from cpf_bench.stats import bootstrap_interval, iqm, paired_headroom
 
-__all__ = ["headroom_rows", "headroom_table", "oracle_not_lowest", "room_closed", "room_table"]
+__all__ = [
+    "RoomScore",
+    "headroom_rows",
+    "headroom_table",
+    "oracle_not_lowest",
+    "room_closed",
+    "room_table",
+]
 
 #: The costs the table reads: (metric, label).
 COSTS = (("cost", "whole episode"), ("cost_window", "final window"))
@@ -148,37 +156,48 @@ def headroom_table(cells: Sequence[CellResult], reference: str = "nn_dsc") -> li
     return lines
 
 
-def room_closed(cells: Sequence[CellResult], metric: str = "cost") -> dict[str, dict[str, object]]:
+@dataclass(frozen=True)
+class RoomScore:
+    """The share of the room one policy closes (``room_closed``).
+
+    Attributes:
+        scenarios: Scenario -> (J_best - J) / (J_best - J_oracle) of the mean cost.
+        iqm: IQM over every episode of those scenarios, each scored against its
+            scenario's two means.
+        interval: Its 95 % bootstrap interval, stratified by scenario.
+    """
+
+    scenarios: dict[str, float]
+    iqm: float
+    interval: tuple[float, float]
+
+
+def room_closed(cells: Sequence[CellResult], metric: str = "cost") -> dict[str, RoomScore]:
     """Each policy outside ``baselines``: the share of the room it closes (module docstring).
 
-    Returns:
-        policy -> ``scenarios`` (scenario -> (J_best - J) / (J_best - J_oracle) of the
-        means), ``iqm`` and ``interval`` (IQM over every episode of the scenarios with a
-        room, each scored against its scenario's two means, and its 95 % bootstrap
-        interval stratified by scenario). Scenarios where the bound is not below the
-        best deployable design have no room and are left out.
+    Scenarios where the bound is not below the best deployable design have no
+    room and are left out.
     """
     rooms = {
         row["scenario"]: (float(row["best_cost"]), float(row["oracle"]))  # type: ignore[arg-type]
         for row in headroom_rows(cells, metric=metric)
         if float(row["oracle"]) < float(row["best_cost"])  # type: ignore[arg-type]
     }
-    scored: dict[str, dict[str, object]] = {}
-    strata: dict[str, list[np.ndarray]] = {}
+    strata: dict[str, dict[str, np.ndarray]] = {}
     for cell in cells:
         if cell.policy in ALL_POLICIES or cell.scenario not in rooms:
             continue
         best, bound = rooms[cell.scenario]
-        episodes = (best - cell.metrics[metric]) / (best - bound)
-        entry = scored.setdefault(cell.policy, {"scenarios": {}})
-        cast(dict[str, float], entry["scenarios"])[cell.scenario] = float(
-            (best - np.mean(cell.metrics[metric])) / (best - bound)
+        scores = (best - cell.metrics[metric]) / (best - bound)
+        strata.setdefault(cell.policy, {})[cell.scenario] = scores
+    return {
+        policy: RoomScore(
+            {name: float(scores.mean()) for name, scores in by_scenario.items()},
+            float(iqm(np.concatenate(list(by_scenario.values())))),
+            bootstrap_interval(list(by_scenario.values()), statistic=iqm),
         )
-        strata.setdefault(cell.policy, []).append(episodes)
-    for policy, entry in scored.items():
-        entry["iqm"] = float(iqm(np.concatenate(strata[policy])))
-        entry["interval"] = bootstrap_interval(strata[policy], statistic=iqm)
-    return scored
+        for policy, by_scenario in strata.items()
+    }
 
 
 def room_table(cells: Sequence[CellResult]) -> list[str]:
@@ -186,14 +205,15 @@ def room_table(cells: Sequence[CellResult]) -> list[str]:
     scored = room_closed(cells)
     if not scored:
         return []
-    names = list(dict.fromkeys(s for e in scored.values() for s in e["scenarios"]))  # type: ignore[attr-defined]
+    names = list(dict.fromkeys(name for score in scored.values() for name in score.scenarios))
     lines = [
         "| policy | IQM (95 % interval) | " + " | ".join(names) + " |",
         "|---|---|" + "---|" * len(names),
     ]
-    for policy, entry in scored.items():
-        low, high = cast(tuple[float, float], entry["interval"])
-        per = cast(dict[str, float], entry["scenarios"])
-        values = " | ".join(f"{per[n]:.2f}" if n in per else "" for n in names)
-        lines.append(f"| {policy} | {entry['iqm']:.2f} ({low:.2f} to {high:.2f}) | {values} |")
+    for policy, score in scored.items():
+        low, high = score.interval
+        values = " | ".join(
+            f"{score.scenarios[n]:.2f}" if n in score.scenarios else "" for n in names
+        )
+        lines.append(f"| {policy} | {score.iqm:.2f} ({low:.2f} to {high:.2f}) | {values} |")
     return lines

@@ -25,8 +25,7 @@ such a hull steers its position with its heading, holding the path in a
 cross current only with its bow turned into the drift and converging to it
 only on a course off the tangent, so neither offset is a regression in
 itself; what it buys is judged by the cross-track, formation and progress
-guards. A metric the scenario does not measure (NaN in the reference) is
-not guarded.
+guards.
 
 A guarded metric is read as its distance from a target where it has one
 (progress from 1: a fleet ahead of its schedule is as far off it as one
@@ -128,13 +127,11 @@ def off_target(metric: str, values: np.ndarray) -> np.ndarray:
 def guarded(base: CellResult) -> list[str]:
     """The ``GUARDED`` metrics that apply on the reference cell's scenario (module docstring).
 
-    Those it measures (not NaN), without the heading where no hull has a sway
-    actuator (where the course is measured).
+    All of them, but the heading where no hull has a sway actuator (where the
+    course is measured).
     """
-    measured = [m for m in GUARDED if not np.isnan(base.metrics[m]).all()]
-    if not np.isnan(base.metrics["course_error_rms_window"]).all():
-        measured.remove("heading_error_rms_window")
-    return measured
+    swayless = not np.isnan(base.metrics["course_error_rms_window"]).all()
+    return [m for m in GUARDED if not (swayless and m == "heading_error_rms_window")]
 
 
 def _regressed(cell: CellResult, base: CellResult) -> tuple[str, ...]:

@@ -83,9 +83,12 @@ PHYSICAL = (
 )
 
 
+#: Every reference agent's label, both tracks.
+LABELS = {**AGENTS, **HARD_AGENTS}
+
+
 def _label(policy: str) -> str:
-    labels = {**AGENTS, **HARD_AGENTS}
-    return labels[policy] if policy in labels else display_name(policy)
+    return LABELS[policy] if policy in LABELS else display_name(policy)
 
 
 def _physical_table(cells: Sequence[CellResult], scenario: str) -> list[str]:
@@ -143,7 +146,7 @@ def _power_table(cells: Sequence[CellResult], policy: str = "backstepping") -> l
 
 def _labelled(lines: list[str]) -> list[str]:
     """Table lines with each agent folder replaced by its label."""
-    for folder, label in {**AGENTS, **HARD_AGENTS}.items():
+    for folder, label in LABELS.items():
         lines = [line.replace(f"| {folder} |", f"| {label} |") for line in lines]
     return lines
 

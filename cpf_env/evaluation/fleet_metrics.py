@@ -34,11 +34,11 @@ psi_d the path's tangent angle and |eta_d'| its speed dp/dtheta:
 The course is the direction of the velocity over ground (u, v are body
 velocities over ground). A hull without a sway actuator holds a path in a
 cross current only by crabbing, its heading off the tangent by the drift
-angle atan2(v, u), so on such a fleet the course error, not the heading
-error, says whether it steers along its path: the course metrics are
-measured where no hull of the fleet has a sway actuator, and are NaN
-elsewhere (``COURSE_UNMEASURED``), like the separation metrics where no
-separation is required (``UNSEPARATED``). ``unmeasured`` gives both sets.
+angle atan2(v, u): heading minus course is that drift angle, so the course
+metrics tell a crab from a steering error. They are measured where no hull
+of the fleet has a sway actuator, and are NaN elsewhere
+(``COURSE_UNMEASURED``), like the separation metrics where no separation is
+required (``UNSEPARATED``). ``unmeasured`` gives both sets.
 """
 
 from __future__ import annotations
@@ -237,6 +237,7 @@ class FleetMetrics:
         self._kinds, self._params = encode_paths(sim.scenario.paths)
         self._tau_scale = sim.constants.tau_scale
         self._separated = sim.scenario.separation is not None
+        self._course = measures_course(sim.scenario)
         self._unmeasured = unmeasured(sim.scenario)
         self.series = {name: np.zeros((sim.num_fleets, self.horizon)) for name in _SERIES}
         self._start_thetap = np.zeros(sim.num_fleets)
@@ -345,8 +346,6 @@ class FleetMetrics:
         put("cross_max", np.abs(rel["cross"]).max(axis=2))
         put("heading_sq", (rel["heading"] ** 2).mean(axis=2))
         put("heading_max", np.abs(rel["heading"]).max(axis=2))
-        put("course_sq", (rel["course"] ** 2).mean(axis=2))
-        put("course_max", np.abs(rel["course"]).max(axis=2))
         thetap = rel["thetap"]
         spread = thetap.max(axis=2) - thetap.min(axis=2)
         put("formation", spread * rel["path_speed"].mean(axis=2))
@@ -359,6 +358,9 @@ class FleetMetrics:
         energy = ((r["tau_applied"] / self._tau_scale) ** 2).sum(axis=3).mean(axis=2)
         put("energy", energy)
         put("saturated", (r["tau_command"] != r["tau_applied"]).any(axis=3).mean(axis=2))
+        if self._course:  # measured where no hull has a sway actuator
+            put("course_sq", (rel["course"] ** 2).mean(axis=2))
+            put("course_max", np.abs(rel["course"]).max(axis=2))
         if self._separated:  # the closest approach is measured where it is constrained
             put("separation", _closest_pair(r["eta"]))
         if self._has_estimate:

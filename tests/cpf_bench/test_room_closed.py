@@ -33,11 +33,11 @@ def test_the_score_reads_the_best_deployable_design_as_0_and_the_bound_as_1() ->
     scored = room_closed(_cells([10.0, 8.0, 6.0, 12.0], [1.0] * 4))
     assert set(scored) == {"agent"}  # the analytic designs and the bound are the scale
     agent = scored["agent"]
-    assert agent["scenarios"] == {"a": pytest.approx(0.25)}  # mean 9; b has no room: left out
+    assert agent.scenarios == {"a": pytest.approx(0.25)}  # mean 9; b has no room: left out
     episodes = np.array([0.0, 0.5, 1.0, -0.5])
-    assert agent["iqm"] == pytest.approx(float(iqm(episodes)))
-    low, high = agent["interval"]
-    assert low <= agent["iqm"] <= high
+    assert agent.iqm == pytest.approx(float(iqm(episodes)))
+    low, high = agent.interval
+    assert low <= agent.iqm <= high
 
 
 def test_the_table_has_a_row_per_scored_policy() -> None:
