@@ -220,6 +220,7 @@ class Filtered(FleetPolicy):
         self.policy = self.inner(env, **options)  # type: ignore[call-arg]
         self.n = scenario.n
         self.obs_dim, self.act_dim = self.policy.obs_dim, self.policy.act_dim
+        self.message_entries = self.policy.message_entries
         self.agents = self.policy.agents
         kinds, paths = encode_paths(scenario.paths)
         self._kinds = np.ascontiguousarray(kinds, dtype=np.int64)

@@ -231,6 +231,7 @@ class RecedingHorizon(FleetPolicy):
         self.n = s.n
         self.obs_dim = observation_layout(s).size
         self.act_dim = 4 + s.message_size
+        self.message_entries = min(1, s.message_size)
         self.agents = [f"vessel_{i}" for i in range(s.n)]
         self.diagnostics: dict[str, Array] = {}
         self._constants = tuple(FleetSim(s).constants)

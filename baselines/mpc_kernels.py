@@ -512,7 +512,8 @@ def local_commands(
         constants: ``tuple(KernelConstants)``.
         start: (B, n, ``LOCAL_STATE``) from ``local_start``.
         neighbours: (B, n, K, 3) from ``local_start``.
-        speed: (B, n) v0 estimates; also the message sent.
+        speed: (B, n) v0 estimates; also the message's entry 0 (the others are left as
+            they are: zeros from the caller).
         residual: (B, n, 3) residual force estimates.
         nominal: (B, n, PARAM_SIZE) the model's vessel parameters.
         gains: The feedback's gains.
@@ -537,8 +538,8 @@ def local_commands(
             for q in range(3):
                 out[b, i, q] = tau[q]
             out[b, i, 3] = rate
-            for q in range(4, out.shape[2]):
-                out[b, i, q] = _clipped(speed[b, i], -c.message_max, c.message_max)
+            if out.shape[2] > 4:  # the message: the estimate in entry 0, the rest untouched
+                out[b, i, 4] = _clipped(speed[b, i], -c.message_max, c.message_max)
 
 
 @numba.njit(cache=True)

@@ -148,6 +148,7 @@ class AnalyticPolicy(FleetPolicy):
         self.n = self.scenario.n
         self.obs_dim = self.layout.size
         self.act_dim = 4 + self.scenario.message_size
+        self.message_entries = min(1, self.scenario.message_size)
         self.dt = float(self.scenario.dt)
         self.agents = [f"vessel_{i}" for i in range(self.n)]
         if self.scenario.message_size < 1 and not self.global_speed:

@@ -174,6 +174,7 @@ class SafetyFiltered(FleetPolicy):
         self.n = self.policy.n
         self.obs_dim = self.policy.obs_dim
         self.act_dim = self.policy.act_dim
+        self.message_entries = SAFETY_MESSAGE
         self.agents = self.policy.agents
         kinds, paths = encode_paths(scenario.paths)
         self._kinds = np.ascontiguousarray(kinds, dtype=np.int64)

@@ -191,6 +191,20 @@ def main() -> None:
     )
     parser.add_argument("--out", type=Path, required=True)
     parser.add_argument(
+        "--mode",
+        choices=("force", "force_and_rate"),
+        default=None,
+        help="residual mode (the task's: force); force_and_rate also corrects the path "
+        "variable's rate",
+    )
+    parser.add_argument(
+        "--messages",
+        type=int,
+        default=None,
+        help="message entries the learner writes, learned end to end (the task's: 0); they "
+        "follow the base's own entries and must fit in the scenario's message_size",
+    )
+    parser.add_argument(
         "--encoder",
         action="store_true",
         help="the actor reads the neighbour slots through the DeepSets encoder "
@@ -273,6 +287,10 @@ def train(args: argparse.Namespace, scratch: str) -> None:
     task.config["privileged_state"] = args.privileged_state
     if args.max_steps is not None:
         task.config["max_steps"] = args.max_steps
+    if args.mode is not None:
+        task.config["mode"] = args.mode
+    if args.messages is not None:
+        task.config["messages"] = args.messages
     model: MlpConfig | NeighbourSetMlpConfig = critic
     if args.encoder:
         task.config["shared_slot_statistics"] = True

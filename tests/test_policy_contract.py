@@ -31,6 +31,23 @@ def test_every_baseline_meets_the_contract(name: str) -> None:
     policy.reset_fleets(np.array([True, False]))  # the batched-env member, present
 
 
+@pytest.mark.parametrize("name", sorted(baselines.DEPLOYABLE))
+def test_each_deployable_design_writes_only_the_message_entries_it_declares(name: str) -> None:
+    """What a learner's messages rely on: the entries after ``message_entries`` stay zero."""
+    scenario = scenarios.make_scenario("hard_crossing", max_steps=40)
+    sim = FleetSim(scenario, num_fleets=2)
+    policy = baselines.make_policy(name, scenario)
+    obs = sim.reset(seeds=[0, 1])
+    declared = policy.message_entries
+    assert 1 <= declared <= scenario.message_size
+    written = np.zeros(scenario.message_size, dtype=bool)
+    for _ in range(40):
+        actions = policy.act_batch(obs)
+        written |= (actions[..., 4:] != 0.0).any(axis=(0, 1))
+        obs = sim.step(actions)
+    assert not written[declared:].any() and written[0]
+
+
 def test_a_trained_agent_and_the_zero_policy_meet_it() -> None:
     from agents import load_policy
 

@@ -206,6 +206,13 @@ def check_distillation(config: TrainConfig, settings: DistillConfig) -> None:
             f"algo={config.algo!r}, "
             f"normalize_observations={config.normalize_observations}."
         )
+    if config.residual.messages:
+        raise ValueError(
+            f"distill fits a student to its teacher's forces, and no teacher writes learned "
+            f"messages: residual.messages = {config.residual.messages} has no labels. Learn "
+            "messages with a reinforcement learner (cpf-train, or MAPPO on the BenchMARL "
+            "route), or leave residual.messages out."
+        )
     groups = len(config.scenarios) + settings.procedural
     if config.fleets < groups:
         raise ValueError(

@@ -62,6 +62,7 @@ class FleetwiseBase(FleetPolicy):
         first = self.policies[0]
         self.name, self.n, self.obs_dim = name, first.n, first.obs_dim
         self.act_dim, self.agents = first.act_dim, first.agents
+        self.message_entries = first.message_entries
         self.diagnostics: dict[str, NDArray[np.float64]] = {}
 
     def act_batch(self, obs: Any, fleets: Any = None) -> NDArray[np.float64]:

@@ -217,13 +217,21 @@ def marl_config(record: Any, source: Path) -> tuple[TrainConfig, list[int], dict
             f"{source}: field 'task.shared_slot_statistics' must be true or false, got "
             f"{type(shared).__name__}."
         )
+    messages = task.get("messages", 0)  # absent before learned messages
+    if isinstance(messages, bool) or not isinstance(messages, int):
+        raise AgentFolderError(
+            f"{source}: field 'task.messages' must be an integer, got {type(messages).__name__}."
+        )
     try:
         config = TrainConfig(
             algo="ppo",
             scenario=task["scenario"],
             base_policy=task["base_policy"],
             residual=ResidualConfig(
-                mode=task["mode"], scale=task["scale"], extras=tuple(task["extras"])
+                mode=task["mode"],
+                scale=task["scale"],
+                extras=tuple(task["extras"]),
+                messages=messages,
             ),
             normalize_observations=task["normalize"],
             shared_slot_statistics=shared,

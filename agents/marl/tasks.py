@@ -75,6 +75,7 @@ class CpfTaskConfig:
         mode: Residual mode (``RESIDUAL_MODES``).
         scale: Residual range as a fraction of the limits.
         extras: Local extras of the learner's input (``EXTRAS``).
+        messages: Message entries the learner writes, end to end (``ResidualConfig``).
         normalize: Scale inputs with statistics of the base policy alone.
         normalization_steps: Control periods those statistics pool.
         shared_slot_statistics: One set of statistics for every neighbour slot, the
@@ -97,6 +98,7 @@ class CpfTaskConfig:
     mode: str = "force"
     scale: float = 0.2
     extras: list[str] = dataclasses.field(default_factory=list)
+    messages: int = 0
     normalize: bool = True
     normalization_steps: int = 200
     shared_slot_statistics: bool = False
@@ -107,7 +109,9 @@ class CpfTaskConfig:
 
     def residual(self) -> ResidualConfig:
         """The residual composition these fields describe."""
-        return ResidualConfig(mode=self.mode, scale=self.scale, extras=tuple(self.extras))
+        return ResidualConfig(
+            mode=self.mode, scale=self.scale, extras=tuple(self.extras), messages=self.messages
+        )
 
 
 def checked_config(config: dict[str, Any]) -> CpfTaskConfig:
@@ -121,7 +125,7 @@ def checked_config(config: dict[str, Any]) -> CpfTaskConfig:
     if "scenario" not in config:
         raise ValueError("a cpf task config needs 'scenario' (a registered scenario name).")
     checked = CpfTaskConfig(**config)
-    checked.residual()  # checks mode, scale and extras
+    checked.residual()  # checks mode, scale, extras and messages
     if checked.privileged_state and not checked.state:
         raise ValueError(
             "privileged_state: true appends to the global state, which this task config "

@@ -64,6 +64,7 @@ RECIPE = (
     "residual.extras",
     "residual.hide_residual_from_base",
     "residual.yield_at_limit",
+    "residual.messages",
     "normalize_observations",
     "shared_slot_statistics",
     "encoder",

@@ -132,6 +132,10 @@ def estimate_input_statistics(
 
     Returns:
         The statistics of the float32 inputs, length ``config.input_size(layout)``.
+        The neighbours' learned messages (``config.message_inputs``), which the base
+        alone never sends, get mean 0 and variance 1: they pass as sent, in [-1, 1]
+        (measured, they would be constant zeros, and the first message a learner
+        sent would be scaled to the clip).
     """
     for name, value in (("steps", steps), ("fleets", fleets)):
         if isinstance(value, bool) or int(value) != value or value < 1:
@@ -155,4 +159,7 @@ def estimate_input_statistics(
             inputs[ending] = controller.observe(obs[ending], fleets=ending)
     pooled = np.concatenate(seen).astype(np.float64)
     controller.reset()
-    return InputStatistics(pooled.mean(axis=0), pooled.var(axis=0))
+    mean, var = pooled.mean(axis=0), pooled.var(axis=0)
+    learned = config.message_inputs(controller.layout)
+    mean[learned], var[learned] = 0.0, 1.0
+    return InputStatistics(mean, var)

@@ -21,6 +21,9 @@ own internal states, one set per fleet:
 - ``diagnostics``: name -> (B, n, ...) arrays of the last ``act_batch`` (may
   be empty), e.g. ``speed_estimate``, ``nn_output``, ``aux_state``;
 - optional ``name``: the label in tables and file names;
+- optional ``message_entries``: how many leading message entries the policy
+  writes (the rest it leaves zero); a residual learner's own messages
+  (``cpf_env.envs.residual``) go after them. Absent: all m;
 - ``reset_fleets(mask)``: forget the states of the fleets in a (B,) mask or
   index list. Required only by batched routes that restart single fleets
   (``cpf_env.envs.core.EpisodeCore``), which say so when it is missing; so is
@@ -74,6 +77,7 @@ class FleetPolicy(abc.ABC, metaclass=_Contract):
     n: int
     obs_dim: int
     act_dim: int
+    message_entries: int
     agents: list[str]
     diagnostics: dict[str, Array]
 

@@ -19,6 +19,18 @@ stays the only clip; messages (and theta_dot except in ``force_and_rate``)
 are the base's. tau_limit is the per-axis magnitude max(|tau_min|, |tau_max|).
 With a = 0 the base policy's actions pass through unchanged, bit for bit.
 
+Learned messages (``messages``, default 0). With ``messages = L`` the
+learner's action grows by L entries, a_k .. a_{k+L-1}, which vessel i
+broadcasts as its message's last L entries (m - L .. m - 1), the values as
+they are (in [-1, 1], no unit: what they mean is learned end to end). Its
+neighbours read them in their slots, delayed and lost as the links deliver
+every packet. The base keeps its own entries: the base policy declares how
+many leading entries it writes (``message_entries``; the analytic designs
+write one, their speed estimate, the safety filters six), and the learner
+may have only the entries after them. A base that declares nothing is taken
+to write all m, so a learned message never overwrites a base's silently.
+With ``L = 0`` the messages are the base's, as above.
+
 Yielding at a limit (``yield_at_limit``, default False). Where the base
 commands an actuator limit on a force axis (within ``LIMIT_TOLERANCE`` of it,
 or past it), a residual that pulls the command back from that limit is
@@ -81,7 +93,7 @@ from numpy.typing import ArrayLike, NDArray
 from cpf_env.envs.policy import FleetPolicy
 from cpf_env.scenarios import Scenario
 from cpf_env.sim.fleet import observation_layout
-from cpf_env.sim.observation import ObsLayout
+from cpf_env.sim.observation import SLOT_MSG, ObsLayout
 
 __all__ = [
     "EXTRAS",
@@ -128,6 +140,8 @@ class ResidualConfig:
         yield_at_limit: Drop a force residual that pulls the command back from an
             actuator limit the base commands (see the module docstring); force
             modes only.
+        messages: Message entries the learner writes (the last ``messages`` of the
+            scenario's m; see the module docstring), 0: none.
     """
 
     mode: str = "force"
@@ -137,6 +151,7 @@ class ResidualConfig:
     hide_residual_from_base: bool = True
     neighbour_slots: int | None = None
     yield_at_limit: bool = False
+    messages: int = 0
 
     def __post_init__(self) -> None:
         if self.mode not in RESIDUAL_MODES:
@@ -174,6 +189,12 @@ class ResidualConfig:
                 "yield_at_limit acts on a force residual; 'kinematic' mode has none. Drop it, "
                 "or use mode='force'."
             )
+        messages = self.messages
+        if isinstance(messages, bool) or not isinstance(messages, int | np.integer) or messages < 0:
+            raise ValueError(
+                f"messages must be an integer >= 0 (learned message entries), got {messages!r}."
+            )
+        object.__setattr__(self, "messages", int(messages))
         slots = self.neighbour_slots
         if slots is not None and (
             isinstance(slots, bool) or not isinstance(slots, int | np.integer) or slots < 1
@@ -185,8 +206,8 @@ class ResidualConfig:
 
     @property
     def action_size(self) -> int:
-        """k, the learner's action length per vessel."""
-        return RESIDUAL_MODES[self.mode]
+        """The learner's action length per vessel: the mode's k plus the learned messages."""
+        return RESIDUAL_MODES[self.mode] + self.messages
 
     def learner_layout(self, layout: ObsLayout) -> ObsLayout:
         """The layout of the observation part of the learner's input.
@@ -206,6 +227,24 @@ class ResidualConfig:
             )
         return ObsLayout(n_slots=self.neighbour_slots, msg_size=layout.msg_size)
 
+    def message_inputs(self, layout: ObsLayout) -> list[int]:
+        """Columns of the learner's input that hold the neighbours' learned messages.
+
+        Args:
+            layout: The scenario's observation layout.
+
+        Returns:
+            The last ``messages`` message entries of every neighbour slot of the
+            learner's layout, slot by slot (empty without learned messages).
+        """
+        learner = self.learner_layout(layout)
+        first = SLOT_MSG + learner.msg_size - self.messages
+        return [
+            learner.slot(k).start + first + j
+            for k in range(learner.n_slots)
+            for j in range(self.messages)
+        ]
+
     def input_size(self, layout: ObsLayout) -> int:
         """The learner's input length per vessel: observation (padded) plus extras."""
         return self.learner_layout(layout).size + sum(EXTRAS[name] for name in self.extras)
@@ -223,12 +262,18 @@ def learner_config(
     Returns:
         ``residual`` over a base policy; with no base policy,
         ``ResidualConfig(mode="force_and_rate", scale=1.0)``: the learner commands
-        forces and path-variable rate as fractions of their limits (messages are
-        zero), keeping the given ``neighbour_slots``.
+        forces and path-variable rate as fractions of their limits, keeping the given
+        ``neighbour_slots`` and ``messages`` (the messages it does not learn are zero).
     """
     if base_policy is None:
-        slots = None if residual is None else residual.neighbour_slots
-        return ResidualConfig(mode="force_and_rate", scale=1.0, neighbour_slots=slots)
+        if residual is None:
+            return ResidualConfig(mode="force_and_rate", scale=1.0)
+        return ResidualConfig(
+            mode="force_and_rate",
+            scale=1.0,
+            neighbour_slots=residual.neighbour_slots,
+            messages=residual.messages,
+        )
     return ResidualConfig() if residual is None else residual
 
 
@@ -238,6 +283,9 @@ class ZeroPolicy(FleetPolicy):
     Args:
         act_dim: Action length per vessel, 4 + m.
     """
+
+    #: Leading message entries written: none.
+    message_entries = 0
 
     def __init__(self, act_dim: int) -> None:
         self.act_dim = act_dim
@@ -275,10 +323,14 @@ class ResidualController:
     Attributes:
         layout: The observation layout.
         input_size: Length of the learner's input per vessel, obs_dim + extras.
-        action_size: k.
+        action_size: The learner's action length, k + ``messages``.
         base_actions: (B, n, 4 + m) the base's last actions (float64).
         residual: (B, n, k) the last correction in physical units (N, N, N m
-            [, 1/s]; m, m, rad in ``kinematic`` mode).
+            [, 1/s]; m, m, rad in ``kinematic`` mode), learned messages aside.
+
+    Raises:
+        ValueError: The learned messages do not fit beside the base's (their
+            numbers are named).
     """
 
     def __init__(
@@ -294,6 +346,7 @@ class ResidualController:
         self.n, self.num_fleets = scenario.n, int(num_fleets)
         self.act_dim = 4 + scenario.message_size
         self.base = ZeroPolicy(self.act_dim) if base_policy is None else base_policy
+        self._check_messages(scenario.message_size, config.messages)
         if "base_signals" in config.extras and not hasattr(self.base, "diagnostics"):
             raise ValueError(
                 f"extra 'base_signals' reads the base policy's diagnostics, and "
@@ -309,7 +362,8 @@ class ResidualController:
         self._padding = config.learner_layout(self.layout).size - self.layout.size
         shape = (self.num_fleets, self.n)
         self.base_actions = np.zeros((*shape, self.act_dim))
-        self.residual = np.zeros((*shape, self.action_size))
+        self._k = RESIDUAL_MODES[config.mode]
+        self.residual = np.zeros((*shape, self._k))
         self._force_residual = np.zeros((*shape, 3))
         self._obs = np.zeros((*shape, self.layout.size))
         self._signals = np.zeros((*shape, EXTRAS["base_signals"]))
@@ -368,26 +422,29 @@ class ResidualController:
         """The command for the plant from the learner's action.
 
         Args:
-            action: (B, n, k) in [-1, 1] (values outside are clipped to it).
+            action: (B, n, k + messages) in [-1, 1] (values outside are clipped to it).
 
         Returns:
-            (B, n, 4 + m) float64: force command (N, N, N m), theta_dot (1/s), message.
+            (B, n, 4 + m) float64: force command (N, N, N m), theta_dot (1/s), message
+            (its last ``messages`` entries the learner's).
         """
         a = np.minimum(np.maximum(np.asarray(action, dtype=np.float64), -1.0), 1.0)  # np.clip
         expected = (self.num_fleets, self.n, self.action_size)
         if a.shape != expected:
             raise ValueError(
-                f"residual actions must have shape (B, n, k) = {expected}, got {a.shape}."
+                f"residual actions must have shape (B, n, k + messages) = {expected}, got "
+                f"{a.shape}."
             )
         if not np.isfinite(a).all():
             raise ValueError("residual actions must be finite.")
+        a, messages = a[..., : self._k], a[..., self._k :]
         scale = self.config.scale
         if self.config.mode == "kinematic":
             self.residual = np.asarray(self.config.kinematic_scale) * a
             shown = self._shown(self._obs, slice(None), offset=self.residual)
             self.base_actions = self.base.act_batch(shown)
             self._record_signals(slice(None))
-            return self.base_actions.copy()
+            return self._with_messages(self.base_actions.copy(), messages)
         command = self.base_actions.copy()
         force = scale * self._tau_scale * a[..., :3]
         if self.config.yield_at_limit:
@@ -401,7 +458,7 @@ class ResidualController:
             self.residual = np.concatenate([force, rate[..., None]], axis=-1)
         else:
             self.residual = force
-        return command
+        return self._with_messages(command, messages)
 
     def base_at_limits(self) -> tuple[NDArray[np.bool_], NDArray[np.bool_]]:
         """Where the base's last force command is at (or past) tau_max and tau_min.
@@ -413,6 +470,27 @@ class ResidualController:
         return base >= self._near_max, base <= self._near_min
 
     # --- helpers --------------------------------------------------------------------------
+
+    def _check_messages(self, size: int, learned: int) -> None:
+        """Refuse learned messages that do not fit after the base's ``message_entries``."""
+        if learned == 0:
+            return
+        written = int(getattr(self.base, "message_entries", size))
+        if written + learned <= size:
+            return
+        name = getattr(self.base, "name", type(self.base).__name__)
+        raise ValueError(
+            f"the learner is to write {learned} message entries, and the base policy {name!r} "
+            f"writes {written} of {self.scenario.name!r}'s {size} (message_size): ask for at "
+            f"most {max(size - written, 0)} learned messages, or give the scenario "
+            f"message_size >= {written + learned} (a scenario override)."
+        )
+
+    def _with_messages(self, command: Array, messages: Array) -> Array:
+        """``command`` with the learned messages in its last message entries."""
+        if messages.shape[-1]:
+            command[..., command.shape[-1] - messages.shape[-1] :] = messages
+        return command
 
     def _shown(self, obs: Array, index: slice | NDArray[np.int64], offset: Array | None) -> Array:
         """The observation the base policy is shown (see the module docstring)."""

@@ -193,6 +193,9 @@ def test_a_residual_yields_to_a_base_at_an_actuator_limit() -> None:
         ({"extras": ("v0_of_everyone",)}, "extras"),
         ({"extras": ("base_action",), "mode": "kinematic"}, "not available in 'kinematic'"),
         ({"kinematic_scale": (0.1, -0.1, 0.1)}, "kinematic_scale"),
+        ({"messages": -1}, "messages must be an integer >= 0"),
+        ({"messages": True}, "messages must be an integer >= 0"),
+        ({"messages": 1.5}, "messages must be an integer >= 0"),
     ],
 )
 def test_bad_residual_configuration_says_what_to_fix(options: dict, message: str) -> None:
@@ -299,3 +302,95 @@ def test_kinematic_residual_commands_what_the_base_commands_for_the_moved_target
         if step == 0:  # the moved target changes the force: the offset is not dropped
             assert np.all(np.abs(command[..., :3] - unmoved[..., :3]) > 1e-6)
         obs = sim.step(command)
+
+
+@pytest.mark.parametrize("mode", ["force", "force_and_rate", "kinematic"])
+def test_learned_messages_are_broadcast_after_the_base_entries(mode: str) -> None:
+    """The action's last L entries become the message's last L; the rest is the base's."""
+    scenario = scenarios.make_scenario("bench_lossy_links", message_size=4)
+    sim, plain_sim = FleetSim(scenario, num_fleets=2), FleetSim(scenario, num_fleets=2)
+    config = ResidualConfig(mode=mode, messages=3)
+    loop = ResidualController(scenario, make_policy("nn_dsc", scenario), 2, config)
+    plain = ResidualController(
+        scenario, make_policy("nn_dsc", scenario), 2, ResidualConfig(mode=mode)
+    )
+    assert loop.action_size == plain.action_size + 3
+    rng = np.random.default_rng(0)
+    loop.observe(sim.reset(seeds=[3, 4]))
+    plain.observe(plain_sim.reset(seeds=[3, 4]))
+    for _ in range(50):
+        correction = rng.uniform(-1.0, 1.0, (2, scenario.n, plain.action_size))
+        messages = rng.uniform(-1.0, 1.0, (2, scenario.n, 3))
+        command = loop.compose(np.concatenate([correction, messages], axis=-1))
+        expected = plain.compose(correction)
+        assert np.array_equal(command[..., 5:], messages)  # entries 1-3 of m = 4
+        assert np.array_equal(command[..., :5], expected[..., :5])  # forces, rate, speed
+        loop.observe(sim.step(command))
+        plain.observe(plain_sim.step(expected))
+    assert np.array_equal(loop.residual, plain.residual)
+
+
+def test_neighbours_read_learned_messages_as_the_links_deliver_them() -> None:
+    """On ideal links vessel j's message reaches its neighbours' slots one step later."""
+    scenario = scenarios.make_scenario("wang2014", message_size=3)
+    sim = FleetSim(scenario, num_fleets=1)
+    loop = ResidualController(
+        scenario, make_policy("nn_dsc", scenario), 1, ResidualConfig(messages=2)
+    )
+    loop.observe(sim.reset(seeds=[0]))
+    # in [-1, 1] and exact in float32
+    sent = np.arange(scenario.n * 2, dtype=np.float64).reshape(1, scenario.n, 2) / 16.0
+    obs = sim.step(loop.compose(np.concatenate([np.zeros((1, scenario.n, 3)), sent], -1)))
+    layout, adjacency = loop.layout, scenario.topology.adjacency
+    for i in range(scenario.n):
+        heard = [obs[0, i, layout.slot(k)] for k in range(layout.n_slots)]
+        linked = [slot[3 + 1 :] for slot in heard if slot[0] != 0.0]
+        neighbours = np.flatnonzero(adjacency[i])
+        assert len(linked) == len(neighbours) > 0
+        assert sorted(map(tuple, linked)) == sorted(tuple(sent[0, j]) for j in neighbours)
+
+
+def test_learned_messages_must_fit_after_the_base_entries() -> None:
+    """The base's declared entries stay its own; an undeclared base keeps all m."""
+    crossing = scenarios.get("hard_crossing")  # m = 6
+    mpc = make_policy("mpc_tuned", crossing)
+    assert mpc.message_entries == 1
+    ResidualController(crossing, mpc, 1, ResidualConfig(messages=5))
+    with pytest.raises(ValueError, match=r"ask for at most 5 learned messages.*>= 7"):
+        ResidualController(crossing, mpc, 1, ResidualConfig(messages=6))
+    safe = make_policy("mpc_tuned_safe", crossing)
+    with pytest.raises(ValueError, match=r"'mpc_tuned_safe' writes 6 of .*at most 0"):
+        ResidualController(crossing, safe, 1, ResidualConfig(messages=1))
+
+    class Undeclared:
+        act_dim, diagnostics = 10, {}
+
+        def act_batch(self, obs: np.ndarray, fleets: object = None) -> np.ndarray:
+            return np.zeros((*np.shape(obs)[:2], 10))
+
+        def reset(self, seed: int | None = None) -> None:
+            pass
+
+    with pytest.raises(ValueError, match="writes 6 of"):
+        ResidualController(crossing, Undeclared(), 1, ResidualConfig(messages=1))  # type: ignore[arg-type]
+    ResidualController(crossing, None, 1, ResidualConfig(messages=6))  # no base: all six free
+
+
+def test_input_statistics_pass_learned_messages_as_sent() -> None:
+    """The base alone never sends them: their columns get mean 0 and variance 1."""
+    from cpf_env.envs.input_statistics import estimate_input_statistics
+
+    scenario = scenarios.make_scenario("bench_lossy_links", message_size=3)
+    config = ResidualConfig(messages=2)
+    stats = estimate_input_statistics(scenario, make_policy("nn_dsc", scenario), config, steps=5)
+    plain = estimate_input_statistics(
+        scenario, make_policy("nn_dsc", scenario), ResidualConfig(), steps=5
+    )
+    columns = config.message_inputs(FleetSim(scenario).layout)
+    layout = FleetSim(scenario).layout
+    assert len(columns) == 2 * layout.n_slots
+    assert all((c - layout.slot(0).start) % layout.slot_size in (4, 5) for c in columns)
+    assert np.all(stats.mean[columns] == 0.0) and np.all(stats.var[columns] == 1.0)
+    assert np.all(plain.var[columns] == 0.0)  # measured: constant zeros
+    others = np.setdiff1d(np.arange(stats.size), columns)
+    assert np.array_equal(stats.mean[others], plain.mean[others])
