@@ -1,7 +1,9 @@
 """``cpf-curves``: learning curves of several training runs, IQM over training seeds.
 
 Reads the ``evaluations.csv`` of each run folder (one per training seed; the
-cost on the benchmark's held-out ``test`` seeds): a ``cpf-train --out``
+cost on the held-out seeds its ``run.json`` names: the validation seeds,
+``cpf_env.scenarios.splits.VALIDATION_SEED`` and up, or for a run recorded
+before them the ``test`` seeds): a ``cpf-train --out``
 folder, or a ``cpf-distill`` run (``--out``, or ``--log`` where given) with
 ``--eval-num-seeds N``, whose rows are the student before round 0 (its base) and
 after each DAgger round at the labelled vessel-steps so far (the simulated
@@ -29,7 +31,8 @@ one; each run's cost at time t is its latest evaluation at or before t.
 
 The lines to beat: with ``--base-policy NAME [NAME ...]``, those analytic
 policies run by the benchmark on the runs' evaluation settings
-(``run.json``): the reference and the best deployable design, say, for the
+(``run.json``: scenarios, seeds, horizon; runs evaluated on different seeds
+are refused): the reference and the best deployable design, say, for the
 time to beat each; without it, the runs' evaluation at 0 vessel-steps,
 which for a residual agent is exactly its base policy (the correction
 starts at zero).
@@ -234,7 +237,7 @@ def figure(curves: Sequence[Curve], lines: dict[str, float], names: Sequence[str
             axes.axhline(cost, color=f"C{k + 1}" if k else "k", ls="--", lw=1.2, label=line)
         axes.set_xlabel(labels[curve.axis])
         axes.xaxis.set_major_formatter(FuncFormatter(_tick))
-        axes.set_ylabel("evaluation cost (test split, lower is better)")
+        axes.set_ylabel("held-out evaluation cost (lower is better)")
         axes.grid(alpha=0.3)
         if index == 0:
             axes.legend(fontsize=8)
@@ -253,6 +256,12 @@ def _lines(
     records = [json.loads((folder / "run.json").read_text()) for folder in folders]
     configs = [config_from_record(record["config"]) for record in records]
     if bases:
+        seeds = {_first_seed(record) for record in records}
+        if len(seeds) > 1:
+            raise ValueError(
+                f"the runs were evaluated on different seeds (first seeds {sorted(seeds)}: "
+                "validation seeds and, before them, the test seeds); draw them apart."
+            )
         evaluation = records[0].get("evaluation") or {}
         # "seeds", "steps": a run written before they were named num_seeds, max_steps
         num_seeds = evaluation.get("num_seeds", evaluation.get("seeds", DEFAULT_EVAL_NUM_SEEDS))
@@ -260,6 +269,7 @@ def _lines(
             list(bases),
             evaluation.get("scenarios") or list(configs[0].scenarios),
             num_seeds=int(num_seeds),
+            seed=seeds.pop(),
             max_steps=evaluation.get("max_steps", evaluation.get("steps")),
             split="test",
         )
@@ -277,6 +287,17 @@ def _lines(
             "a run has no evaluation at 0 vessel-steps (its base); give --base-policy NAME."
         )
     return {"base policy": float(iqm(np.array([start[0] for start in starts])))}
+
+
+def _first_seed(record: dict) -> int:
+    """The first seed a run's evaluations reset with (``run.json``'s ``evaluation``).
+
+    A run recorded before the validation seeds has no ``seed`` and was evaluated on
+    the ``test`` seeds, from ``EVALUATION_SEED``.
+    """
+    from cpf_env.scenarios.splits import EVALUATION_SEED
+
+    return int((record.get("evaluation") or {}).get("seed", EVALUATION_SEED))
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -297,7 +318,8 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument("--out", required=True, help="output folder (curves.csv, curves.png)")
     parser.add_argument(
         "--base-policy", default=None, nargs="+", metavar="NAME",
-        help="analytic policies whose test-split costs are the lines to beat, the first "
+        help="analytic policies whose costs on the runs' evaluation seeds are the lines to "
+        "beat, the first "
         "curves.csv's base_cost (default: the runs' evaluation at 0 vessel-steps, their base "
         "policy)",
     )  # fmt: skip

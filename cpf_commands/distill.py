@@ -26,8 +26,8 @@ seeds and the data order). ``--out`` receives an ordinary agent folder
   at an actuator limit or the residual's reach) and ``seconds`` (since the start);
 - with ``--eval-num-seeds N`` (N > 0; default 0, none), ``evaluations.csv`` in
   ``cpf-train``'s columns (``agents.training.schedule.EvaluationLog``, the evaluator
-  ``agents.training.evaluation.TestSplitEvaluator`` on the training scenarios'
-  ``test`` split, N seeds each): the student before round 0 (exactly the
+  ``agents.training.evaluation.ValidationEvaluator`` on the training scenarios'
+  validation seeds, N seeds each): the student before round 0 (exactly the
   base) and after each round, at the labelled vessel-steps so far, and
   ``run.json``'s ``evaluation`` (the settings, as ``cpf-train`` records
   them), so ``cpf-curves`` reads the run as it reads ``cpf-train``'s.
@@ -64,7 +64,7 @@ from cpf_env.infra import atomic
 from cpf_env.scenarios.suite import SUITE
 
 try:  # the learning extra; on the base install, a message instead of a traceback
-    from agents.training.evaluation import TestSplitEvaluator
+    from agents.training.evaluation import ValidationEvaluator
 except ModuleNotFoundError as error:
     raise SystemExit(missing_extra("cpf-distill", error)) from None
 
@@ -196,7 +196,7 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument(
         "--eval-num-seeds", type=non_negative_int, default=0,
         help="evaluate the student before round 0 (the base) and after each round on the "
-        "training scenarios' test split, this many episodes each (cpf-bench --num-seeds), into "
+        "training scenarios' validation seeds, this many episodes each, into "
         "evaluations.csv (cpf-train's columns; cpf-curves reads it); 0: none",
     )  # fmt: skip
     parser.add_argument(
@@ -236,7 +236,7 @@ def distill_main(argv: Sequence[str] | None = None) -> int:
     evaluate = (
         None
         if args.eval_num_seeds == 0
-        else TestSplitEvaluator(config.scenarios, args.eval_num_seeds)
+        else ValidationEvaluator(config.scenarios, args.eval_num_seeds)
     )
     started = time.perf_counter()
     report = distill(config, settings, out, device=args.device, evaluate=evaluate)

@@ -8,7 +8,8 @@ with ``agents.load_policy(DIR)`` and is accepted wherever a policy name is
 (``cpf-bench --policies nn_dsc DIR``, ``cpf-run --policy DIR``).
 
 RL Zoo conventions too (``docs/residual_rl.md``, "A training run"): held-out
-evaluation on the benchmark's ``test`` split with the best agent kept
+evaluation on the validation seeds (``cpf_env.scenarios.splits.VALIDATION_SEED``,
+never the benchmark's) with the best agent kept
 (``--eval-every``, ``--eval-num-seeds``; ``agents.training.evaluation``),
 checkpoints and ``--resume`` (``checkpoint_every``), a checkpoint and agent
 on Ctrl-C, ``--tensorboard-log DIR``, and ``--config FILE.toml``
@@ -47,7 +48,7 @@ from cpf_env.scenarios.splits import SHIFT_SUFFIX, check_training
 from cpf_env.scenarios.suite import SUITE
 
 try:  # the learning extra; on the base install, a message instead of a traceback
-    from agents.training.evaluation import DEFAULT_EVAL_NUM_SEEDS, TestSplitEvaluator
+    from agents.training.evaluation import DEFAULT_EVAL_NUM_SEEDS, ValidationEvaluator
 except ModuleNotFoundError as error:
     raise SystemExit(missing_extra("cpf-train", error)) from None
 
@@ -134,8 +135,8 @@ def _parser() -> argparse.ArgumentParser:
     )
     parser.add_argument(
         "--eval-every", type=non_negative_int, default=DEFAULT_EVAL_EVERY,
-        help="vessel-steps between evaluations of the deterministic agent on the benchmark's "
-        "test split (evaluations.csv, best/); 0: none",
+        help="vessel-steps between evaluations of the deterministic agent on the validation "
+        "seeds, 9000 and up (evaluations.csv, best/); 0: none",
     )  # fmt: skip
     parser.add_argument(
         "--eval-num-seeds", type=positive_int, default=DEFAULT_EVAL_NUM_SEEDS,
@@ -306,7 +307,7 @@ def train_main(argv: Sequence[str] | None = None) -> int:
         torch_device(args.device)
     except ValueError as error:
         parser.error(str(error))
-    evaluate = TestSplitEvaluator(config.scenarios, seeds, max_steps)
+    evaluate = ValidationEvaluator(config.scenarios, seeds, max_steps)
     out = Path(args.out)
     replacing = args.force and not args.resume and out.is_dir() and any(out.iterdir())
     try:

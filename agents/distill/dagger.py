@@ -479,7 +479,7 @@ def distill(
     """Distill a teacher into a local residual student; write its agent folder.
 
     With ``evaluate`` (``cpf-distill --eval-num-seeds``: ``cpf-train``'s evaluator
-    on the benchmark's ``test`` split) the student is evaluated before round 0
+    on the validation seeds) the student is evaluated before round 0
     and after each round (``agents.training.schedule.EvaluationLog``, no ``best/``: the
     student is the last round's). Before round 0 its output is exactly zero
     (``student_actor``), so the first row is the base policy (the folder

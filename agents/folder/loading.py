@@ -250,10 +250,12 @@ class TrainedPolicy(FleetPolicy):
             residual = dataclasses.replace(residual, neighbour_slots=slots)
         self._residual = learner_config(self._base, residual)
         # the entries a learner over this agent may not write (FleetPolicy.message_entries):
-        # its base's; all m once it writes learned messages (they end the message)
-        if self._base is None:
-            self.message_entries = self.act_dim - 4 if self._residual.messages else 0
-        elif not self._residual.messages and hasattr(self._base, "message_entries"):
+        # all m once it writes learned messages (they end the message), else its base's
+        if self._residual.messages:
+            self.message_entries = self.act_dim - 4
+        elif self._base is None:
+            self.message_entries = 0
+        elif hasattr(self._base, "message_entries"):
             self.message_entries = self._base.message_entries
         self._controller: ResidualController | None = None
         self._history: OwnHistory | None = None

@@ -8,8 +8,9 @@ taken there resumes bit for bit), in this order:
 1. evaluation, when due: the current agent (deterministic actor, the
    normalization statistics frozen as they are) is written as an agent folder
    and handed to ``evaluate`` (folder -> mean cost per scenario; ``cpf-train``
-   passes the benchmark's own evaluation on the ``test`` split, so the number
-   is the one ``cpf-bench --split test`` prints for that folder). A new best
+   passes the benchmark's own evaluation on the validation seeds, so the number
+   is the one ``cpf-bench --split test --seed 9000`` prints for that folder, and
+   the ``test`` seeds play no part in the choice). A new best
    mean cost replaces ``best/``. ``evaluations.csv`` gets a row (rewritten
    atomically; ``EvaluationLog``, which ``cpf-distill`` uses too):
    vessel-steps, wall-clock seconds since the run started (evaluations

@@ -86,7 +86,7 @@ def train(
             run stays as it was.
         callbacks: More SB3 callbacks (a sweep's reporting to Ray Tune, say).
         evaluate: Agent folder -> mean cost per scenario on held-out seeds (``cpf-train``
-            passes the benchmark's ``test`` split); None: no evaluation.
+            passes the validation seeds, ``agents.training.evaluation``); None: no evaluation.
         schedule: Evaluation and checkpoint periods (default: neither).
         resume: Continue the run in ``out`` from its last checkpoint; ``config`` must be
             the run's own (``run.json``) but for a larger ``timesteps``.

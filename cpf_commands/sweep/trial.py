@@ -3,7 +3,9 @@
 A trial trains with exactly ``cpf-train``'s function (``agents.train``) into
 ``<out>/trials/<name>/`` (so ``agents.load_policy`` loads it), reports the
 episodic cost to Ray Tune as it learns, then evaluates the agent against its
-base policy on paired seeds with ``cpf-bench``'s machinery and writes
+base policy on paired validation seeds (``cpf_env.scenarios.splits.VALIDATION_SEED``
+and up: a sweep chooses among its trials, and the benchmark's seeds play no
+part in that choice) with ``cpf-bench``'s machinery and writes
 ``evaluation.json`` (``sweep_report``). A trial whose folder shows it
 finished with the same configuration is reported again without retraining.
 A trial that was interrupted starts over (trials keep no mid-training
@@ -26,6 +28,7 @@ from cpf_bench.report import summarize
 from cpf_commands.bench.run import run_bench
 from cpf_commands.sweep.report import trial_state, write_evaluation
 from cpf_commands.sweep.spec import SweepSpec, trial_name
+from cpf_env.scenarios.splits import VALIDATION_SEED
 
 __all__ = ["evaluate_agent", "run_trial"]
 
@@ -61,7 +64,7 @@ def evaluate_agent(
     Args:
         folder: A trained agent's folder.
         config: Its training configuration.
-        num_seeds: Evaluation episodes (seeds ``BASE_SEED + k``, as ``cpf-bench`` uses).
+        num_seeds: Evaluation episodes (seeds ``VALIDATION_SEED + k``).
         max_steps: Horizon (None: the scenario's ``max_steps``).
 
     Returns:
@@ -77,7 +80,7 @@ def evaluate_agent(
     """
     reference = "nn_dsc" if config.base_policy == "none" else config.base_policy
     policies: dict[str, str | Path] = {"agent": folder, reference: reference}
-    cells = run_bench(policies, list(config.scenarios), num_seeds=num_seeds, max_steps=max_steps)
+    cells = run_bench(policies, list(config.scenarios), num_seeds, VALIDATION_SEED, max_steps)
     rows = summarize(cells, reference)
     by_metric = {row["metric"]: row for row in rows if row["policy"] == "agent"}
     base = {row["metric"]: row for row in rows if row["policy"] == reference}

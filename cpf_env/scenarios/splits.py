@@ -29,9 +29,13 @@ training scenario          its ``shift`` (outside the training ranges)
                            (``cpf_env.scenarios.hard``)
 =========================  ==================================================================
 
-Training code draws only from the training distribution:
-``check_training`` refuses a ``_shift`` scenario and any reset seed at or
-above ``EVALUATION_SEED``.
+Between training and the splits sit the validation seeds, ``VALIDATION_SEED``
+(9,000) to ``EVALUATION_SEED`` - 1: the training distribution on seeds no
+training draws, on which a training run evaluates itself and keeps its best
+agent, so that choosing an agent never sees a seed the benchmark reports.
+Training code draws only from the training distribution: ``check_training``
+refuses a ``_shift`` scenario and any reset seed at or above
+``VALIDATION_SEED``.
 
 Example:
     >>> from cpf_env.scenarios import splits
@@ -61,13 +65,18 @@ __all__ = [
     "EVALUATION_SEED",
     "SHIFTS",
     "SPLITS",
+    "VALIDATION_SEED",
     "check_training",
     "split_scenario",
     "suite_version",
 ]
 
-#: First evaluation seed; training resets use seeds below it.
+#: First evaluation seed: the ``test`` and ``shift`` splits reset with seeds from here.
 EVALUATION_SEED = 10_000
+#: First validation seed: seeds ``VALIDATION_SEED`` .. ``EVALUATION_SEED`` - 1 select among
+#: a training run's agents (its evaluations during training and its best agent), so the
+#: benchmark's seeds play no part in any choice; training resets use seeds below it.
+VALIDATION_SEED = 9_000
 #: The evaluation splits.
 SPLITS = ("test", "shift")
 SHIFT_SUFFIX = "_shift"
@@ -224,14 +233,15 @@ def suite_version(name: str) -> int | None:
 
 
 def check_training(scenario: str | Scenario, seeds: Iterable[int]) -> None:
-    """Refuse to train on an evaluation split.
+    """Refuse to train on an evaluation split or on held-out seeds.
 
     Args:
         scenario: The training scenario (name or object).
         seeds: Every reset seed training will use.
 
     Raises:
-        ValueError: A ``_shift`` scenario, or a seed >= ``EVALUATION_SEED``.
+        ValueError: A ``_shift`` scenario, or a seed >= ``VALIDATION_SEED`` (the
+            validation seeds, then the evaluation seeds).
     """
     name = scenario if isinstance(scenario, str) else scenario.name
     if name.endswith(SHIFT_SUFFIX) and name[: -len(SHIFT_SUFFIX)] in SHIFTS:
@@ -239,12 +249,13 @@ def check_training(scenario: str | Scenario, seeds: Iterable[int]) -> None:
             f"{name} is the held-out shift split of {name[: -len(SHIFT_SUFFIX)]}; train on "
             f"{name[: -len(SHIFT_SUFFIX)]} and evaluate on {name}."
         )
-    used = [int(seed) for seed in seeds if int(seed) >= EVALUATION_SEED]
+    used = [int(seed) for seed in seeds if int(seed) >= VALIDATION_SEED]
     if used:
         raise ValueError(
-            f"training would reset fleets with evaluation seeds (from {used[0]}; seeds "
-            f">= {EVALUATION_SEED} are held out for cpf-bench); choose a seed below "
-            f"{EVALUATION_SEED} minus the number of fleets."
+            f"training would reset fleets with held-out seeds (from {used[0]}; seeds "
+            f"{VALIDATION_SEED}-{EVALUATION_SEED - 1} select a run's best agent, seeds >= "
+            f"{EVALUATION_SEED} are cpf-bench's evaluation seeds); choose a seed below "
+            f"{VALIDATION_SEED} minus the number of fleets."
         )
 
 

@@ -5,10 +5,11 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
+import pytest
 from conftest import ROOT, load_script
 
 from cpf_bench.report import METRICS, CellResult, episodes_csv
-from cpf_env import scenarios
+from cpf_env import FleetSim, scenarios
 from cpf_env.model.links import LinkImpairments
 from cpf_env.model.sensors import Sensors
 
@@ -105,3 +106,43 @@ def test_the_learners_study_groups_runs_by_method_and_pools_their_episodes(tmp_p
     # scores 0.5, 0.25, 0, -0.25: the IQM of four drops one at each end
     assert any("ppo: room closed, IQM over 2 seeds x 2 episodes 0.125" in line for line in lines)
     assert any("student: room closed, IQM over 1 seeds x 2 episodes 1.000" in x for x in lines)
+
+
+def test_the_messages_study_finds_what_a_known_message_carries() -> None:
+    """A design that sends its path rate in entry 2: correlation 1 with the path rate."""
+    from baselines import make_policy
+    from cpf_bench.rollout import rollout
+
+    script = load_script(ROOT / "studies/hard_track/messages.py")
+    scenario = scenarios.make_scenario("bench_lossy_links", message_size=3, max_steps=60)
+    design = make_policy("nn_dsc", scenario)
+
+    class SendsRate:  # nn_dsc, its path rate in entry 2, a constant in entry 1
+        name, n, obs_dim, act_dim = "rate", design.n, design.obs_dim, design.act_dim
+        agents, diagnostics = design.agents, design.diagnostics
+
+        def act_batch(self, obs, fleets=None):
+            actions = design.act_batch(obs, fleets)
+            actions[..., 5], actions[..., 6] = 0.5, actions[..., 3]
+            return actions
+
+        def reset(self, seed=None):
+            design.reset(seed)
+
+        def reset_fleets(self, fleets):
+            design.reset_fleets(fleets)
+
+    record = script.SenderRecord(learned=2)
+    rollout(SendsRate(), scenario, [0, 1], observer=record)
+    assert record.messages.shape == (2 * 60 * scenario.n, 2)
+    assert record.features.shape == (2 * 60 * scenario.n, len(script.FEATURES))
+    std, correlation, r2 = script.carried(record.messages, record.features)
+    rate = script.FEATURES.index("path rate")
+    assert std[0] == 0.0 and np.isnan(correlation[0]).all() and np.isnan(r2[0])
+    assert correlation[1, rate] == pytest.approx(1.0) and r2[1] == pytest.approx(1.0)
+    assert np.nanmax(np.abs(np.delete(correlation[1], rate))) < 0.999
+
+    cut = script.MessagesCut(SendsRate(), learned=2)
+    cut.reset()
+    obs = FleetSim(scenario).reset(seeds=[0])
+    assert np.all(cut.act_batch(obs)[..., 5:] == 0.0)

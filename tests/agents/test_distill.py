@@ -31,7 +31,7 @@ from agents.envs.vec_env import FleetVecEnv
 from agents.folder.actor import build_actor
 from agents.folder.format import read_agent
 from agents.training.config import TrainConfig
-from agents.training.evaluation import TestSplitEvaluator
+from agents.training.evaluation import ValidationEvaluator
 from baselines import make_policy
 from cpf_commands.bench.run import run_bench
 from cpf_commands.distill import distill_main, read_distill_config
@@ -39,6 +39,7 @@ from cpf_env import scenarios
 from cpf_env.envs.input_statistics import InputStatistics
 from cpf_env.envs.residual import ResidualConfig
 from cpf_env.scenarios.sampler import NOMINAL_TAU_MAX, ScenarioDistribution
+from cpf_env.scenarios.splits import VALIDATION_SEED
 from cpf_env.sim.fleet import observation_layout
 from cpf_env.sim.observation import SLOTS
 
@@ -388,9 +389,9 @@ def test_distill_refuses_what_it_cannot_do(tmp_path: Path) -> None:
         distill(_config(scenario="bench_current_waves_shift"), TINY, tmp_path / "x")
     with pytest.raises(ValueError, match="held-out shift split"):
         distill(_config(scenario=("bench_mild", "bench_mild_shift")), TINY, tmp_path / "x")
-    with pytest.raises(ValueError, match="evaluation seeds"):
+    with pytest.raises(ValueError, match="held-out seeds"):
         distill(_config(seed=10_000), TINY, tmp_path / "x")
-    with pytest.raises(ValueError, match="evaluation seeds"):
+    with pytest.raises(ValueError, match="held-out seeds"):
         distill(
             _config(scenario=("bench_mild", "bench_switching"), seed=9_999), TINY, tmp_path / "x"
         )
@@ -467,7 +468,7 @@ def test_cpf_distill_refuses_an_existing_out(
     assert "exists; pass --force" in capsys.readouterr().err
     with pytest.raises(SystemExit):
         distill_main(["--config", str(path), "--seed", "10000", "--out", str(tmp_path / "p")])
-    assert "evaluation seeds" in capsys.readouterr().err
+    assert "held-out seeds" in capsys.readouterr().err
 
 
 def _encoder_config(**changes: object) -> TrainConfig:
@@ -587,7 +588,7 @@ def test_distill_refuses_a_device_it_does_not_have(tmp_path: Path) -> None:
 
 
 def test_evaluation_rows_are_cpf_trains_and_leave_the_student_unchanged(tmp_path: Path) -> None:
-    evaluate = TestSplitEvaluator(["bench_current_waves"], num_seeds=1, max_steps=20)
+    evaluate = ValidationEvaluator(["bench_current_waves"], num_seeds=1, max_steps=20)
     evaluated = distill(_config(), TINY, tmp_path / "a", evaluate=evaluate)
     plain = distill(_config(), TINY, tmp_path / "b")
     assert plain.evaluations == () and plain.losses == evaluated.losses
@@ -604,11 +605,11 @@ def test_evaluation_rows_are_cpf_trains_and_leave_the_student_unchanged(tmp_path
     seconds = [row["wall_clock_seconds"] for row in rows]
     assert seconds == sorted(seconds) and seconds[-1] <= evaluated.seconds + 5e-4  # rounded
     # Row 0 is the base itself; the last row is the student written to the folder.
-    base = run_bench(["nn_dsc"], ["bench_current_waves"], num_seeds=1, max_steps=20, split="test")
+    base = run_bench(["nn_dsc"], ["bench_current_waves"], 1, VALIDATION_SEED, max_steps=20)
     assert rows[0]["mean_cost"] == float(np.mean(base[0].metrics["cost"]))
     final = run_bench(
-        {"s": tmp_path / "a"}, ["bench_current_waves"], num_seeds=1, max_steps=20, reference="s",
-        split="test",
+        {"s": tmp_path / "a"}, ["bench_current_waves"], 1, VALIDATION_SEED, max_steps=20,
+        reference="s",
     )  # fmt: skip
     assert rows[-1]["mean_cost"] == float(np.mean(final[0].metrics["cost"]))
     assert rows[-1]["mean_cost"] != rows[0]["mean_cost"]

@@ -28,7 +28,7 @@ from agents.folder.files import AgentFolderError
 from agents.marl import envs, policy_folder
 from agents.marl.tasks import CONF, CpfTask, CpfTaskClass
 from baselines import DEPLOYABLE
-from cpf_env import scenarios
+from cpf_env import FleetSim, scenarios
 from cpf_env.evaluation.privileged import unobserved_state
 from cpf_env.scenarios import paper, suite
 
@@ -100,7 +100,7 @@ def test_task_configs_are_checked_and_evaluation_seeds_refused() -> None:
     with pytest.raises(ValueError, match=r"unknown cpf task config fields \['max_step'\]"):
         task.get_env_fun(2, True, 0, "cpu")
     task = CpfTask.BENCH_MILD.get_from_yaml()
-    with pytest.raises(ValueError, match="evaluation seeds"):
+    with pytest.raises(ValueError, match="held-out seeds"):
         task.get_env_fun(4, True, 9_998, "cpu")
     with pytest.raises(ValueError, match="continuous actions only"):
         task.get_env_fun(4, False, 0, "cpu")
@@ -248,6 +248,30 @@ def test_two_mappo_iterations_on_the_pettingzoo_route_with_distinct_worker_seeds
     experiment.run()
     assert experiment.n_iters_performed == 2
     assert experiment.total_frames == 400
+
+
+def test_a_learner_with_messages_saves_them_and_its_fleet_broadcasts_them(tmp_path: Path) -> None:
+    """hard_crossing over mpc_tuned: five free entries, learned, saved and sent on loading."""
+    out = tmp_path / "run"
+    command = [sys.executable, str(SCRIPT), "--task", "hard_crossing", "--iterations", "1",
+               "--mode", "force_and_rate", "--messages", "5", "--encoder", "--out", str(out),
+               "--eval-fleets", "1", "--eval-max-steps", "20"]  # fmt: skip
+    env = {**os.environ, "NUMBA_NUM_THREADS": "1"}
+    result = subprocess.run(command, capture_output=True, text=True, env=env, cwd=tmp_path)
+    assert result.returncode == 0, result.stderr[-2000:]
+    record = json.loads((out / "config.json").read_text())
+    assert record["task"]["messages"] == 5 and record["sizes"][-1] == 4 + 5
+    policy = load_policy(out)
+    assert policy.config.residual.messages == 5 and policy.message_entries == 6
+    sim = FleetSim(policy.scenario, num_fleets=2)
+    obs = sim.reset(seeds=[0, 1])
+    policy.reset()
+    for _ in range(3):
+        actions = policy.act_batch(obs)
+        obs = sim.step(actions)
+    sent = actions[..., 5:]  # entries 1-5, the learner's
+    assert np.all(np.abs(sent) <= 1.0) and np.any(sent != 0.0)
+    assert np.array_equal(sim.arrays.message[..., 1:], sent)
 
 
 @pytest.mark.parametrize(

@@ -15,7 +15,7 @@ import pytest
 from stable_baselines3.common.callbacks import BaseCallback
 
 from agents import TrainConfig, load_policy, train
-from agents.training.evaluation import TestSplitEvaluator
+from agents.training.evaluation import ValidationEvaluator
 from agents.training.schedule import RunSchedule, TrainingInterrupted
 
 #: 2 fleets x 5 vessels x 16 steps = 160 vessel-steps per PPO rollout.
@@ -36,8 +36,8 @@ def _config(algo: str) -> TrainConfig:
     )
 
 
-def _evaluator() -> TestSplitEvaluator:
-    return TestSplitEvaluator(["bench_mild"], num_seeds=2, max_steps=20)
+def _evaluator() -> ValidationEvaluator:
+    return ValidationEvaluator(["bench_mild"], num_seeds=2, max_steps=20)
 
 
 class _KillAt(BaseCallback):
@@ -250,7 +250,7 @@ def test_a_killed_mixture_run_resumes_to_the_same_files(tmp_path: Path) -> None:
         **{**TINY, "batch_size": 120},  # type: ignore[arg-type]
     )  # 2 fleets: 5 + 10 slots, 240 vessel-steps per rollout
     schedule = RunSchedule(eval_every=240, checkpoint_every=480)
-    evaluate = TestSplitEvaluator(config.scenarios, num_seeds=1, max_steps=20)
+    evaluate = ValidationEvaluator(config.scenarios, num_seeds=1, max_steps=20)
     whole = train(config, tmp_path / "whole", False, evaluate=evaluate, schedule=schedule)
     parts = tmp_path / "parts"
     with pytest.raises(RuntimeError, match="killed"):

@@ -11,11 +11,12 @@ import numpy as np
 import pytest
 from conftest import STUDENT_TOML
 
-from agents.training.evaluation import TestSplitEvaluator
+from agents.training.evaluation import ValidationEvaluator
 from cpf_commands import distill as distill_command
 from cpf_commands.bench.run import run_bench
 from cpf_commands.curves import curves_main
 from cpf_commands.distill import distill_main
+from cpf_env.scenarios.splits import EVALUATION_SEED, VALIDATION_SEED
 
 #: Four runs (training seeds): (vessel_steps, wall_clock_seconds, mean_cost) per evaluation.
 RUNS = {
@@ -90,6 +91,25 @@ def test_the_base_line_of_an_analytic_policy_is_the_benchmark_number(tmp_path: P
     assert _curves(tmp_path / "c")["vessel_steps"][0]["base_cost"] == expected
 
 
+def test_the_lines_to_beat_run_on_the_seeds_the_runs_were_evaluated_on(tmp_path: Path) -> None:
+    """A run evaluated on the validation seeds is compared on them; mixed seeds are refused."""
+    evaluation = {"split": "validation", "seed": VALIDATION_SEED, "scenarios": ["bench_mild"],
+                  "num_seeds": 2, "max_steps": 20}  # fmt: skip
+    folders = _write_runs(tmp_path / "runs", base="none", evaluation=evaluation)
+    assert curves_main([*folders, "--out", str(tmp_path / "c"), "--base-policy", "dsc"]) == 0
+    validation, test = (
+        float(np.mean(run_bench(["dsc"], ["bench_mild"], 2, seed, 20)[0].metrics["cost"]))
+        for seed in (VALIDATION_SEED, EVALUATION_SEED)
+    )
+    assert validation != test
+    assert _curves(tmp_path / "c")["vessel_steps"][0]["base_cost"] == validation
+    record = json.loads((Path(folders[0]) / "run.json").read_text())
+    del record["evaluation"]["seed"]  # a run recorded before the validation seeds
+    (Path(folders[0]) / "run.json").write_text(json.dumps(record))
+    with pytest.raises(SystemExit):
+        curves_main([*folders, "--out", str(tmp_path / "d"), "--base-policy", "dsc"])
+
+
 def test_several_lines_to_beat_each_have_their_cost_and_time(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
@@ -149,7 +169,7 @@ def test_cpf_curves_reads_cpf_distill_runs(
 ) -> None:
     # Evaluation episodes of 20 steps (cpf-distill evaluates whole episodes), to keep it fast.
     monkeypatch.setattr(
-        distill_command, "TestSplitEvaluator", functools.partial(TestSplitEvaluator, max_steps=20)
+        distill_command, "ValidationEvaluator", functools.partial(ValidationEvaluator, max_steps=20)
     )
     config = tmp_path / "student.toml"
     config.write_text(STUDENT_TOML)
@@ -161,7 +181,8 @@ def test_cpf_curves_reads_cpf_distill_runs(
         logs.append(str(log))
     record = json.loads((tmp_path / "run_s0" / "run.json").read_text())
     assert record["evaluation"] == {
-        "split": "test", "scenarios": ["bench_mild"], "num_seeds": 1, "max_steps": 20
+        "split": "validation", "seed": VALIDATION_SEED, "scenarios": ["bench_mild"],
+        "num_seeds": 1, "max_steps": 20
     }  # fmt: skip
     rows = list(csv.DictReader((tmp_path / "run_s0" / "evaluations.csv").open()))
     assert list(rows[0]) == ["vessel_steps", "wall_clock_seconds", "evaluation_seconds",

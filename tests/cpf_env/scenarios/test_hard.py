@@ -111,5 +111,5 @@ def test_the_shift_split_shifts_the_core_task_and_the_mechanisms(name: str) -> N
     assert splits.suite_version(shifted.name) == suite.HARD_VERSION
     with pytest.raises(ValueError, match="held-out shift split"):
         splits.check_training(shifted.name, range(4))
-    with pytest.raises(ValueError, match="evaluation seeds"):
+    with pytest.raises(ValueError, match="held-out seeds"):
         splits.check_training(name, range(splits.EVALUATION_SEED, splits.EVALUATION_SEED + 2))

@@ -47,10 +47,13 @@ def test_shifted_conditions_are_outside_the_training_ranges():
     assert shift.topology.period < train.topology.period
 
 
-def test_training_refuses_evaluation_seeds_and_the_shift_split():
+def test_training_refuses_held_out_seeds_and_the_shift_split():
     splits.check_training("bench_lossy_links", range(0, 256))
-    with pytest.raises(ValueError, match="evaluation seeds"):
+    splits.check_training("bench_lossy_links", range(splits.VALIDATION_SEED - 256, 9_000))
+    with pytest.raises(ValueError, match="held-out seeds"):
         splits.check_training("bench_lossy_links", range(9900, 10156))
+    with pytest.raises(ValueError, match=r"held-out seeds \(from 9000; seeds 9000-9999 select"):
+        splits.check_training("bench_lossy_links", range(8990, 9001))
     with pytest.raises(ValueError, match="held-out shift split"):
         splits.check_training("bench_lossy_links_shift", [0])
     with pytest.raises(ValueError, match="unknown split"):
@@ -64,7 +67,7 @@ def test_cpf_train_refuses_evaluation_seeds(capsys):
 
     with pytest.raises(SystemExit):
         train_main(["--scenarios", "bench_mild", "--seed", "10000", "--out", "unused"])
-    assert "evaluation seeds" in capsys.readouterr().err
+    assert "held-out seeds" in capsys.readouterr().err
 
 
 @pytest.mark.parametrize("split", splits.SPLITS)
