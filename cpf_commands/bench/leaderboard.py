@@ -57,13 +57,20 @@ AGENTS = {
     "results/agents/student_deepsets_s0": "student with a neighbour encoder, any degree",
     "results/agents/mappo_s0": "residual MAPPO, lossy links",
 }
-#: The hard track's reference agents, one per learning method, trained on ``hard_sensing``
+#: The hard track's reference agents: one per learning method on ``hard_sensing``, and
+#: residual MAPPO on the two crossing scenarios (learned messages on ``hard_crossing``), each
 #: with one budget of vessel-steps; results/README.md has the command that trained each.
 HARD_AGENTS = {
     "results/agents/hard_sensing_ppo_scratch_s0": "PPO from scratch, hard_sensing",
     "results/agents/hard_sensing_ppo_residual_s0": "residual PPO on mpc_tuned_ekf, hard_sensing",
     "results/agents/hard_sensing_student_s0": "student of the oracle, hard_sensing",
     "results/agents/hard_sensing_mappo_s0": "residual MAPPO on mpc_tuned_ekf, hard_sensing",
+    "results/agents/hard_crossing_mappo_messages_s0": (
+        "residual MAPPO with learned messages on mpc_tuned, hard_crossing"
+    ),
+    "results/agents/hard_large_fleet_mappo_s0": (
+        "residual MAPPO on mpc_tuned_ekf_safe, hard_large_fleet"
+    ),
 }
 #: The marl-eval JSON of both splits, under the results folder.
 LEADERBOARD_JSON = "leaderboard.json"

@@ -102,6 +102,7 @@ __all__ = [
     "ResidualConfig",
     "ResidualController",
     "ZeroPolicy",
+    "check_messages",
     "learner_config",
 ]
 
@@ -250,6 +251,33 @@ class ResidualConfig:
         return self.learner_layout(layout).size + sum(EXTRAS[name] for name in self.extras)
 
 
+def check_messages(scenario: Scenario, base_policy: FleetPolicy | None, learned: int) -> None:
+    """Refuse learned messages that do not fit after the base's ``message_entries``.
+
+    Args:
+        scenario: The task (its ``message_size`` m).
+        base_policy: The base (None: writes none); one without ``message_entries``
+            is taken to write all m.
+        learned: ``ResidualConfig.messages``.
+
+    Raises:
+        ValueError: The base's entries and the learned ones exceed m (the numbers named).
+    """
+    size = scenario.message_size
+    if learned == 0:
+        return
+    written = 0 if base_policy is None else int(getattr(base_policy, "message_entries", size))
+    if written + learned <= size:
+        return
+    name = getattr(base_policy, "name", type(base_policy).__name__)
+    raise ValueError(
+        f"the learner is to write {learned} message entries, and the base policy {name!r} "
+        f"writes {written} of {scenario.name!r}'s {size} (message_size): ask for at "
+        f"most {max(size - written, 0)} learned messages, or give the scenario "
+        f"message_size >= {written + learned} (a scenario override)."
+    )
+
+
 def learner_config(
     base_policy: FleetPolicy | None, residual: ResidualConfig | None = None
 ) -> ResidualConfig:
@@ -346,7 +374,7 @@ class ResidualController:
         self.n, self.num_fleets = scenario.n, int(num_fleets)
         self.act_dim = 4 + scenario.message_size
         self.base = ZeroPolicy(self.act_dim) if base_policy is None else base_policy
-        self._check_messages(scenario.message_size, config.messages)
+        check_messages(scenario, self.base, config.messages)
         if "base_signals" in config.extras and not hasattr(self.base, "diagnostics"):
             raise ValueError(
                 f"extra 'base_signals' reads the base policy's diagnostics, and "
@@ -470,21 +498,6 @@ class ResidualController:
         return base >= self._near_max, base <= self._near_min
 
     # --- helpers --------------------------------------------------------------------------
-
-    def _check_messages(self, size: int, learned: int) -> None:
-        """Refuse learned messages that do not fit after the base's ``message_entries``."""
-        if learned == 0:
-            return
-        written = int(getattr(self.base, "message_entries", size))
-        if written + learned <= size:
-            return
-        name = getattr(self.base, "name", type(self.base).__name__)
-        raise ValueError(
-            f"the learner is to write {learned} message entries, and the base policy {name!r} "
-            f"writes {written} of {self.scenario.name!r}'s {size} (message_size): ask for at "
-            f"most {max(size - written, 0)} learned messages, or give the scenario "
-            f"message_size >= {written + learned} (a scenario override)."
-        )
 
     def _with_messages(self, command: Array, messages: Array) -> Array:
         """``command`` with the learned messages in its last message entries."""
