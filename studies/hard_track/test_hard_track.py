@@ -146,3 +146,23 @@ def test_the_messages_study_finds_what_a_known_message_carries() -> None:
     cut.reset()
     obs = FleetSim(scenario).reset(seeds=[0])
     assert np.all(cut.act_batch(obs)[..., 5:] == 0.0)
+
+
+def test_the_hand_designed_messages_study_runs_on_validation_seeds(capsys) -> None:
+    script = load_script(ROOT / "studies/hard_track/hand_messages.py")
+    scenario = scenarios.get("hard_crossing")
+    rate = script.Rate(scenario)
+    obs = FleetSim(scenario).reset(seeds=[0])
+    actions = rate.act_batch(obs)
+    assert np.array_equal(actions[..., 5], actions[..., 3])  # the path rate, sent in entry 1
+    import sys
+
+    argv, sys.argv = sys.argv, ["hand_messages.py", "--num-seeds", "1", "--max-steps", "30"]
+    try:
+        script.main()
+    finally:
+        sys.argv = argv
+    printed = capsys.readouterr().out
+    assert "validation seeds 9000-9000" in printed
+    assert "| mpc_tuned | " in printed and "+0.0 (+0.0 to +0.0)" in printed
+    assert "path rate in entry 1" in printed and "age compensated twice" in printed
