@@ -17,6 +17,7 @@ from agents import FleetVecEnv, TrainConfig, load_policy, train
 from agents.envs.history_env import HistoryVecEnv
 from agents.folder.loading import TrainedPolicy
 from agents.training.algorithms import build_model
+from baselines import make_policy
 from cpf_env import FleetSim, scenarios
 from cpf_env.envs.residual import ResidualConfig
 from cpf_env.model.graph import Graph
@@ -272,3 +273,25 @@ def test_an_encoder_agent_on_another_message_size_is_refused(agent: Path) -> Non
     other = scenarios.get("bench_mild").replace(message_size=2)
     with pytest.raises(ValueError, match="slots of 4 floats but scenario 'bench_mild' gives 5"):
         load_policy(agent, scenario=other)
+
+
+def test_an_sb3_agent_with_learned_messages_broadcasts_them_after_its_base(tmp_path: Path) -> None:
+    """cpf-train's route: five entries after nn_dsc's one, learned, saved and sent."""
+    config = TrainConfig(
+        scenario="hard_crossing",  # m = 6
+        base_policy="nn_dsc",
+        residual={"mode": "force_and_rate", "messages": 5},  # type: ignore[arg-type]
+        timesteps=64, fleets=1, n_steps=16, batch_size=64, n_epochs=1, torch_threads=1,
+    )  # fmt: skip
+    folder = train(config, tmp_path / "agent", False)
+    policy = load_policy(folder)
+    assert policy.config.residual.messages == 5 and policy.message_entries == 6
+    sim, alone = FleetSim(policy.scenario), FleetSim(policy.scenario)
+    base = make_policy("nn_dsc", policy.scenario)
+    obs, plain = sim.reset(seeds=[3]), alone.reset(seeds=[3])
+    policy.reset()
+    actions, expected = policy.act_batch(obs), base.act_batch(plain)
+    assert np.array_equal(actions[..., 4], expected[..., 4])  # the base's speed estimate
+    assert np.any(actions[..., 5:] != 0.0) and np.all(np.abs(actions[..., 5:]) <= 1.0)
+    sim.step(actions)
+    assert np.array_equal(sim.arrays.message[..., 1:], actions[..., 5:])
