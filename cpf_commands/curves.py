@@ -62,6 +62,7 @@ from numpy.typing import NDArray
 from cpf_bench.stats import bootstrap_interval, iqm
 from cpf_commands.bench.run import run_bench
 from cpf_env.infra import atomic
+from cpf_env.scenarios.splits import EVALUATION_SEED
 
 __all__ = [
     "Curve",
@@ -255,13 +256,13 @@ def _lines(
 
     records = [json.loads((folder / "run.json").read_text()) for folder in folders]
     configs = [config_from_record(record["config"]) for record in records]
+    seeds = {_first_seed(record) for record in records}
+    if len(seeds) > 1:
+        raise ValueError(
+            f"the runs were evaluated on different seeds (first seeds {sorted(seeds)}: "
+            "validation seeds and, before them, the test seeds); draw them apart."
+        )
     if bases:
-        seeds = {_first_seed(record) for record in records}
-        if len(seeds) > 1:
-            raise ValueError(
-                f"the runs were evaluated on different seeds (first seeds {sorted(seeds)}: "
-                "validation seeds and, before them, the test seeds); draw them apart."
-            )
         evaluation = records[0].get("evaluation") or {}
         # "seeds", "steps": a run written before they were named num_seeds, max_steps
         num_seeds = evaluation.get("num_seeds", evaluation.get("seeds", DEFAULT_EVAL_NUM_SEEDS))
@@ -295,8 +296,6 @@ def _first_seed(record: dict) -> int:
     A run recorded before the validation seeds has no ``seed`` and was evaluated on
     the ``test`` seeds, from ``EVALUATION_SEED``.
     """
-    from cpf_env.scenarios.splits import EVALUATION_SEED
-
     return int((record.get("evaluation") or {}).get("seed", EVALUATION_SEED))
 
 

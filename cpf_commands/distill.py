@@ -150,7 +150,7 @@ def _evaluated(rows: Sequence[dict[str, float]], log: Path) -> str:
     costs = ", ".join(f"{row['mean_cost']:.4g}" for row in rows)
     seconds = sum(row["evaluation_seconds"] for row in rows)
     return (
-        f"test-split cost before round 0 (the base) and after each round: {costs} "
+        f"validation cost before round 0 (the base) and after each round: {costs} "
         f"({seconds:.0f} s of evaluation; {log}/{'evaluations.csv'})\n"
     )
 
@@ -184,7 +184,9 @@ def _parser() -> argparse.ArgumentParser:
         help="TrainConfig keys at the top (scenario may be 'suite'), DistillConfig keys in a "
         "[distill] table",
     )  # fmt: skip
-    parser.add_argument("--seed", type=int, required=True, help="training seed (< 10000)")
+    parser.add_argument(
+        "--seed", type=int, required=True, help="training seed (below 9000 minus the fleets)"
+    )
     parser.add_argument("--out", required=True, help="the agent folder to write")
     parser.add_argument(
         "--log", metavar="DIR", default=None,

@@ -9,11 +9,13 @@ learner's raw inputs and its correction:
   scenario's; the residual range is per vessel);
 - the saved normalization (``(x - mean) / sqrt(var + eps)``, clipped);
 - the actor (``agents.folder.actor.PolicyNetwork``);
-- output ``action`` (B, n, a) float32 in [-1, 1] (clipped or tanh-squashed);
-- output ``residual`` (B, n, a) float32: the correction in physical units, the
-  action times the residual range (``residual_range``: ``scale`` x each
-  vessel's force limits (N, N, N m) and, in ``force_and_rate`` mode,
-  ``scale`` x theta_dot_max (1/s)), which the base's command is added to.
+- output ``action`` (B, n, a) float32 in [-1, 1] (clipped or tanh-squashed),
+  a = k + the learned message entries (``ResidualConfig.messages``);
+- output ``residual`` (B, n, k) float32: the correction in physical units, the
+  action's first k entries times the residual range (``residual_range``:
+  ``scale`` x each vessel's force limits (N, N, N m) and, in
+  ``force_and_rate`` mode, ``scale`` x theta_dot_max (1/s)), which the base's
+  command is added to (learned messages are sent as they are).
 
 The training configuration (``config.json``) is stored in the graph's
 metadata (key ``cpf_config``), and the file's own SHA-256 in key ``cpf_sha256``
@@ -76,7 +78,7 @@ from agents.folder.files import (
 )
 from agents.folder.format import Normalization, read_agent, training_config
 from agents.folder.loading import TrainedPolicy, load_policy
-from agents.training.config import TrainConfig
+from agents.training.config import TrainConfig, upgrade_record
 from cpf_env.infra import atomic
 from cpf_env.scenarios import Scenario, make_scenario
 from cpf_env.sim.observation import SLOTS
@@ -93,7 +95,7 @@ _SEAL = re.compile(rb"\x0a\x0a" + HASH_KEY.encode() + rb"\x12\x40([0-9a-f]{64})"
 
 
 def residual_range(config: TrainConfig, scenario: Scenario) -> NDArray[np.float32]:
-    """(n, a) correction per unit of action, per vessel, as ``ResidualController.compose``.
+    """(n, k) correction per unit of action, per vessel, as ``ResidualController.compose``.
 
     Forces in N, N, N m (``scale`` x each vessel's force limits) and, in
     ``force_and_rate`` mode, the rate in 1/s (``scale`` x theta_dot_max); in
@@ -140,7 +142,7 @@ class _Graph(torch.nn.Module):
             scaled = (rows.to(torch.float64) - self.mean) / self.std
             latent = torch.clamp(scaled, -self.clip, self.clip).to(torch.float32)
         action = self.network(latent)
-        return action, action * self.scale
+        return action, action[..., : self.scale.shape[-1]] * self.scale
 
 
 def export_onnx(
@@ -342,7 +344,10 @@ class OnnxActor:
         if CONFIG_KEY not in metadata:
             raise AgentFolderError(f"{source} was not written by cpf-export (no {CONFIG_KEY}).")
         self.record: dict[str, Any] = parse_json(metadata[CONFIG_KEY].encode(), where)
-        self.config = training_config(field(self.record, "config", where), where)
+        config = field(self.record, "config", where)
+        if isinstance(config, dict) and "base" in config:  # exported before folder format 3
+            config = upgrade_record(config)
+        self.config = training_config(config, where)
         self.n, self.input_size, self.action_size = _interface(self.session, source)
 
     def __call__(self, rows: NDArray[np.float32]) -> NDArray[np.float32]:

@@ -2,11 +2,11 @@
 
 The env layer (``cpf_env.envs.torchrl_env``) takes a base policy object and
 imports no policy code; names resolve in ``agents.envs.resolve``, as on every
-learning route, with ``FleetVecEnv``'s defaults (residual on ``"nn_dsc"``,
-stagger on).
+learning route, with ``FleetVecEnv``'s defaults (no base policy: the learner
+commands forces and path rate itself; stagger on).
 
 Example:
-    >>> env = make_env("bench_lossy_links", num_fleets=2, seed=0, max_steps=50)
+    >>> env = make_env("bench_lossy_links", 2, "nn_dsc", seed=0, max_steps=50)
     >>> env.full_action_spec["vessel", "action"].shape  # force residual, k = 3
     torch.Size([2, 5, 3])
 """

@@ -75,7 +75,8 @@ class TrainConfig:
             forces and path-variable rate itself (learning from scratch).
         residual: How the learner's action enters (``cpf_env.envs.residual.ResidualConfig``:
             ``mode``, ``scale``, ``kinematic_scale``, ``extras``,
-            ``hide_residual_from_base``, ``neighbour_slots``, ``yield_at_limit``), or a
+            ``hide_residual_from_base``, ``neighbour_slots``, ``yield_at_limit``,
+            ``messages``), or a
             mapping of those fields (a TOML ``[residual]`` table). In a mixture, its
             ``neighbour_slots`` left None become the largest degree of the training
             scenarios, so the agent runs on every one of them.

@@ -79,6 +79,7 @@ from agents.training.schedule import (
     evaluations_csv,
 )
 from cpf_env.infra import atomic
+from cpf_env.scenarios.splits import EVALUATION_SEED
 
 __all__ = [
     "RUN_RECORD",
@@ -158,7 +159,9 @@ def read_init_record(folder: Path) -> dict[str, str] | None:
         return None
 
 
-def prepare_resume(folder: Path, config: TrainConfig) -> Path:
+def prepare_resume(
+    folder: Path, config: TrainConfig, evaluation: dict[str, Any] | None = None
+) -> Path:
     """Check that ``config`` continues the run in ``folder``; return its checkpoint folder.
 
     Also tidies what a killed run left (the caller holds the folder's lock): a
@@ -167,12 +170,28 @@ def prepare_resume(folder: Path, config: TrainConfig) -> Path:
     the budget while the folder holds no complete agent of it (the run was
     killed while saving) is returned too: the resumed run only writes the agent.
 
+    Args:
+        folder: The run folder.
+        config: The configuration the resumed run trains with.
+        evaluation: The resumed run's evaluation settings (``ValidationEvaluator.settings``),
+            or None.
+
     Raises:
         ValueError: No checkpoint, ``config`` differs from the run's in anything
-            but ``timesteps``, or a budget the checkpoint and the agent have
-            reached already.
+            but ``timesteps``, the run's evaluations reset with other seeds (a run
+            recorded before the validation seeds), or a budget the checkpoint and
+            the agent have reached already.
     """
-    saved, _, _ = read_run_record(folder)
+    saved, _, saved_evaluation = read_run_record(folder)
+    if evaluation is not None and saved_evaluation is not None:
+        # a record without a seed was evaluated on the test seeds (before the validation ones)
+        first, now = (e.get("seed", EVALUATION_SEED) for e in (saved_evaluation, evaluation))
+        if first != now:
+            raise ValueError(
+                f"the run in {folder} evaluated itself on seeds from {first}, and this run "
+                f"evaluates from {now}: resuming would mix the two in evaluations.csv and "
+                "best/. Start a new run (another --out)."
+            )
     for child in (CHECKPOINT, BEST):  # a run killed while swapping one in: put it back
         atomic.recover_folder(folder / child, remove_leftovers=True)
     for scratch in folder.glob(".evaluating-*"):  # a run killed while evaluating

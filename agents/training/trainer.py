@@ -137,7 +137,7 @@ def train(
     with atomic.FolderLock(folder, "another training run"):  # recovers a killed swap first
         init: InitSource | dict[str, str] | None = source
         if resume:
-            resume_state = prepare_resume(folder, config)
+            resume_state = prepare_resume(folder, config, getattr(evaluate, "settings", None))
             workdir = folder
             init = read_init_record(folder)
         else:

@@ -23,10 +23,10 @@ from typing import Any
 import numpy as np
 
 from agents.training.config import TrainConfig
-from cpf_commands.bench.run import BASE_SEED
 from cpf_commands.bench.views import markdown_table
 from cpf_commands.sweep.spec import SweepSpec, trial_name
 from cpf_env.infra import atomic
+from cpf_env.scenarios.splits import VALIDATION_SEED
 
 __all__ = [
     "EVALUATION_FILE",
@@ -59,16 +59,22 @@ def trial_state(folder: Path, config: TrainConfig) -> tuple[str, dict[str, Any]]
     """A trial folder's state and its evaluation record.
 
     Returns:
-        ("done", record) if the trial finished with ``config``; ("stale",
-        record) if it finished with another configuration; ("missing", {})
-        if it has not finished.
+        ("done", record) if the trial finished with ``config`` and was evaluated on
+        the validation seeds; ("stale", record) if it finished with another
+        configuration or was evaluated on other seeds (a record without ``seed``:
+        the test seeds, before the validation seeds); ("missing", {}) if it has
+        not finished.
     """
     record = _read_json(folder / EVALUATION_FILE)
     if record is None:
         return "missing", {}
     saved = _read_json(folder / "config.json") or {}
     wanted = json.loads(json.dumps(config.to_json()))  # as config.json holds it: lists
-    return ("done" if saved.get("config") == wanted else "stale"), record
+    evaluated = "cost" in record  # a trial of a sweep without evaluation has no seed
+    current = saved.get("config") == wanted and (
+        not evaluated or record.get("seed") == VALIDATION_SEED
+    )
+    return ("done" if current else "stale"), record
 
 
 def summary_rows(spec: SweepSpec, out: Path, errors: dict[str, str]) -> list[dict[str, Any]]:
@@ -82,8 +88,8 @@ def summary_rows(spec: SweepSpec, out: Path, errors: dict[str, str]) -> list[dic
             row |= record | {"status": "done"}
         elif state == "stale":
             row["status"] = (
-                "stale: trained with another configuration; the next run of the sweep "
-                "trains it again"
+                "stale: trained with another configuration or evaluated on other seeds; the "
+                "next run of the sweep trains it again"
             )
         else:
             row["status"] = f"error: {errors[name]}" if name in errors else "not finished"
@@ -135,8 +141,9 @@ def summary_markdown(spec: SweepSpec, rows: Sequence[dict[str, Any]], command: s
     references = sorted({row["reference"] for row in rows if "reference" in row})
     if spec.eval_num_seeds:
         lines.append(
-            f"Evaluation: {spec.eval_num_seeds} paired episodes per trial (seeds from {BASE_SEED}) "
-            "against the trial's base policy, or nn_dsc for an agent trained from scratch "
+            f"Evaluation: {spec.eval_num_seeds} paired episodes per trial (validation seeds "
+            f"from {VALIDATION_SEED}) against the trial's base policy, or nn_dsc for an agent "
+            "trained from scratch "
             f"(here: {', '.join(references) or 'no trial finished yet'}); a scenario in which "
             "nothing is random runs one episode (`episodes`). cost_ratio < 1: the agent's "
             "cost is lower."

@@ -35,6 +35,7 @@ import cpf_env
 from agents.training.config import TrainConfig
 from cpf_env.envs.residual import ResidualConfig
 from cpf_env.infra import atomic
+from cpf_env.scenarios.splits import EVALUATION_SEED, VALIDATION_SEED
 
 __all__ = ["SweepSpec", "parse_setting", "trial_name"]
 
@@ -147,8 +148,12 @@ class SweepSpec:
         for name, count in (("scenarios", self.scenarios), ("seeds", self.seeds)):
             if len(set(count)) != len(count):
                 raise ValueError(f"{name} repeat: {list(count)}; give each once.")
-        if self.eval_num_seeds < 0:
-            raise ValueError(f"eval seeds must be >= 0, got {self.eval_num_seeds}.")
+        available = EVALUATION_SEED - VALIDATION_SEED
+        if not 0 <= self.eval_num_seeds <= available:
+            raise ValueError(
+                f"eval seeds must be from 0 to the {available} validation seeds, got "
+                f"{self.eval_num_seeds}."
+            )
         if self.cpus_per_trial < 1:
             raise ValueError(f"CPUs per trial must be >= 1, got {self.cpus_per_trial}.")
         fields = _field_types()

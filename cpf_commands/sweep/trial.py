@@ -69,9 +69,10 @@ def evaluate_agent(
 
     Returns:
         ``reference`` (the base policy; ``nn_dsc`` for an agent trained from
-        scratch), ``episodes`` (run per policy: 1 on a scenario in which
-        nothing is random), ``cost`` and ``reference_cost`` (mean episodic
-        costs: minus the sum over steps of the fleet-mean reward),
+        scratch), ``seed`` (the first of the paired seeds), ``episodes`` (run per
+        policy: 1 on a scenario in which nothing is random), ``cost`` and
+        ``reference_cost`` (mean episodic costs: minus the sum over steps of the
+        fleet-mean reward),
         ``cost_ratio`` (agent / reference),
         ``p_beats_reference`` (fraction of paired episodes with a lower cost),
         ``failures`` (agent episodes that left the path), and
@@ -86,6 +87,7 @@ def evaluate_agent(
     base = {row["metric"]: row for row in rows if row["policy"] == reference}
     return {
         "reference": reference,
+        "seed": VALIDATION_SEED,
         "episodes": len(cells[0].seeds),
         "cost": by_metric["cost"]["mean"],
         "reference_cost": base["cost"]["mean"],

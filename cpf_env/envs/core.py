@@ -181,7 +181,8 @@ class EpisodeCore:
         horizon: (B,) int, the step at which each fleet's episode is truncated.
         last_base_actions: (B, n, 4 + m) the base's commands of the last step
             (residual form).
-        last_residual: (B, n, k) the last correction in physical units (residual form).
+        last_residual: (B, n, k) the last correction in physical units, learned messages
+            aside (residual form).
     """
 
     def __init__(
@@ -219,7 +220,8 @@ class EpisodeCore:
         self.horizon = np.full(B, scenario.max_steps, dtype=np.int64)
         self._inputs = np.zeros((B, self.n, self.input_size), dtype=np.float32)
         self.last_base_actions = np.zeros((B, self.n, self.sim.act_dim))
-        self.last_residual = np.zeros((B, self.n, self.action_size))
+        width = self.action_size if self.controller is None else self.controller.residual.shape[-1]
+        self.last_residual = np.zeros((B, self.n, width))
 
     @property
     def inputs(self) -> NDArray[np.float32]:
@@ -237,7 +239,7 @@ class EpisodeCore:
 
     @property
     def action_size(self) -> int:
-        """a, each vessel's action length: 4 + m raw, k residual."""
+        """a, each vessel's action length: 4 + m raw, k + learned messages residual."""
         return self.sim.act_dim if self.controller is None else self.controller.action_size
 
     def action_bounds(self) -> tuple[NDArray[np.float32], NDArray[np.float32]]:

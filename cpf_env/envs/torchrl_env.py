@@ -25,7 +25,8 @@ key                            shape        meaning
                                             extras; scaled by ``InputStatistics`` if normalized
 ("vessel", "action")           [B, n, a]    float32 raw: [tau_u (N), tau_v (N), tau_r (N m),
                                             theta_dot (1/s), message (m)], a = 4 + m;
-                                            residual: a = k in [-1, 1]
+                                            residual: a = k + learned messages,
+                                            in [-1, 1]
 ("vessel", "reward")           [B, n, 1]    float32 reward of each vessel
 ("vessel", "done"/...)         [B, n, 1]    bool done, terminated, truncated of each vessel
 "done"/"terminated"/...        [B, 1]       bool, the fleet's flags (equal to its vessels')

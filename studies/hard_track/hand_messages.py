@@ -68,6 +68,10 @@ class Rate(_Advanced):
 
     name = "mpc_tuned, path rate in entry 1"
 
+    def __init__(self, env: object, **options: Any) -> None:
+        super().__init__(env, **options)
+        self.message_entries = 2  # the speed estimate, then the path rate
+
     def _rate(self, obs: Array, base: int) -> Array:
         return obs[..., base + SLOT_MSG + 1] - obs[..., base + SLOT_MSG]
 

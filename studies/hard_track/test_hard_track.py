@@ -155,6 +155,7 @@ def test_the_hand_designed_messages_study_runs_on_validation_seeds(capsys) -> No
     obs = FleetSim(scenario).reset(seeds=[0])
     actions = rate.act_batch(obs)
     assert np.array_equal(actions[..., 5], actions[..., 3])  # the path rate, sent in entry 1
+    assert rate.message_entries == 2
     import sys
 
     argv, sys.argv = sys.argv, ["hand_messages.py", "--num-seeds", "1", "--max-steps", "30"]

@@ -222,7 +222,7 @@ def test_an_mlp_agent_is_not_exported_for_a_fleet_of_higher_degree(
     with pytest.raises(SystemExit):
         export_main([str(AGENT), str(out), "--scenario", "bench_large_fleet_shift"])
     error = capsys.readouterr().err
-    assert "train with --set neighbour_slots=K to run on graphs of higher degree" in error
+    assert "train with --set residual.neighbour_slots=K to run on graphs of higher degree" in error
     assert not out.exists()
 
 
@@ -235,3 +235,28 @@ def test_slots_for_an_mlp_agent_are_refused(
     with pytest.raises(SystemExit):
         export_main([str(AGENT), str(tmp_path / "a.onnx"), "--slots", "0"])
     assert "--slots must be >= 1" in capsys.readouterr().err
+
+
+def test_an_agent_with_learned_messages_exports_and_sends_them_from_onnx(tmp_path: Path) -> None:
+    """The graph's action holds the messages; its residual output only the correction."""
+    from agents import TrainConfig, train
+
+    config = TrainConfig(
+        scenario="hard_crossing", base_policy="nn_dsc",
+        residual={"mode": "force_and_rate", "messages": 5},  # type: ignore[arg-type]
+        timesteps=64, fleets=1, n_steps=16, batch_size=64, n_epochs=1, torch_threads=1,
+    )  # fmt: skip
+    folder = train(config, tmp_path / "agent", False)
+    out = tmp_path / "agent.onnx"
+    assert export_main([str(folder), str(out), "--checks", "100"]) == 0
+    torch_policy, onnx_policy = load_policy(folder), load_onnx_policy(out)
+    sim = FleetSim(torch_policy.scenario)
+    obs = sim.reset(seeds=[5])
+    for policy in (torch_policy, onnx_policy):
+        policy.reset()
+    for _ in range(10):
+        expected, got = torch_policy.act_batch(obs), onnx_policy.act_batch(obs)
+        np.testing.assert_allclose(got, expected, atol=1e-5)
+        assert torch_policy.diagnostics["residual"].shape == (1, 4, 4)
+        obs = sim.step(expected)
+    assert np.any(expected[..., 5:] != 0.0)  # messages sent

@@ -17,6 +17,7 @@ from stable_baselines3.common.callbacks import BaseCallback
 from agents import TrainConfig, load_policy, train
 from agents.training.evaluation import ValidationEvaluator
 from agents.training.schedule import RunSchedule, TrainingInterrupted
+from cpf_env.scenarios.splits import VALIDATION_SEED
 
 #: 2 fleets x 5 vessels x 16 steps = 160 vessel-steps per PPO rollout.
 TINY = {"fleets": 2, "n_steps": 16, "batch_size": 80, "n_epochs": 1, "net_arch": (16, 16)}
@@ -144,6 +145,22 @@ def test_resume_refuses_what_it_cannot_continue(tmp_path: Path) -> None:
         with pytest.raises(ValueError, match="has trained 640 vessel-steps already"):
             train(shorter, folder, False, schedule=SCHEDULE, resume=True)
     assert {path.name: path.read_bytes() for path in folder.iterdir() if path.is_file()} == before
+
+
+def test_a_run_evaluated_on_the_test_seeds_is_not_resumed_on_the_validation_seeds(
+    tmp_path: Path,
+) -> None:
+    """A run recorded before the validation seeds: resuming would mix seeds in best/."""
+    config = _config("ppo")
+    folder = train(config, tmp_path / "run", False, evaluate=_evaluator(), schedule=SCHEDULE)
+    record = json.loads((folder / "run.json").read_text())
+    assert record["evaluation"]["seed"] == VALIDATION_SEED
+    del record["evaluation"]["seed"]  # as recorded before: the test seeds
+    (folder / "run.json").write_text(json.dumps(record))
+    longer = TrainConfig(**{**config.to_json(), "timesteps": 960})
+    with pytest.raises(ValueError, match="seeds from 10000, and this run evaluates from 9000"):
+        train(longer, folder, False, evaluate=_evaluator(), schedule=SCHEDULE, resume=True)
+    train(longer, folder, False, schedule=SCHEDULE, resume=True)  # no evaluation: nothing mixed
 
 
 def test_resume_extends_a_finished_run(tmp_path: Path) -> None:

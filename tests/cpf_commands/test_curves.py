@@ -91,7 +91,9 @@ def test_the_base_line_of_an_analytic_policy_is_the_benchmark_number(tmp_path: P
     assert _curves(tmp_path / "c")["vessel_steps"][0]["base_cost"] == expected
 
 
-def test_the_lines_to_beat_run_on_the_seeds_the_runs_were_evaluated_on(tmp_path: Path) -> None:
+def test_the_lines_to_beat_run_on_the_seeds_the_runs_were_evaluated_on(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     """A run evaluated on the validation seeds is compared on them; mixed seeds are refused."""
     evaluation = {"split": "validation", "seed": VALIDATION_SEED, "scenarios": ["bench_mild"],
                   "num_seeds": 2, "max_steps": 20}  # fmt: skip
@@ -106,8 +108,10 @@ def test_the_lines_to_beat_run_on_the_seeds_the_runs_were_evaluated_on(tmp_path:
     record = json.loads((Path(folders[0]) / "run.json").read_text())
     del record["evaluation"]["seed"]  # a run recorded before the validation seeds
     (Path(folders[0]) / "run.json").write_text(json.dumps(record))
-    with pytest.raises(SystemExit):
-        curves_main([*folders, "--out", str(tmp_path / "d"), "--base-policy", "dsc"])
+    for lines in ([], ["--base-policy", "dsc"]):  # one IQM over two seed sets: refused
+        with pytest.raises(SystemExit):
+            curves_main([*folders, "--out", str(tmp_path / "d"), *lines])
+        assert "evaluated on different seeds (first seeds [9000, 10000]" in capsys.readouterr().err
 
 
 def test_several_lines_to_beat_each_have_their_cost_and_time(

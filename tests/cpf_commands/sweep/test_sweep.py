@@ -181,7 +181,8 @@ def _finished(out, spec: SweepSpec, params: dict, ratio: float, reference="nn_ds
     folder.mkdir(parents=True)
     config = {"config": json.loads(json.dumps(spec.config(params).to_json()))}
     (folder / "config.json").write_text(json.dumps(config))
-    record = {"reference": reference, "cost_ratio": ratio, "p_beats_reference": 0.6}
+    record = {"reference": reference, "seed": 9000, "cost": 1.0, "cost_ratio": ratio,
+              "p_beats_reference": 0.6}  # fmt: skip
     write_evaluation(folder, record)
     return folder.name
 
@@ -215,6 +216,10 @@ def test_a_trial_counts_only_if_it_finished_with_this_configuration(tmp_path) ->
     status = {row["trial"]: row["status"] for row in summary_rows(spec, tmp_path, {})}
     assert status[done] == "done"
     assert status[stale].startswith("stale: trained with another configuration")
+    # evaluated on the test seeds (recorded before the validation seeds): evaluated again
+    record = json.loads((tmp_path / "trials" / done / EVALUATION_FILE).read_text())
+    write_evaluation(tmp_path / "trials" / done, {k: v for k, v in record.items() if k != "seed"})
+    assert trial_state(tmp_path / "trials" / done, spec.config(params[0]))[0] == "stale"
     assert status[cut] == "not finished"
     assert trial_state(tmp_path / "trials" / cut, spec.config(params[2])) == ("missing", {})
 
@@ -494,3 +499,9 @@ def test_a_precompiled_cache_is_loaded_not_compiled(tmp_path) -> None:
     compiled, loaded = _counts(first)
     assert compiled >= len(ENTRY_KERNELS) and loaded == 0
     assert _counts(second) == (0, len(ENTRY_KERNELS))
+
+
+@pytest.mark.parametrize("seeds", [-1, 1001])
+def test_trial_evaluations_stay_on_the_validation_seeds(seeds: int) -> None:
+    with pytest.raises(ValueError, match="eval seeds must be from 0 to the 1000 validation seeds"):
+        SweepSpec(("bench_mild",), (0,), eval_num_seeds=seeds)

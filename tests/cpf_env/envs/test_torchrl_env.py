@@ -5,6 +5,7 @@ from __future__ import annotations
 import doctest
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -240,8 +241,8 @@ def test_module_example_runs() -> None:
     assert results.failed == 0
 
 
-def run_example(name: str, *args: str) -> str:
-    command = [sys.executable, str(EXAMPLES / name), *args]
+def run_example(name: str, *args: str, folder: Path = EXAMPLES) -> str:
+    command = [sys.executable, str(folder / name), *args]
     return subprocess.run(command, capture_output=True, text=True, check=True).stdout
 
 
@@ -256,8 +257,9 @@ def test_pettingzoo_example_runs() -> None:
 
 def test_throughput_example_prints_its_table() -> None:
     out = run_example(
-        "torchrl_throughput.py", "--seconds", "0.3", "--fleets", "2", "256", "--rollout-steps", "0"
-    )
+        "torchrl_throughput.py", "--seconds", "0.3", "--fleets", "2", "256", "--rollout-steps", "0",
+        folder=EXAMPLES.parent / "benchmarks",
+    )  # fmt: skip
     assert "PettingZooWrapper, info_level=none" in out
     assert "native B = 256 / PettingZooWrapper, info_level=none:" in out
     rows = [line for line in out.splitlines() if line.startswith("TorchRLFleetEnv")]

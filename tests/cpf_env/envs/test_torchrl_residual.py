@@ -95,6 +95,19 @@ def test_check_env_specs_with_state_extras_and_normalized_inputs() -> None:
     assert env.observation_spec["state"].shape == (3, 50)
 
 
+def test_check_env_specs_with_learned_messages_and_full_infos() -> None:
+    """The action holds k + L entries; the residual info the k of the correction."""
+    config = ResidualConfig(mode="force_and_rate", messages=2)
+    env = residual_env(
+        "bench_lossy_links", 2, residual=config, info_level="full",
+        overrides={"max_steps": 30, "message_size": 3}, seed=0,
+    )  # fmt: skip
+    check_env_specs(env)
+    assert env.full_action_spec[GROUP, "action"].shape == (2, 5, 4 + 2)
+    rollout = env.rollout(5)
+    assert rollout["next", GROUP, "info", "residual"].shape == (2, 5, 5, 4)  # B, T, n, k
+
+
 def test_state_is_the_parallel_envs_state_of_each_fleet() -> None:
     env = TorchRLFleetEnv("heterogeneous", num_fleets=2, state=True, seed=5, max_steps=30)
     td = env.reset()
@@ -238,7 +251,7 @@ def test_bad_residual_input_is_refused_and_leaves_the_state_alone() -> None:
     with pytest.raises(ValueError, match="real numbers"):
         env.step(td.clone().set((GROUP, "action"), torch.zeros(2, 5, 3, dtype=torch.complex64)))
     assert np.array_equal(env.sim.arrays.eta, before)
-    with pytest.raises(TypeError, match=r"agents\.marl\.make_env"):
+    with pytest.raises(TypeError, match=r"agents\.marl\.envs\.make_env"):
         TorchRLFleetEnv("bench_mild", num_fleets=2, base_policy="nn_dsc")  # type: ignore[arg-type]
     with pytest.raises(ValueError, match="has none: give base_policy="):
         TorchRLFleetEnv("bench_mild", num_fleets=2, normalize=True)
