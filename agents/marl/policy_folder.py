@@ -217,11 +217,6 @@ def marl_config(record: Any, source: Path) -> tuple[TrainConfig, list[int], dict
             f"{source}: field 'task.shared_slot_statistics' must be true or false, got "
             f"{type(shared).__name__}."
         )
-    messages = task.get("messages", 0)  # absent before learned messages
-    if isinstance(messages, bool) or not isinstance(messages, int):
-        raise AgentFolderError(
-            f"{source}: field 'task.messages' must be an integer, got {type(messages).__name__}."
-        )
     try:
         config = TrainConfig(
             algo="ppo",
@@ -231,7 +226,7 @@ def marl_config(record: Any, source: Path) -> tuple[TrainConfig, list[int], dict
                 mode=task["mode"],
                 scale=task["scale"],
                 extras=tuple(task["extras"]),
-                messages=messages,
+                messages=task.get("messages", 0),  # absent before learned messages
             ),
             normalize_observations=task["normalize"],
             shared_slot_statistics=shared,

@@ -3,11 +3,12 @@
 Each member of ``CpfTask`` is a training scenario: the paper's scenarios
 (``cpf_env.scenarios.paper``), the benchmark suite (``suite.SUITE``) and the
 hard track (``list_suite("hard")``: residual over each scenario's best
-deployable design, whole episodes); the ``_shift`` variants and evaluation
-seeds are held out (``cpf_env.scenarios.splits``: the env refuses them). The env is the native
-batched ``TorchRLFleetEnv`` (BenchMARL's ``num_envs`` is the number of fleets,
-no ``SerialEnv``), in the residual form over a named base policy, with the
-global state for centralized critics and frozen input statistics.
+deployable design, whole episodes); the ``_shift`` variants, validation and
+evaluation seeds are held out (``cpf_env.scenarios.splits``: the env refuses
+them). The env is the native batched ``TorchRLFleetEnv`` (BenchMARL's
+``num_envs`` is the number of fleets, no ``SerialEnv``), in the residual form
+over a named base policy, with the global state for centralized critics and
+frozen input statistics.
 
 The default configuration of each task is ``conf/task/cpf/<task>.yaml`` beside
 this module (``CpfTaskConfig`` lists and checks its fields); episodes are 200

@@ -251,13 +251,13 @@ class ResidualConfig:
         return self.learner_layout(layout).size + sum(EXTRAS[name] for name in self.extras)
 
 
-def check_messages(scenario: Scenario, base_policy: FleetPolicy | None, learned: int) -> None:
+def check_messages(scenario: Scenario, base_policy: FleetPolicy, learned: int) -> None:
     """Refuse learned messages that do not fit after the base's ``message_entries``.
 
     Args:
         scenario: The task (its ``message_size`` m).
-        base_policy: The base (None: writes none); one without ``message_entries``
-            is taken to write all m.
+        base_policy: The base (``ZeroPolicy`` for a learner without one); one without
+            ``message_entries`` is taken to write all m.
         learned: ``ResidualConfig.messages``.
 
     Raises:
@@ -266,7 +266,7 @@ def check_messages(scenario: Scenario, base_policy: FleetPolicy | None, learned:
     size = scenario.message_size
     if learned == 0:
         return
-    written = 0 if base_policy is None else int(getattr(base_policy, "message_entries", size))
+    written = int(getattr(base_policy, "message_entries", size))
     if written + learned <= size:
         return
     name = getattr(base_policy, "name", type(base_policy).__name__)
@@ -293,16 +293,15 @@ def learner_config(
         forces and path-variable rate as fractions of their limits, keeping the given
         ``neighbour_slots`` and ``messages`` (the messages it does not learn are zero).
     """
+    asked = ResidualConfig() if residual is None else residual
     if base_policy is None:
-        if residual is None:
-            return ResidualConfig(mode="force_and_rate", scale=1.0)
         return ResidualConfig(
             mode="force_and_rate",
             scale=1.0,
-            neighbour_slots=residual.neighbour_slots,
-            messages=residual.messages,
+            neighbour_slots=asked.neighbour_slots,
+            messages=asked.messages,
         )
-    return ResidualConfig() if residual is None else residual
+    return asked
 
 
 class ZeroPolicy(FleetPolicy):
