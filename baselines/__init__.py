@@ -26,7 +26,9 @@ For vessels that observe noisy, late pose fixes and maybe no velocity
 (``Scenario.sensors``; ``FILTERED``, deployable, in the hard track's default set):
 ``nn_dsc_ekf``, ``mpc_tuned_ekf`` and ``ilos_ekf``, ``nn_dsc``, ``mpc_tuned`` and
 ``ilos`` on the estimate of an extended Kalman filter on the nominal vessel model
-with a disturbance bias (``baselines.estimator``).
+with a disturbance bias (``baselines.estimator``); ``mpc_tuned_mmae``, ``mpc_tuned``
+on a bank of four such filters, from calm-water to wave process noise, weighted
+by the likelihood of their innovations (multiple-model adaptive estimation).
 
 Privileged references, not deployable (``PRIVILEGED``): ``nn_dsc_global_v0``,
 ``nn_dsc`` told v0's schedule on every vessel (no estimator; an ablation
@@ -57,7 +59,13 @@ from typing import Any
 
 from baselines.backstepping import BacksteppingPolicy
 from baselines.delay_compensated import BacksteppingDelayCompensated, NNDSCDelayCompensated
-from baselines.estimator import Filtered, ILOSFiltered, MPCTunedFiltered, NNDSCFiltered
+from baselines.estimator import (
+    Filtered,
+    ILOSFiltered,
+    MPCTunedAdaptive,
+    MPCTunedFiltered,
+    NNDSCFiltered,
+)
 from baselines.gains import BacksteppingGains, CooperativeGains, NNDSCGains
 from baselines.ilos import ILOSGains, ILOSPolicy
 from baselines.mpc import MPCPolicy, MPCPrivileged, OraclePolicy, RecedingHorizonGains
@@ -97,6 +105,7 @@ __all__ = [
     "MPCToldLinks",
     "MPCToldV0",
     "MPCTuned",
+    "MPCTunedAdaptive",
     "MPCTunedFiltered",
     "MPCTunedFilteredSafe",
     "MPCTunedSafe",
@@ -135,7 +144,8 @@ POLICIES: dict[str, type[FleetPolicy]] = {
 UNDERACTUATED: dict[str, type[FleetPolicy]] = {ILOSPolicy.name: ILOSPolicy}
 
 FILTERED: dict[str, type[FleetPolicy]] = {
-    policy.name: policy for policy in (NNDSCFiltered, MPCTunedFiltered, ILOSFiltered)
+    policy.name: policy
+    for policy in (NNDSCFiltered, MPCTunedFiltered, MPCTunedAdaptive, ILOSFiltered)
 }
 #: Deployable designs under the separation's safety filter (``baselines.safety``), for the
 #: scenarios whose messages carry its broadcast (the crossing scenarios).

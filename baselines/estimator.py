@@ -24,11 +24,23 @@ filter's disturbance observer):
   noise is the scenario's ``position_std`` and ``heading_std``;
 * with a velocity sensor, correct with the observed velocity as well.
 
-``Filtered`` runs the filter and hands its inner policy the observation
-rebuilt from the estimate (``nu``, ``z1``, ``t1``, ``t2``), everything else
-as observed. It is deployable: it uses only the vessel's observation and the
-scenario's known constants. ``nn_dsc_ekf``, ``mpc_tuned_ekf`` and ``ilos_ekf``
-are the filter under ``nn_dsc``, ``mpc_tuned`` and ``ilos``.
+No single process noise suits every sea: on the hard track's training seeds
+the filter under ``mpc_tuned`` costs least with 0.003-0.01 times
+``FILTER_NOISE``'s velocity and bias densities in calm water and with 3
+times them in waves (``studies/hard_track/filter_tuning.py``). The adaptive
+answer is a bank of filters (multiple-model adaptive estimation, Magill
+1965): M filters differing only in that factor (``ADAPTIVE_SCALES``) run side
+by side, each fix adds the log-likelihood of each filter's innovation,
+log N(0, S), to its score, discounted by ``FORGETTING`` per fix, and the
+estimate is the filters' states weighted by the softmax of their scores.
+
+``Filtered`` runs the filter (a bank of one, ``noise_scales = (1,)``, or
+several) and hands its inner policy the observation rebuilt from the
+estimate (``nu``, ``z1``, ``t1``, ``t2``), everything else as observed. It is
+deployable: it uses only the vessel's observation and the scenario's known
+constants. ``nn_dsc_ekf``, ``mpc_tuned_ekf`` and ``ilos_ekf`` are one filter
+under ``nn_dsc``, ``mpc_tuned`` and ``ilos``; ``mpc_tuned_mmae`` is the bank
+under ``mpc_tuned``.
 """
 
 from __future__ import annotations
@@ -49,11 +61,25 @@ from cpf_env.model.paths import encode_paths, path_values
 from cpf_env.model.plant import plant_rhs_given
 from cpf_env.sim.observation import NU, T1, T2, TAU, THETA, Z1, path_frame, wrap_angle
 
-__all__ = ["FILTER_NOISE", "Filtered", "ILOSFiltered", "MPCTunedFiltered", "NNDSCFiltered"]
+__all__ = [
+    "ADAPTIVE_SCALES",
+    "FILTER_NOISE",
+    "Filtered",
+    "ILOSFiltered",
+    "MPCTunedAdaptive",
+    "MPCTunedFiltered",
+    "NNDSCFiltered",
+]
 
 #: Process noise spectral densities of the nine states (per second): pose (m^2/s, rad^2/s),
 #: velocity (m^2/s^3, rad^2/s^3), the acceleration bias (m^2/s^5, rad^2/s^5).
 FILTER_NOISE = (1e-8, 1e-8, 1e-8, 4e-4, 4e-4, 4e-3, 2.5e-5, 2.5e-5, 2.5e-4)
+#: The adaptive bank's factors on the velocity and bias densities of ``FILTER_NOISE``, from
+#: calm water to waves, 30 times apart (``studies/hard_track/filter_tuning.py``).
+ADAPTIVE_SCALES = (0.001, 0.03, 1.0, 30.0)
+#: Discount of each filter's log-likelihood per fix (its memory: 1 / (1 - 0.98) = 50 fixes, 10 s
+#: at 5 Hz).
+FORGETTING = 0.98
 #: Initial variances of velocity (m^2/s^2, rad^2/s^2) and bias when the first fix arrives.
 INITIAL_VARIANCE = (0.01, 0.01, 0.01, 1e-4, 1e-4, 1e-3)
 #: A fix that moved less than this (m, rad) since the last is the held one (float32 observations).
@@ -102,11 +128,11 @@ def _predict(p: np.ndarray, x: np.ndarray, cov: np.ndarray, tau: np.ndarray, dt:
 
 @numba.njit(cache=True)
 def _correct(x: np.ndarray, cov: np.ndarray, first: int, values: np.ndarray,
-             variances: np.ndarray, angle: int) -> None:  # fmt: skip
+             variances: np.ndarray, angle: int) -> float:  # fmt: skip
     """The EKF's measurement update in place for states first .. first + len(values) - 1.
 
     ``angle`` is the index (within ``values``) of a heading, whose innovation is
-    wrapped, or -1.
+    wrapped, or -1. Returns the log-likelihood of the innovation, log N(0, S).
     """
     m = values.shape[0]
     innovation = np.empty(m)
@@ -117,19 +143,50 @@ def _correct(x: np.ndarray, cov: np.ndarray, first: int, values: np.ndarray,
     s = cov[first : first + m, first : first + m].copy()
     for j in range(m):
         s[j, j] += max(variances[j], MEASUREMENT_FLOOR)
-    gain = np.ascontiguousarray(cov[:, first : first + m]) @ np.ascontiguousarray(np.linalg.inv(s))
+    inverse = np.ascontiguousarray(np.linalg.inv(s))
+    gain = np.ascontiguousarray(cov[:, first : first + m]) @ inverse
     x += gain @ innovation
     keep = np.eye(STATES)
     keep[:, first : first + m] -= gain
     cov[:, :] = keep @ cov
     cov[:, :] = 0.5 * (cov + cov.T)
+    return -0.5 * (innovation @ inverse @ innovation + math.log(np.linalg.det(s))
+                   + m * math.log(2.0 * math.pi))  # fmt: skip
+
+
+@numba.njit(cache=True)
+def _blend(bank: np.ndarray, loglik: np.ndarray, out: np.ndarray) -> None:
+    """The bank's estimate: its filters' states weighted by their likelihoods, into ``out`` (9,).
+
+    ``bank`` is (M, 9), ``loglik`` (M,) the filters' discounted log-likelihoods; the
+    weights are their softmax, the headings averaged as offsets from the likeliest one's.
+    A bank of one is its filter's state, as it is.
+    """
+    if bank.shape[0] == 1:
+        out[:] = bank[0]
+        return
+    best = 0
+    for m in range(bank.shape[0]):
+        if loglik[m] > loglik[best]:
+            best = m
+    weights = np.exp(loglik - loglik[best])
+    weights /= weights.sum()
+    out[:] = 0.0
+    for m in range(bank.shape[0]):
+        for j in range(STATES):
+            if j == 2:
+                out[j] += weights[m] * wrap_angle(bank[m, j] - bank[best, j])
+            else:
+                out[j] += weights[m] * bank[m, j]
+    out[2] = wrap_angle(out[2] + bank[best, 2])
 
 
 @numba.njit(cache=True)
 def filter_rows(obs: np.ndarray, index: np.ndarray, kinds: np.ndarray, paths: np.ndarray,
                 nominal: np.ndarray, dt: float, sensor_variances: np.ndarray,
-                velocity_measured: bool, q: np.ndarray, initial: np.ndarray,
-                state: np.ndarray, cov: np.ndarray, last_fix: np.ndarray, ready: np.ndarray,
+                velocity_measured: bool, q: np.ndarray, scales: np.ndarray, forgetting: float,
+                initial: np.ndarray, bank: np.ndarray, cov: np.ndarray, loglik: np.ndarray,
+                last_fix: np.ndarray, ready: np.ndarray, state: np.ndarray,
                 out: np.ndarray) -> None:  # fmt: skip
     """Filter one step of every listed fleet and write the estimated observations.
 
@@ -143,15 +200,21 @@ def filter_rows(obs: np.ndarray, index: np.ndarray, kinds: np.ndarray, paths: np
         sensor_variances: (3,) x, y (m^2), psi (rad^2) variances of a fix.
         velocity_measured: Whether ``obs``'s nu is a measurement.
         q: (9,) process noise densities (``FILTER_NOISE``).
+        scales: (M,) the bank's factors on the velocity and bias densities (one filter: (1,)).
+        forgetting: Discount of the log-likelihoods per fix, in (0, 1] (``FORGETTING``).
         initial: (6,) initial velocity and bias variances (``INITIAL_VARIANCE``).
-        state: (F, n, 9) estimates (written).
-        cov: (F, n, 9, 9) their covariances (written).
-        last_fix: (F, n, 3) the last fix each filter corrected with (written).
-        ready: (F, n) bool, whether each filter has started (written).
+        bank: (F, n, M, 9) each filter's estimate (written).
+        cov: (F, n, M, 9, 9) their covariances (written).
+        loglik: (F, n, M) their discounted log-likelihoods (written).
+        last_fix: (F, n, 3) the last fix the filters corrected with (written).
+        ready: (F, n) bool, whether each vessel's filters have started (written).
+        state: (F, n, 9) the bank's estimate (``_blend``; written).
         out: (rows, n, obs_dim) float32, the estimated observations (written).
     """
     n = obs.shape[1]
+    models = scales.shape[0]
     pose_variances = np.empty(3)
+    scaled = np.empty(STATES)
     for row in range(obs.shape[0]):
         f = index[row]
         for i in range(n):
@@ -162,36 +225,46 @@ def filter_rows(obs: np.ndarray, index: np.ndarray, kinds: np.ndarray, paths: np
             c, s = math.cos(heading), math.sin(heading)
             fix = np.array((target[0] + c * o[Z1] - s * o[Z1 + 1],
                             target[1] + s * o[Z1] + c * o[Z1 + 1], heading))  # fmt: skip
-            x, p = state[f, i], cov[f, i]
             if not ready[f, i]:
-                x[:] = 0.0
-                x[0], x[1], x[2] = fix[0], fix[1], fix[2]
-                if velocity_measured:
+                for m in range(models):
+                    x, p = bank[f, i, m], cov[f, i, m]
+                    x[:] = 0.0
+                    x[0], x[1], x[2] = fix[0], fix[1], fix[2]
+                    if velocity_measured:
+                        for k in range(3):
+                            x[3 + k] = o[NU + k]
+                    p[:, :] = 0.0
                     for k in range(3):
-                        x[3 + k] = o[NU + k]
-                p[:, :] = 0.0
-                for k in range(3):
-                    p[k, k] = max(sensor_variances[k], MEASUREMENT_FLOOR)
-                for k in range(6):
-                    p[3 + k, 3 + k] = initial[k]
+                        p[k, k] = max(sensor_variances[k], MEASUREMENT_FLOOR)
+                    for k in range(6):
+                        p[3 + k, 3 + k] = initial[k]
+                    loglik[f, i, m] = 0.0
                 last_fix[f, i] = fix
                 ready[f, i] = True
             else:
                 tau = np.array((float(o[TAU]), float(o[TAU + 1]), float(o[TAU + 2])))
-                _predict(nominal[i], x, p, tau, dt, q)
                 moved = (
                     abs(fix[0] - last_fix[f, i, 0]) > HELD_TOLERANCE[0]
                     or abs(fix[1] - last_fix[f, i, 1]) > HELD_TOLERANCE[0]
                     or abs(wrap_angle(fix[2] - last_fix[f, i, 2])) > HELD_TOLERANCE[1]
                 )
+                for m in range(models):
+                    x, p = bank[f, i, m], cov[f, i, m]
+                    for j in range(STATES):
+                        scaled[j] = q[j] * (scales[m] if j >= 3 else 1.0)
+                    _predict(nominal[i], x, p, tau, dt, scaled)
+                    if moved:
+                        for k in range(3):
+                            pose_variances[k] = sensor_variances[k]
+                        likelihood = _correct(x, p, 0, fix, pose_variances, 2)
+                        loglik[f, i, m] = forgetting * loglik[f, i, m] + likelihood
+                    if velocity_measured:
+                        measured = np.array((float(o[NU]), float(o[NU + 1]), float(o[NU + 2])))
+                        _correct(x, p, 3, measured, np.zeros(3), -1)
                 if moved:
-                    for k in range(3):
-                        pose_variances[k] = sensor_variances[k]
-                    _correct(x, p, 0, fix, pose_variances, 2)
                     last_fix[f, i] = fix
-                if velocity_measured:
-                    measured = np.array((float(o[NU]), float(o[NU + 1]), float(o[NU + 2])))
-                    _correct(x, p, 3, measured, np.zeros(3), -1)
+            x = state[f, i]
+            _blend(bank[f, i], loglik[f, i], x)
             seen = out[row, i]
             seen[:] = o
             z1, t1, t2 = path_frame(x[0], x[1], x[2], point)
@@ -214,6 +287,9 @@ class Filtered(FleetPolicy):
 
     name: ClassVar[str]
     inner: ClassVar[type[FleetPolicy]]
+    #: Factors on the velocity and bias process noise, one filter each: (1,) is one EKF on
+    #: ``FILTER_NOISE``; several make a bank weighted by likelihood (``ADAPTIVE_SCALES``).
+    noise_scales: ClassVar[tuple[float, ...]] = (1.0,)
 
     def __init__(self, env: object, **options: Any) -> None:
         scenario = resolve_scenario(env)
@@ -231,6 +307,7 @@ class Filtered(FleetPolicy):
         self._velocity = bool(sensors.velocity)
         self._dt = float(scenario.dt)
         self._q = np.array(FILTER_NOISE)
+        self._scales = np.array(self.noise_scales, dtype=np.float64)
         self._initial = np.array(INITIAL_VARIANCE)
         self._fleets = 0
         self.diagnostics: dict[str, Array] = {}
@@ -239,8 +316,11 @@ class Filtered(FleetPolicy):
     def _allocate(self, fleets: int) -> None:
         """Filter states for ``fleets`` fleets, none started."""
         self._fleets = fleets
+        models = self._scales.shape[0]
+        self._bank = np.zeros((fleets, self.n, models, STATES))
+        self._cov = np.zeros((fleets, self.n, models, STATES, STATES))
+        self._loglik = np.zeros((fleets, self.n, models))
         self._state = np.zeros((fleets, self.n, STATES))
-        self._cov = np.zeros((fleets, self.n, STATES, STATES))
         self._last_fix = np.zeros((fleets, self.n, 3))
         self._ready = np.zeros((fleets, self.n), dtype=bool)
 
@@ -276,14 +356,26 @@ class Filtered(FleetPolicy):
                 )
         out = np.empty_like(batch)
         filter_rows(batch, index, self._kinds, self._paths, self._nominal, self._dt,
-                    self._variances, self._velocity, self._q, self._initial, self._state,
-                    self._cov, self._last_fix, self._ready, out)  # fmt: skip
+                    self._variances, self._velocity, self._q, self._scales, FORGETTING,
+                    self._initial, self._bank, self._cov, self._loglik, self._last_fix,
+                    self._ready, self._state, out)  # fmt: skip
         return out
 
     def act_batch(self, obs: ArrayLike, fleets: ArrayLike | None = None) -> Array:
-        """The inner policy's actions on the estimated observations."""
+        """The inner policy's actions on the estimated observations.
+
+        ``diagnostics`` gains ``estimate`` (F, n, 9), the state estimate of every
+        fleet's vessels, and ``filter_weights`` (F, n, M), the weight of each filter
+        of the bank (1 for a single filter).
+        """
         actions = self.policy.act_batch(self.estimate(obs, fleets), fleets)
-        self.diagnostics = {**self.policy.diagnostics, "estimate": self._state.copy()}
+        scores = self._loglik - self._loglik.max(axis=-1, keepdims=True)
+        weights = np.exp(scores) / np.exp(scores).sum(axis=-1, keepdims=True)
+        self.diagnostics = {
+            **self.policy.diagnostics,
+            "estimate": self._state.copy(),
+            "filter_weights": weights,
+        }
         return actions
 
 
@@ -299,6 +391,14 @@ class MPCTunedFiltered(Filtered):
 
     name = "mpc_tuned_ekf"
     inner = MPCTuned
+
+
+class MPCTunedAdaptive(Filtered):
+    """``mpc_tuned`` on a bank of filters weighted by their likelihood (module docstring)."""
+
+    name = "mpc_tuned_mmae"
+    inner = MPCTuned
+    noise_scales = ADAPTIVE_SCALES
 
 
 class ILOSFiltered(Filtered):

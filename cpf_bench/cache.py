@@ -1,7 +1,7 @@
 """Content-keyed cache of the bench's slow cells: the receding-horizon planners.
 
 The headroom bound (``oracle``), ``mpc`` and ``mpc_tuned`` (and, on the hard
-track, ``mpc_tuned`` under the navigation filter and the safety filter) plan
+track, ``mpc_tuned`` under the navigation filters and the safety filter) plan
 by rolling candidate plans out over their horizon at every revision, about a
 hundred times the work of the other analytic policies. Their episodes are a
 pure function of what they are run on (and each episode of its seed alone:
@@ -55,6 +55,7 @@ CACHED_POLICIES = (
     "mpc",
     "mpc_tuned",
     "mpc_tuned_ekf",
+    "mpc_tuned_mmae",
     "mpc_tuned_safe",
     "mpc_tuned_ekf_safe",
 )
