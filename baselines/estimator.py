@@ -263,16 +263,31 @@ def filter_rows(obs: np.ndarray, index: np.ndarray, kinds: np.ndarray, paths: np
                         _correct(x, p, 3, measured, np.zeros(3), -1)
                 if moved:
                     last_fix[f, i] = fix
-            x = state[f, i]
-            _blend(bank[f, i], loglik[f, i], x)
-            seen = out[row, i]
-            seen[:] = o
-            z1, t1, t2 = path_frame(x[0], x[1], x[2], point)
-            for k in range(3):
-                seen[NU + k] = x[3 + k]
-                seen[Z1 + k] = z1[k]
-                seen[T1 + k] = t1[k]
-                seen[T2 + k] = t2[k]
+            _blend(bank[f, i], loglik[f, i], state[f, i])
+            _observe(o, point, state[f, i], out[row, i])
+
+
+@numba.njit(cache=True)
+def _observe(o: np.ndarray, point: tuple, x: np.ndarray, seen: np.ndarray) -> None:
+    """Write into ``seen`` the observation ``o`` with nu, z1, t1, t2 rebuilt from estimate ``x``."""
+    seen[:] = o
+    z1, t1, t2 = path_frame(x[0], x[1], x[2], point)
+    for k in range(3):
+        seen[NU + k] = x[3 + k]
+        seen[Z1 + k] = z1[k]
+        seen[T1 + k] = t1[k]
+        seen[T2 + k] = t2[k]
+
+
+@numba.njit(cache=True)
+def observe_rows(obs: np.ndarray, kinds: np.ndarray, paths: np.ndarray, states: np.ndarray,
+                 out: np.ndarray) -> None:  # fmt: skip
+    """``obs`` (rows, n, obs_dim) rebuilt from ``states`` (rows, n, 9), written into ``out``."""
+    for row in range(obs.shape[0]):
+        for i in range(obs.shape[1]):
+            o = obs[row, i]
+            point = path_values(kinds[i], paths[i], float(o[THETA]))
+            _observe(o, point, states[row, i], out[row, i])
 
 
 class Filtered(FleetPolicy):
@@ -359,6 +374,28 @@ class Filtered(FleetPolicy):
                     self._variances, self._velocity, self._q, self._scales, FORGETTING,
                     self._initial, self._bank, self._cov, self._loglik, self._last_fix,
                     self._ready, self._state, out)  # fmt: skip
+        return out
+
+    @property
+    def state(self) -> NDArray[np.float64]:
+        """(F, n, 9) every fleet's vessels' estimates after the last step (module docstring)."""
+        return self._state
+
+    @property
+    def last_fix(self) -> NDArray[np.float64]:
+        """(F, n, 3) the last fix x, y (m), psi (rad) each vessel's filters corrected with."""
+        return self._last_fix
+
+    def observe(self, obs: ArrayLike, states: ArrayLike) -> NDArray[np.float32]:
+        """The observations (rows, n, dim) with nu, z1, t1 and t2 rebuilt from ``states``.
+
+        ``states`` is (rows, n, 9), in the filter's layout (``state``): what a
+        design acting on a corrected estimate hands its inner policy.
+        """
+        batch = np.ascontiguousarray(obs, dtype=np.float32)
+        out = np.empty_like(batch)
+        observe_rows(batch, self._kinds, self._paths,
+                     np.ascontiguousarray(states, dtype=np.float64), out)  # fmt: skip
         return out
 
     def act_batch(self, obs: ArrayLike, fleets: ArrayLike | None = None) -> Array:

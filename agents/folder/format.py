@@ -115,8 +115,9 @@ __all__ = [
 FORMAT = "cpf-agent"
 #: The version written (its manifest names the trainer).
 FORMAT_VERSION = 3
-#: The trainers whose folders the format holds: their ``config.json`` records differ.
-TRAINERS = ("sb3", "benchmarl")
+#: The trainers whose folders the format holds: their ``config.json`` records differ
+#: (``filter``: a learned correction of a navigation filter, ``agents.estimation``).
+TRAINERS = ("sb3", "benchmarl", "filter")
 #: Earlier (name, version) pairs read, and the trainer each implies (no ``trainer`` field).
 LEGACY_FORMATS = {
     ("cpf-agent", 1): "sb3",

@@ -33,6 +33,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from agents.envs.history import OwnHistory
 from agents.envs.resolve import resolve_base_policy
+from agents.estimation.policy import LearnedFilter
 from agents.folder.actor import PolicyNetwork
 from agents.folder.encoder import statistics_for_slots
 from agents.folder.files import AgentFolderError, field
@@ -65,8 +66,13 @@ __all__ = [
 Array = NDArray[np.float64]
 
 
-def load_policy(path: str | Path, scenario: str | Scenario | None = None) -> TrainedPolicy:
+def load_policy(
+    path: str | Path, scenario: str | Scenario | None = None
+) -> TrainedPolicy | LearnedFilter:
     """Load a trained agent from the folder ``cpf-train --out`` (or ``save_marl_policy``) wrote.
+
+    A learned navigation filter's folder (``cpf-fit-filter --out``) loads as its
+    ``agents.estimation.LearnedFilter``.
 
     Reads the data-only formats (``agents.folder.format``, and a BenchMARL actor's
     ``agents.marl.policy_folder``: safetensors and JSON, every file checked
@@ -89,6 +95,10 @@ def load_policy(path: str | Path, scenario: str | Scenario | None = None) -> Tra
     """
     folder = Path(path)
     trainer, _ = read_agent_manifest(folder)
+    if trainer == "filter":  # a learned navigation filter (agents.estimation)
+        from agents.estimation.folder import load_filter
+
+        return load_filter(folder, scenario)
     overrides: dict[str, Any] = {}  # a MARL task's Scenario field overrides
     if trainer == "benchmarl":  # a BenchMARL actor (agents.marl.policy_folder)
         config, network, normalization, overrides = read_marl_agent(folder)

@@ -57,7 +57,8 @@ AGENTS = {
     "results/agents/student_deepsets_s0": "student with a neighbour encoder, any degree",
     "results/agents/mappo_s0": "residual MAPPO, lossy links",
 }
-#: The hard track's reference agents: one per learning method on ``hard_sensing``, and
+#: The hard track's reference agents: one per learning method on ``hard_sensing`` (the learned
+#: filter: ``agents.estimation``), and
 #: residual MAPPO on the two crossing scenarios (learned messages on ``hard_crossing``), each
 #: with one budget of vessel-steps; results/README.md has the command that trained each.
 HARD_AGENTS = {
@@ -65,6 +66,9 @@ HARD_AGENTS = {
     "results/agents/hard_sensing_ppo_residual_s0": "residual PPO on mpc_tuned_ekf, hard_sensing",
     "results/agents/hard_sensing_student_s0": "student of the oracle, hard_sensing",
     "results/agents/hard_sensing_mappo_s0": "residual MAPPO on mpc_tuned_ekf, hard_sensing",
+    "results/agents/hard_sensing_learned_filter_s0": (
+        "learned filter on mpc_tuned_mmae, hard_sensing"
+    ),
     "results/agents/hard_crossing_mappo_messages_s0": (
         "residual MAPPO with learned messages on mpc_tuned, hard_crossing"
     ),
@@ -120,7 +124,7 @@ def _suite_table(cells: Sequence[CellResult]) -> list[str]:
         row = [_label(policy)]
         for name in names:
             if (policy, name) not in costs:
-                row.append("not run (layout)")
+                row.append("not run")
                 continue
             v = judged.get((policy, name))
             row.append(f"{costs[(policy, name)]:.3g}" + (f" {v.label}" if v else ""))
@@ -173,7 +177,7 @@ def _against_best(cells: Sequence[CellResult], agents: Sequence[str]) -> list[st
         for name in names:
             cell = by_key.get((agent, name))
             if cell is None:
-                row.append("not run (layout)")
+                row.append("not run")
                 continue
             base = by_key[(str(best[name]), name)]
             judged = verdict(cell, base).label
@@ -242,7 +246,9 @@ def _hard_section(test: Sequence[CellResult], shift: Sequence[CellResult], note:
         "",
         "Each agent against the best deployable design of each scenario, `test` split: mean "
         "cost and verdict (`beats` needs the whole cost interval below zero and no guarded "
-        "physical regression):",
+        "physical regression; `not run`: the agent cannot act there, its network's inputs "
+        "do not fit the fleet or, for a learned filter, the vessels observe their true state; "
+        "`summary.md` says why):",
         "",
         *_against_best(test, agents),
         "",

@@ -30,7 +30,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from agents import load_policy
+from agents import TrainedPolicy, load_policy
 from cpf_bench.rollout import rollout
 from cpf_bench.stats import paired_difference
 from cpf_env.envs.policy import FleetPolicy
@@ -189,6 +189,8 @@ def study(folder: Path, scenario: Scenario, num_seeds: int, base: str | None) ->
     """The report's lines (markdown) for the agent in ``folder`` on ``scenario``."""
     seeds = [EVALUATION_SEED + k for k in range(num_seeds)]
     agent = load_policy(folder, scenario)
+    if not isinstance(agent, TrainedPolicy):
+        raise SystemExit(f"{folder} holds a learned filter, which sends no messages.")
     learned = agent.config.residual.messages
     if learned < 1:
         raise SystemExit(f"{folder} learned no messages (its residual.messages is 0).")
