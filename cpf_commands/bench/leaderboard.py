@@ -57,8 +57,8 @@ AGENTS = {
     "results/agents/student_deepsets_s0": "student with a neighbour encoder, any degree",
     "results/agents/mappo_s0": "residual MAPPO, lossy links",
 }
-#: The hard track's reference agents: one per learning method on ``hard_sensing`` (the learned
-#: filter: ``agents.estimation``), and
+#: The hard track's reference agents: one per learning method on ``hard_sensing``, the learned
+#: filter (``agents.estimation``) also on the two other sensing scenarios with room, and
 #: residual MAPPO on the two crossing scenarios (learned messages on ``hard_crossing``), each
 #: with one budget of vessel-steps; results/README.md has the command that trained each.
 HARD_AGENTS = {
@@ -68,6 +68,12 @@ HARD_AGENTS = {
     "results/agents/hard_sensing_mappo_s0": "residual MAPPO on mpc_tuned_ekf, hard_sensing",
     "results/agents/hard_sensing_learned_filter_s0": (
         "learned filter on mpc_tuned_mmae, hard_sensing"
+    ),
+    "results/agents/hard_sensing_waves_learned_filter_s0": (
+        "learned filter on mpc_tuned_mmae, hard_sensing_waves"
+    ),
+    "results/agents/hard_heterogeneous_learned_filter_s0": (
+        "learned filter on mpc_tuned_mmae, hard_heterogeneous"
     ),
     "results/agents/hard_crossing_mappo_messages_s0": (
         "residual MAPPO with learned messages on mpc_tuned, hard_crossing"

@@ -71,6 +71,22 @@ def test_the_safety_tuning_study_sweeps_distance_and_gain(capsys) -> None:
     assert "| 0.7 | 1.0 |" in capsys.readouterr().out
 
 
+def test_the_filter_tuning_study_compares_one_filter_per_factor_with_the_bank(capsys) -> None:
+    script = load_script(ROOT / "studies/hard_track/filter_tuning.py")
+    table = script.main(["--num-seeds", "1", "--max-steps", "40", "--factors", "1", "0.01"])
+    assert set(table) == {"x1", "x0.01", "bank (0.001, 0.03, 1.0, 30.0)"}
+    assert all(set(costs) == set(script.SENSING) for costs in table.values())
+    assert "| x0.01 |" in capsys.readouterr().out
+
+
+def test_the_learned_filter_study_fits_on_more_and_more_episodes(capsys) -> None:
+    script = load_script(ROOT / "studies/hard_track/learned_filter.py")
+    argv = ["--num-seeds", "2", "--eval-num-seeds", "2", "--max-steps", "120"]
+    rows = script.main(argv)
+    assert [k for k, _ in rows] == [1, 2] and all(cost > 0 for _, cost in rows)
+    assert "| 2 | 800 |" in capsys.readouterr().out  # 5 vessels x (120 - 40) steps x 2
+
+
 def test_the_crossing_geometry_study_moves_only_the_formation(capsys) -> None:
     script = load_script(ROOT / "studies/hard_track/crossing_geometry.py")
     task, moved = scenarios.get("hard_crossing"), script.with_offset(1.2)
