@@ -69,6 +69,7 @@ __all__ = [
     "MPCTunedAdaptive",
     "MPCTunedFiltered",
     "NNDSCFiltered",
+    "fleet_rows",
 ]
 
 #: Process noise spectral densities of the nine states (per second): pose (m^2/s, rad^2/s),
@@ -290,6 +291,14 @@ def observe_rows(obs: np.ndarray, kinds: np.ndarray, paths: np.ndarray, states: 
             _observe(o, point, states[row, i], out[row, i])
 
 
+def fleet_rows(fleets: ArrayLike) -> NDArray[np.int64]:
+    """The indices of a (F,) bool mask, or the indices given."""
+    chosen = np.asarray(fleets)
+    if chosen.dtype == bool:
+        return np.flatnonzero(chosen)
+    return chosen.astype(np.int64)
+
+
 class Filtered(FleetPolicy):
     """An analytic policy acting on the navigation filter's estimate (module docstring).
 
@@ -345,9 +354,13 @@ class Filtered(FleetPolicy):
         self._allocate(self._fleets)
 
     def reset_fleets(self, fleets: ArrayLike) -> None:
-        """Forget the listed fleets' estimates (they start again at their next fix)."""
+        """Forget some fleets' estimates (they start again at their next fix).
+
+        Args:
+            fleets: (F,) bool mask, or indices, of the fleets to restart.
+        """
         self.policy.reset_fleets(fleets)
-        self._ready[np.asarray(fleets, dtype=np.int64)] = False
+        self._ready[fleet_rows(fleets)] = False
 
     def estimate(self, obs: ArrayLike, fleets: ArrayLike | None = None) -> NDArray[np.float32]:
         """Filter one step and return the observation rebuilt from the estimate (rows, n, dim)."""

@@ -65,3 +65,7 @@ def fit_filter_main(argv: Sequence[str] | None = None) -> None:
             f"({change:+.1%}; validation seeds {record['validation_seeds'][0]}-"
             f"{record['validation_seeds'][-1]})"
         )
+
+
+if __name__ == "__main__":
+    fit_filter_main()

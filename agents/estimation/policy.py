@@ -22,7 +22,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from agents.estimation.correction import STEP_SIZE, Correction, correct, step_inputs
 from baselines import FILTERED, make_policy
-from baselines.estimator import Filtered
+from baselines.estimator import Filtered, fleet_rows
 from cpf_env.envs.policy import FleetPolicy
 from cpf_env.scenarios import Scenario, make_scenario
 from cpf_env.sim.observation import TAU
@@ -95,9 +95,9 @@ class LearnedFilter(FleetPolicy):
         self._history = np.zeros((0, self.n, self._window, STEP_SIZE))
 
     def reset_fleets(self, fleets: ArrayLike) -> None:
-        """Forget the listed fleets' estimates and histories."""
+        """Forget some fleets' estimates and histories ((F,) bool mask, or indices)."""
         self.base.reset_fleets(fleets)
-        self._history[np.asarray(fleets, dtype=np.int64)] = 0.0
+        self._history[fleet_rows(fleets)] = 0.0
 
     def act_batch(self, obs: ArrayLike, fleets: ArrayLike | None = None) -> Array:
         """The inner design's actions (B, n, act_dim) on the corrected estimates.

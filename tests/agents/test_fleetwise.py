@@ -52,7 +52,7 @@ def test_an_env_with_base_mpc_restarts_single_fleets() -> None:
 
 
 def test_every_mpc_design_is_run_fleet_by_fleet() -> None:
-    filtered = {"mpc_tuned_ekf", "mpc_tuned_safe", "mpc_tuned_ekf_safe"}  # the hard track's
+    filtered = {"mpc_tuned_ekf", "mpc_tuned_mmae", "mpc_tuned_safe", "mpc_tuned_ekf_safe"}
     assert set(WHOLE_BATCH_BASES) == {"mpc", "mpc_tuned", *filtered}
     env = FleetVecEnv(
         "bench_current_waves", num_fleets=2, base_policy="mpc_tuned", residual=ResidualConfig()

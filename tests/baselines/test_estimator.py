@@ -81,6 +81,13 @@ def test_reset_fleets_restarts_only_their_filters_and_rows_act_for_their_fleets(
     after = policy.diagnostics["estimate"]
     assert np.array_equal(after[[0, 2]], before[[0, 2]])  # untouched
     assert np.all(after[1, :, 3:] == 0.0)  # restarted at a fix: no velocity, no bias yet
+    policy.act_batch(obs)
+    before = policy.diagnostics["estimate"].copy()
+    policy.reset_fleets(np.array([False, False, True]))  # a mask, as the envs pass it
+    policy.act_batch(obs[[2]], fleets=[2])
+    after = policy.diagnostics["estimate"]
+    assert np.array_equal(after[[0, 1]], before[[0, 1]])
+    assert np.all(after[2, :, 3:] == 0.0)
     with pytest.raises(ValueError, match="fleets must be 1 indices below 3"):
         policy.act_batch(obs[[0]], fleets=[5])
     with pytest.raises(ValueError, match=r"obs must be \(B, 5, obs_dim\)"):

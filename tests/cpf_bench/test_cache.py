@@ -20,7 +20,7 @@ def test_keys_change_with_the_scenario_the_horizon_and_the_policy():
     assert key != cache.cell_key("oracle", mild.replace(max_path_error=9.0), 20)
     with pytest.raises(
         ValueError,
-        match="only oracle, mpc, mpc_tuned, mpc_tuned_ekf, mpc_tuned_safe, "
+        match="only oracle, mpc, mpc_tuned, mpc_tuned_ekf, mpc_tuned_mmae, mpc_tuned_safe, "
         "mpc_tuned_ekf_safe are cached, not 'nn_dsc'",
     ):
         cache.cell_key("nn_dsc", mild, 20)

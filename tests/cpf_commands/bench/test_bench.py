@@ -445,6 +445,7 @@ def test_default_bench_is_every_baseline_and_the_headroom_reference_on_the_suite
         "ilos",
         "nn_dsc_ekf",
         "mpc_tuned_ekf",
+        "mpc_tuned_mmae",
         "ilos_ekf",
         *SAFE,
         HEADROOM_REFERENCE,
