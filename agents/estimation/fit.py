@@ -37,7 +37,11 @@ RIDGE = 1e-3
 def gather(
     scenario: str | Scenario, seeds: Sequence[int], base: str, window: int
 ) -> tuple[Array, Array]:
-    """Inputs (N, D) and errors (N, 6) of the base's filter on ``scenario``'s ``seeds``."""
+    """Inputs (N, D) and errors (N, 6) of the base's filter on ``scenario``'s ``seeds``.
+
+    Every step from the ``window``-th on, every vessel of every fleet still running (a
+    fleet whose episode failed is left out from then on).
+    """
     check_training(scenario, seeds)
     task = make_scenario(scenario)
     policy = LearnedFilter(task, None, base=base, window=window)
@@ -46,10 +50,13 @@ def gather(
     inputs, errors = [], []
     for step in range(task.max_steps):
         actions = policy.act_batch(obs)
-        if step >= window:
-            states = policy.base.state
-            inputs.append(assemble(policy.history_inputs(), states).reshape(-1, 6 * window + 6))
-            errors.append(body_error(states, sim.arrays.eta, sim.arrays.nu).reshape(-1, 6))
+        alive = ~sim.arrays.terminated  # a fleet that failed is not stepped on
+        if step >= window and alive.any():
+            states = policy.base.state[alive]
+            history = policy.history_inputs()[alive]
+            inputs.append(assemble(history, states).reshape(-1, 6 * window + 6))
+            truth = body_error(states, sim.arrays.eta[alive], sim.arrays.nu[alive])
+            errors.append(truth.reshape(-1, 6))
         obs = sim.step(actions)
     return np.concatenate(inputs), np.concatenate(errors)
 

@@ -21,7 +21,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from agents.estimation.correction import STEP_SIZE, Correction, correct, step_inputs
-from baselines import FILTERED, make_policy
+from baselines import DEPLOYABLE, make_policy
 from baselines.estimator import Filtered, fleet_rows
 from cpf_env.envs.policy import FleetPolicy
 from cpf_env.scenarios import Scenario, make_scenario
@@ -36,7 +36,7 @@ Array = NDArray[np.float64]
 
 
 class LearnedFilter(FleetPolicy):
-    """A ``baselines.FILTERED`` design on its estimate plus a learned ``Correction`` (module doc).
+    """A design on the navigation filter's estimate plus a learned ``Correction`` (module doc).
 
     Args:
         scenario: The scenario it acts on (a name or a ``Scenario``); it must have
@@ -44,7 +44,8 @@ class LearnedFilter(FleetPolicy):
             nothing to correct.
         correction: The fitted map, or None for the base alone (how its training
             data is gathered).
-        base: A name of ``baselines.FILTERED``.
+        base: A deployable design on the navigation filter (``baselines.FILTERED``, or
+            ``mpc_tuned_ekf_safe``, the safety filter on it).
         name: The policy's label.
         window: The history kept without a correction (with one: its window).
 
@@ -61,10 +62,11 @@ class LearnedFilter(FleetPolicy):
         window: int = WINDOW,
     ) -> None:
         task = make_scenario(scenario)
-        if base not in FILTERED:
+        filtered = sorted(name for name, cls in DEPLOYABLE.items() if issubclass(cls, Filtered))
+        if base not in filtered:
             raise ValueError(
                 f"a learned filter corrects a navigation filter's estimate: base must be one "
-                f"of {sorted(FILTERED)}, got {base!r}."
+                f"of {filtered}, got {base!r}."
             )
         if task.sensors.ideal:
             raise ValueError(
@@ -73,7 +75,7 @@ class LearnedFilter(FleetPolicy):
                 "Scenario.sensors set (the hard track's sensing scenarios)."
             )
         policy = make_policy(base, task)
-        assert isinstance(policy, Filtered)  # FILTERED holds Filtered designs only
+        assert isinstance(policy, Filtered)
         self.scenario = task
         self.base: Filtered = policy
         self.correction = correction

@@ -82,6 +82,18 @@ def test_without_a_correction_it_is_its_base_bit_for_bit() -> None:
         obs = [sim.step(a) for sim, a in zip(sims, actions, strict=True)]
 
 
+def test_under_the_safety_filter_too_without_a_correction_it_is_its_base() -> None:
+    task = make_scenario("hard_large_fleet").replace(max_steps=60)
+    base = baselines.make_policy("mpc_tuned_ekf_safe", task)
+    alone = LearnedFilter(task, None, base="mpc_tuned_ekf_safe")
+    sims = [FleetSim(task, num_fleets=1) for _ in range(2)]
+    obs = [sim.reset(seeds=[7]) for sim in sims]
+    for _ in range(60):
+        actions = [base.act_batch(obs[0]), alone.act_batch(obs[1])]
+        np.testing.assert_array_equal(actions[0], actions[1])
+        obs = [sim.step(a) for sim, a in zip(sims, actions, strict=True)]
+
+
 def test_it_refuses_ideal_sensors_and_a_design_without_a_filter() -> None:
     with pytest.raises(ValueError, match="ideal sensors: its vessels observe their true state"):
         LearnedFilter("hard_crossing", None)
