@@ -1,7 +1,8 @@
 """``cpf-fit-filter``: fit a learned correction of a navigation filter (``agents.estimation``).
 
-Runs the base design (a ``baselines.FILTERED`` name, default ``mpc_tuned_mmae``)
-on ``--num-seeds`` training seeds of each ``--scenarios`` (from ``--seed``;
+Runs the base design (a deployable design on the navigation filter: by
+default ``mpc_tuned_mmae``; ``mpc_tuned_ekf``, ``mpc_tuned_ekf_safe``...) on
+``--num-seeds`` training seeds of each ``--scenarios`` (from ``--seed``;
 seeds from 9000 up are refused), records every vessel's recent fix offsets
 and applied forces and its filter's error against the true state, fits the
 ridge regression from the one to the other, and measures the base and the
@@ -30,7 +31,7 @@ def fit_filter_main(argv: Sequence[str] | None = None) -> None:
     parser.add_argument("--scenarios", nargs="+", required=True, help="training scenarios")
     parser.add_argument("--num-seeds", type=int, default=16, help="episodes per scenario")
     parser.add_argument("--seed", type=int, default=0, help="first training seed")
-    parser.add_argument("--base", default="mpc_tuned_mmae", help="a baselines.FILTERED name")
+    parser.add_argument("--base", default="mpc_tuned_mmae", help="a design on a navigation filter")
     parser.add_argument("--window", type=int, default=WINDOW, help="steps of history")
     parser.add_argument("--ridge", type=float, default=RIDGE, help="penalty per sample")
     parser.add_argument("--eval-num-seeds", type=int, default=10, help="validation seeds")
