@@ -268,7 +268,7 @@ def read_agent_manifest(folder: Path, trainer: str | None = None) -> tuple[str, 
     if trainer is not None and found != trainer:
         raise AgentFolderError(
             f"{path}: the folder holds a {found} agent, not a {trainer} one; load it with "
-            "agents.load_policy, which reads both."
+            "agents.load_policy, which reads every trainer's folder."
         )
     return found, manifest
 
