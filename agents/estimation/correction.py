@@ -110,7 +110,7 @@ class Correction:
     offset: Array
 
     def __post_init__(self) -> None:
-        size = self.window * STEP_SIZE + STATE_SIZE
+        size = self.inputs
         shapes = {
             "weights": (size, TARGET_SIZE),
             "input_mean": (size,),
@@ -141,7 +141,10 @@ class Correction:
             history: (..., n, window, ``STEP_SIZE``) the step inputs, newest first.
             states: (..., n, 9) the filter's estimates.
         """
-        inputs = assemble(history, states)
+        return self.apply(assemble(history, states))
+
+    def apply(self, inputs: Array) -> Array:
+        """The predicted errors (..., ``TARGET_SIZE``) of assembled inputs (..., D)."""
         return ((inputs - self.input_mean) / self.input_scale) @ self.weights + self.offset
 
 

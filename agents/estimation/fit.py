@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from agents.estimation.correction import Correction, assemble, body_error, fit
+from agents.estimation.correction import TARGET_SIZE, Correction, assemble, body_error, fit
 from agents.estimation.policy import WINDOW, LearnedFilter
 from cpf_bench.rollout import rollout_group
 from cpf_env.scenarios import Scenario, make_scenario
@@ -54,9 +54,10 @@ def gather(
         if step >= window and alive.any():
             states = policy.base.state[alive]
             history = policy.history_inputs()[alive]
-            inputs.append(assemble(history, states).reshape(-1, 6 * window + 6))
+            seen = assemble(history, states)
+            inputs.append(seen.reshape(-1, seen.shape[-1]))
             truth = body_error(states, sim.arrays.eta[alive], sim.arrays.nu[alive])
-            errors.append(truth.reshape(-1, 6))
+            errors.append(truth.reshape(-1, TARGET_SIZE))
         obs = sim.step(actions)
     return np.concatenate(inputs), np.concatenate(errors)
 
@@ -79,17 +80,15 @@ def fit_filter(
     """
     start = time.perf_counter()
     seeds = list(range(seed, seed + num_seeds))
-    parts = [gather(name, seeds, base, window) for name in scenarios]
+    tasks = [make_scenario(s) for s in scenarios]
+    parts = [gather(task, seeds, base, window) for task in tasks]
     inputs = np.concatenate([p[0] for p in parts])
     errors = np.concatenate([p[1] for p in parts])
     correction = fit(inputs, errors, window, ridge)
-    left = errors - (
-        ((inputs - correction.input_mean) / correction.input_scale) @ correction.weights
-        + correction.offset
-    )
+    left = errors - correction.apply(inputs)
     validation: dict[str, dict[str, float]] = {}
     checks = [VALIDATION_SEED + k for k in range(eval_num_seeds)]
-    for task in [make_scenario(s) for s in scenarios] if eval_num_seeds > 0 else []:
+    for task in tasks if eval_num_seeds > 0 else []:
         alone, fitted = rollout_group(
             [LearnedFilter(task, None, base=base), LearnedFilter(task, correction, base=base)],
             task,
@@ -101,7 +100,7 @@ def fit_filter(
         }
     record = {
         "base": base,
-        "scenarios": [make_scenario(s).name for s in scenarios],
+        "scenarios": [task.name for task in tasks],
         "seeds": seeds,
         "window": window,
         "ridge": ridge,

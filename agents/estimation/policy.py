@@ -20,7 +20,13 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from agents.estimation.correction import STEP_SIZE, Correction, correct, step_inputs
+from agents.estimation.correction import (
+    STEP_SIZE,
+    TARGET_SIZE,
+    Correction,
+    correct,
+    step_inputs,
+)
 from baselines import DEPLOYABLE, make_policy
 from baselines.estimator import Filtered, fleet_rows
 from cpf_env.envs.policy import FleetPolicy
@@ -125,7 +131,7 @@ class LearnedFilter(FleetPolicy):
         history[:, :, 0] = step
         self._history[rows] = history
         if self.correction is None:
-            errors = np.zeros((*states.shape[:2], 6))
+            errors = np.zeros((*states.shape[:2], TARGET_SIZE))
         else:
             errors = self.correction.predict(history, states)
         corrected = correct(states, errors)
