@@ -395,6 +395,11 @@ class Filtered(FleetPolicy):
         return self._state
 
     @property
+    def members(self) -> NDArray[np.float64]:
+        """(F, n, M, 9) each filter of the bank's own estimate (``state`` is their blend)."""
+        return self._bank
+
+    @property
     def last_fix(self) -> NDArray[np.float64]:
         """(F, n, 3) the last fix x, y (m), psi (rad) each vessel's filters corrected with."""
         return self._last_fix

@@ -7,8 +7,10 @@ before them the ``test`` seeds): a ``cpf-train --out``
 folder, or a ``cpf-distill`` run (``--out``, or ``--log`` where given) with
 ``--eval-num-seeds N``, whose rows are the student before round 0 (its base) and
 after each DAgger round at the labelled vessel-steps so far (the simulated
-ones, as ``cpf-train`` counts them; the seconds include the teacher's). It
-writes to ``--out``:
+ones, as ``cpf-train`` counts them; the seconds include the teacher's), or a
+``cpf-fit-filter --out`` folder with ``--eval-num-seeds N``, whose rows are
+its base at 0 vessel-steps and each round's filter at the vessel-steps
+simulated so far. It writes to ``--out``:
 
 - ``curves.csv``: one row per point of either axis: ``axis`` (``vessel_steps``
   or ``wall_clock_seconds``), ``x``, ``iqm`` (interquartile mean over the runs
@@ -75,6 +77,8 @@ __all__ = [
 ]
 
 AXES = ("vessel_steps", "wall_clock_seconds")
+#: A cost within this fraction of a line's is level with it (floating-point rounding).
+TIE = 1e-9
 
 
 @dataclass(frozen=True)
@@ -125,7 +129,7 @@ def read_run(folder: Path) -> RunCurve:
     if not path.is_file():
         raise ValueError(
             f"{folder} has no evaluations.csv; train with cpf-train --eval-every N (> 0) or "
-            "cpf-distill --eval-num-seeds N (> 0)."
+            "cpf-distill or cpf-fit-filter --eval-num-seeds N (> 0)."
         )
     rows = list(csv.DictReader(io.StringIO(path.read_text())))
     if not rows:
@@ -137,7 +141,7 @@ def read_run(folder: Path) -> RunCurve:
         ]
     except (KeyError, ValueError) as error:
         raise ValueError(
-            f"{path} is not an evaluations.csv of cpf-train or cpf-distill: {error}"
+            f"{path} is not an evaluations.csv of cpf-train, cpf-distill or cpf-fit-filter: {error}"
         ) from None
     return RunCurve(folder.name, *columns)
 
@@ -166,7 +170,8 @@ def steps_curve(runs: Sequence[RunCurve]) -> Curve:
     if not common:
         raise ValueError(
             "the runs share no evaluation vessel-step count; train them with one --eval-every "
-            "(cpf-train) or one rounds, steps and fleets (cpf-distill)."
+            "(cpf-train), one rounds, steps and fleets (cpf-distill) or one --num-seeds and "
+            "--rounds (cpf-fit-filter)."
         )
     values = np.array(
         [[run.cost[np.flatnonzero(run.steps == x)[-1]] for run in runs] for x in common]
@@ -192,9 +197,14 @@ def time_curve(runs: Sequence[RunCurve]) -> Curve:
 
 
 def first_below(curve: Curve, level: float) -> tuple[float | None, float | None]:
-    """First x where the IQM is below ``level``, and first x where the whole interval is."""
-    below = np.flatnonzero(curve.iqm < level)
-    surely = np.flatnonzero(curve.high < level)
+    """First x where the IQM is below ``level``, and first x where the whole interval is.
+
+    Below means by more than rounding (``TIE``): runs that all start as their base (a
+    residual at zero, a learned filter's correction of zeros) have an IQM that differs from
+    the base's cost in its last bits, and do not beat it there.
+    """
+    below = np.flatnonzero(curve.iqm < level - TIE * abs(level))
+    surely = np.flatnonzero(curve.high < level - TIE * abs(level))
     return (
         float(curve.x[below[0]]) if below.size else None,
         float(curve.x[surely[0]]) if surely.size else None,
@@ -251,11 +261,9 @@ def _lines(
     folders: Sequence[Path], runs: Sequence[RunCurve], bases: Sequence[str] | None
 ) -> dict[str, float]:
     """Name -> evaluation cost of each line to beat (see the module docstring)."""
-    from agents.training.config import config_from_record
     from agents.training.evaluation import DEFAULT_EVAL_NUM_SEEDS
 
     records = [json.loads((folder / "run.json").read_text()) for folder in folders]
-    configs = [config_from_record(record["config"]) for record in records]
     seeds = {_first_seed(record) for record in records}
     if len(seeds) > 1:
         raise ValueError(
@@ -268,7 +276,7 @@ def _lines(
         num_seeds = evaluation.get("num_seeds", evaluation.get("seeds", DEFAULT_EVAL_NUM_SEEDS))
         cells = run_bench(
             list(bases),
-            evaluation.get("scenarios") or list(configs[0].scenarios),
+            evaluation.get("scenarios") or list(_trained(records[0])[0]),
             num_seeds=int(num_seeds),
             seed=seeds.pop(),
             max_steps=evaluation.get("max_steps", evaluation.get("steps")),
@@ -278,7 +286,7 @@ def _lines(
             base: float(np.mean([np.mean(c.metrics["cost"]) for c in cells if c.policy == base]))
             for base in dict.fromkeys(bases)
         }
-    if any(config.base_policy == "none" for config in configs):
+    if any(_trained(record)[1] == "none" for record in records):
         raise ValueError(
             "runs trained from scratch have no base to compare with; give --base-policy NAME."
         )
@@ -288,6 +296,20 @@ def _lines(
             "a run has no evaluation at 0 vessel-steps (its base); give --base-policy NAME."
         )
     return {"base policy": float(iqm(np.array([start[0] for start in starts])))}
+
+
+def _trained(record: dict) -> tuple[list[str], str]:
+    """The scenarios a run trained on and its base policy (``run.json``).
+
+    A ``cpf-train`` or ``cpf-distill`` run records its ``config``; a ``cpf-fit-filter``
+    run its ``filter`` (the base is the design under the filter).
+    """
+    from agents.training.config import config_from_record
+
+    if "filter" in record:
+        return list(record["filter"]["scenarios"]), str(record["filter"]["base"])
+    config = config_from_record(record["config"])
+    return list(config.scenarios), config.base_policy
 
 
 def _first_seed(record: dict) -> int:
@@ -303,16 +325,16 @@ def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         allow_abbrev=False,
         prog="cpf-curves",
-        description="Learning curves of cpf-train or cpf-distill runs (one per training seed): "
-        "IQM of the "
+        description="Learning curves of cpf-train, cpf-distill or cpf-fit-filter runs (one per "
+        "training seed): IQM of the "
         "held-out evaluation cost with 95 % bootstrap intervals vs vessel-steps and vs "
         "wall-clock seconds; writes curves.csv and curves.png and prints when the IQM first "
         "beats the base policy.",
     )
     parser.add_argument(
         "runs", nargs="+", metavar="RUN_DIR",
-        help="cpf-train --out folders, or cpf-distill run folders (--out, or --log if given) "
-        "of runs with --eval-num-seeds",
+        help="cpf-train --out folders, cpf-distill run folders (--out, or --log if given) or "
+        "cpf-fit-filter --out folders of runs with --eval-num-seeds",
     )  # fmt: skip
     parser.add_argument("--out", required=True, help="output folder (curves.csv, curves.png)")
     parser.add_argument(

@@ -1,114 +1,213 @@
-"""Fit a ``LearnedFilter``: closed-loop episodes of its base, then least squares.
+"""Fit a ``LearnedFilter``: closed-loop episodes, least squares, and again on its own episodes.
 
-``gather`` runs the base design (a ``LearnedFilter`` without a correction,
-so the history is kept exactly as the fitted filter will keep it) on
-training seeds of each scenario and records, every step after the first
-``window``, each vessel's inputs and its filter's error against the true
-state the simulator holds. ``fit_filter`` gathers, fits the ridge
-regression (``correction.fit``) and measures the base and the fitted
-filter on the validation seeds (``cpf_env.scenarios.splits``), paired by
-seed; ``agents.estimation.folder`` writes what it fitted.
+``gather`` runs a ``LearnedFilter`` on training seeds of a scenario and
+records, every step after the first ``window``, each vessel's inputs
+(``correction.assemble``) and its base filter's error against the true state
+the simulator holds. ``fit_filter`` fits in rounds, as DAgger does (Ross et
+al. 2011): round 0 gathers under the base alone (``Correction.zero``), each
+later round under the filter fitted so far, on fresh training seeds, and
+every round refits the ridge regression (``correction.fit``) and, with
+hidden layers, the network on what it leaves (``network.fit_network``) on
+all the data so far. The rounds matter because the correction acts in the loop: it
+moves the vessels, so the forces and fix offsets its inputs read are not
+those of the base's episodes (a map on a long history fitted on the base's
+episodes alone can make the loop worse than the base; a round on its own
+episodes repairs it). With validation seeds (``eval_num_seeds``), the base
+and each round's filter are measured on them (``EvaluationLog``: the rows
+of ``evaluations.csv`` that ``cpf-curves`` reads); ``agents.estimation.folder``
+writes what it fitted.
 """
 
 from __future__ import annotations
 
+import tempfile
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from agents.estimation.correction import TARGET_SIZE, Correction, assemble, body_error, fit
+from agents.estimation.folder import save_filter
+from agents.estimation.network import EPOCHS, HIDDEN, fit_network
 from agents.estimation.policy import WINDOW, LearnedFilter
-from cpf_bench.rollout import rollout_group
+from agents.training.evaluation import ValidationEvaluator
+from agents.training.schedule import EvaluationLog
+from baselines import make_policy
+from baselines.estimator import Filtered
 from cpf_env.scenarios import Scenario, make_scenario
-from cpf_env.scenarios.splits import VALIDATION_SEED, check_training
+from cpf_env.scenarios.splits import check_training
 from cpf_env.sim.fleet import FleetSim
 
-__all__ = ["RIDGE", "fit_filter", "gather"]
+__all__ = ["RIDGE", "ROUNDS", "Gathered", "bank_size", "fit_filter", "gather"]
 
 Array = NDArray[np.float64]
 
 #: The ridge penalty per sample on the standardized weights.
 RIDGE = 1e-3
+#: Rounds of gathering and fitting (the first under the base alone).
+ROUNDS = 4
+
+#: (inputs (N, D), errors (N, 6), simulated vessel-steps) of one gathering.
+Gathered = tuple[Array, Array, int]
+
+
+def bank_size(base: str, scenario: str | Scenario) -> int:
+    """M, the filters of ``base``'s bank (``Filtered.noise_scales``)."""
+    policy = make_policy(base, make_scenario(scenario))
+    if not isinstance(policy, Filtered):
+        raise ValueError(f"{base!r} is not a design on the navigation filter.")
+    return len(policy.noise_scales)
 
 
 def gather(
-    scenario: str | Scenario, seeds: Sequence[int], base: str, window: int
-) -> tuple[Array, Array]:
-    """Inputs (N, D) and errors (N, 6) of the base's filter on ``scenario``'s ``seeds``.
+    scenario: str | Scenario, seeds: Sequence[int], base: str, correction: Correction
+) -> Gathered:
+    """Inputs, errors and simulated vessel-steps of ``correction`` on ``scenario``'s ``seeds``.
 
     Every step from the ``window``-th on, every vessel of every fleet still running (a
     fleet whose episode failed is left out from then on).
     """
     check_training(scenario, seeds)
     task = make_scenario(scenario)
-    policy = LearnedFilter(task, None, base=base, window=window)
+    policy = LearnedFilter(task, correction, base=base)
     sim = FleetSim(task, num_fleets=len(seeds))
     obs = sim.reset(seeds=list(seeds))
-    inputs, errors = [], []
+    inputs, errors, simulated = [], [], 0
     for step in range(task.max_steps):
         actions = policy.act_batch(obs)
         alive = ~sim.arrays.terminated  # a fleet that failed is not stepped on
-        if step >= window and alive.any():
+        simulated += int(alive.sum()) * task.n
+        if step >= correction.window and alive.any():
             states = policy.base.state[alive]
-            history = policy.history_inputs()[alive]
-            seen = assemble(history, states)
+            seen = assemble(policy.history_inputs()[alive], states, policy.base.members[alive])
             inputs.append(seen.reshape(-1, seen.shape[-1]))
             truth = body_error(states, sim.arrays.eta[alive], sim.arrays.nu[alive])
             errors.append(truth.reshape(-1, TARGET_SIZE))
         obs = sim.step(actions)
-    return np.concatenate(inputs), np.concatenate(errors)
+    return np.concatenate(inputs), np.concatenate(errors), simulated
 
 
 def fit_filter(
-    scenarios: Sequence[str | Scenario],
+    scenarios: Sequence[str],
     num_seeds: int,
     base: str = "mpc_tuned_mmae",
     window: int = WINDOW,
     ridge: float = RIDGE,
+    rounds: int = ROUNDS,
+    hidden: tuple[int, ...] = HIDDEN,
+    epochs: int = EPOCHS,
     eval_num_seeds: int = 10,
     seed: int = 0,
-) -> tuple[Correction, dict[str, Any]]:
-    """Gather ``num_seeds`` episodes per scenario from training seed ``seed``, fit, validate.
+    max_steps: int | None = None,
+    report: Callable[[str], None] | None = None,
+) -> tuple[Correction, dict[str, Any], list[dict[str, float]]]:
+    """Fit in ``rounds`` of ``num_seeds`` episodes per scenario each, from training seed ``seed``.
+
+    Round r runs training seeds ``seed + r * num_seeds`` on (module docstring); its
+    network (none for ``hidden = ()``) trains ``epochs`` passes from seed ``seed + r``.
+    ``max_steps`` shortens every episode, gathered and validated (None: each
+    scenario's own); ``report`` is handed a line per round (``print``: progress).
 
     Returns:
-        The correction and the record: the settings, the samples, the error's RMS
-        before and after on the training data, and per scenario the validation
-        seeds' mean cost of the base and of the fitted filter.
+        The correction; the record (the settings, the validation's (``evaluation``:
+        ``ValidationEvaluator.settings``, None without), the samples, the error's RMS
+        before and after on all the data, each round's samples, vessel-steps and
+        seconds, and per scenario the validation cost of the base and of the last
+        round's filter); and the evaluations' rows (``EvaluationLog.rows``: the base at 0
+        vessel-steps, then each round; empty without validation seeds).
+
+    Raises:
+        ValueError: A setting out of range, a held-out scenario or seed.
     """
-    start = time.perf_counter()
-    seeds = list(range(seed, seed + num_seeds))
-    tasks = [make_scenario(s) for s in scenarios]
-    parts = [gather(task, seeds, base, window) for task in tasks]
-    inputs = np.concatenate([p[0] for p in parts])
-    errors = np.concatenate([p[1] for p in parts])
-    correction = fit(inputs, errors, window, ridge)
-    left = errors - correction.apply(inputs)
-    validation: dict[str, dict[str, float]] = {}
-    checks = [VALIDATION_SEED + k for k in range(eval_num_seeds)]
-    for task in tasks if eval_num_seeds > 0 else []:
-        alone, fitted = rollout_group(
-            [LearnedFilter(task, None, base=base), LearnedFilter(task, correction, base=base)],
-            task,
-            checks,
+    if rounds < 1 or num_seeds < 1 or window < 1:
+        raise ValueError(
+            f"rounds, num_seeds and window must be >= 1, got {rounds}, {num_seeds}, {window}."
         )
-        validation[task.name] = {
-            "base": float(np.mean(alone["cost"])),
-            "filter": float(np.mean(fitted["cost"])),
-        }
+    tasks = [make_scenario(s) for s in scenarios]
+    if max_steps is not None:
+        tasks = [task.replace(max_steps=max_steps) for task in tasks]
+    for task in tasks:
+        check_training(task, range(seed, seed + rounds * num_seeds))
+        if task.max_steps <= window:
+            raise ValueError(
+                f"{task.name}'s episodes of {task.max_steps} steps end before the window of "
+                f"{window} fills: give longer episodes or a shorter window."
+            )
+    members = bank_size(base, tasks[0])
+    start = time.perf_counter()
+    evaluator = (
+        ValidationEvaluator([t.name for t in tasks], eval_num_seeds, max_steps)
+        if eval_num_seeds > 0
+        else None
+    )
+    log = None if evaluator is None else EvaluationLog(evaluator, best=None)
+
+    def evaluate(correction: Correction, vessel_steps: int) -> None:
+        """One row of the log: ``correction`` on the validation seeds, as a folder."""
+        if log is None:
+            return
+        settings = {"base": base, "scenarios": [t.name for t in tasks], "window": window}
+
+        def write(folder: Path) -> None:
+            save_filter(folder, correction, {**settings, "members": members})
+
+        with tempfile.TemporaryDirectory(prefix="cpf-fit-filter-") as scratch:
+            log.run(write, vessel_steps, lambda: time.perf_counter() - start, Path(scratch))
+
+    correction = Correction.zero(window, members)
+    evaluate(correction, 0)
+    parts: list[Gathered] = []
+    history = []
+    for r in range(rounds):
+        seeds = list(range(seed + r * num_seeds, seed + (r + 1) * num_seeds))
+        parts += [gather(task, seeds, base, correction) for task in tasks]
+        inputs = np.concatenate([p[0] for p in parts])
+        errors = np.concatenate([p[1] for p in parts])
+        correction = fit(inputs, errors, window, members, ridge)
+        if hidden:
+            correction = fit_network(inputs, errors, correction, hidden, epochs, seed + r)
+        vessel_steps = sum(p[2] for p in parts)
+        history.append(
+            {
+                "round": r,
+                "seeds": seeds,
+                "samples": len(inputs),
+                "vessel_steps": vessel_steps,
+                "seconds": round(time.perf_counter() - start, 1),
+            }
+        )
+        evaluate(correction, vessel_steps)
+        if report is not None:
+            cost = "" if log is None else f", validation cost {log.rows[-1]['mean_cost']:.1f}"
+            report(
+                f"round {r}: {len(inputs):,} samples from {vessel_steps:,} vessel-steps{cost} "
+                f"({time.perf_counter() - start:.0f} s)"
+            )
+    left = errors - correction.apply(inputs)
+    rows = [] if log is None else list(log.rows)
     record = {
         "base": base,
         "scenarios": [task.name for task in tasks],
-        "seeds": seeds,
         "window": window,
+        "members": members,
         "ridge": ridge,
+        "hidden": list(hidden),
+        "epochs": epochs,
+        "rounds": history,
         "samples": len(inputs),
         "error_rms": np.sqrt(np.mean(errors**2, axis=0)).tolist(),
         "error_rms_fitted": np.sqrt(np.mean(left**2, axis=0)).tolist(),
-        "validation_seeds": checks,
-        "validation": validation,
-        "seconds": time.perf_counter() - start,
+        "evaluation": None if evaluator is None else evaluator.settings,
+        "validation": {
+            task.name: {
+                "base": rows[0][f"cost_{task.name}"],
+                "filter": rows[-1][f"cost_{task.name}"],
+            }
+            for task in (tasks if rows else [])
+        },
+        "seconds": round(time.perf_counter() - start, 1),
     }
-    return correction, record
+    return correction, record, rows

@@ -2,8 +2,8 @@
 
 Each step, per fleet: the base design's filter (``baselines.Filtered``, by
 default ``mpc_tuned_mmae``'s bank) takes the observation; the vessel's
-recent history of fix offsets and applied forces
-(``agents.estimation.correction``) predicts the estimate's error; the
+recent history of fix offsets and applied forces and the bank's filters
+(``agents.estimation.correction``) predict the estimate's error; the
 corrected estimate is rebuilt into the observation (``Filtered.observe``)
 and the base's inner design acts on it. It reads nothing but the vessel's
 own observation, as the filter does: it is as deployable as its base.
@@ -20,13 +20,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from agents.estimation.correction import (
-    STEP_SIZE,
-    TARGET_SIZE,
-    Correction,
-    correct,
-    step_inputs,
-)
+from agents.estimation.correction import STEP_SIZE, Correction, correct, step_inputs
 from baselines import DEPLOYABLE, make_policy
 from baselines.estimator import Filtered, fleet_rows
 from cpf_env.envs.policy import FleetPolicy
@@ -48,24 +42,22 @@ class LearnedFilter(FleetPolicy):
         scenario: The scenario it acts on (a name or a ``Scenario``); it must have
             sensors (``Scenario.sensors`` not ideal): on the true state there is
             nothing to correct.
-        correction: The fitted map, or None for the base alone (how its training
-            data is gathered).
+        correction: The fitted map (``Correction.zero``: the base alone, bit for bit).
         base: A deployable design on the navigation filter (``baselines.FILTERED``, or
             ``mpc_tuned_ekf_safe``, the safety filter on it).
         name: The policy's label.
-        window: The history kept without a correction (with one: its window).
 
     Raises:
-        ValueError: ``base`` is not a filtered design, or the scenario has ideal sensors.
+        ValueError: ``base`` is not a filtered design, the scenario has ideal sensors, or
+            the correction reads another number of filters than the base's bank holds.
     """
 
     def __init__(
         self,
         scenario: str | Scenario,
-        correction: Correction | None,
+        correction: Correction,
         base: str = "mpc_tuned_mmae",
         name: str = "learned_filter",
-        window: int = WINDOW,
     ) -> None:
         task = make_scenario(scenario)
         filtered = sorted(name for name, cls in DEPLOYABLE.items() if issubclass(cls, Filtered))
@@ -82,6 +74,11 @@ class LearnedFilter(FleetPolicy):
             )
         policy = make_policy(base, task)
         assert isinstance(policy, Filtered)
+        if correction.members != len(policy.noise_scales):
+            raise ValueError(
+                f"the correction reads a bank of {correction.members} filters, and {base!r} "
+                f"runs {len(policy.noise_scales)}: give the base it was fitted on."
+            )
         self.scenario = task
         self.base: Filtered = policy
         self.correction = correction
@@ -93,14 +90,13 @@ class LearnedFilter(FleetPolicy):
         tau_min, tau_max = task.tau_limits
         scale = np.maximum(np.abs(np.asarray(tau_min)), np.abs(np.asarray(tau_max)))
         self._force_scale = np.maximum(scale.reshape(self.n, 3), 1e-9)
-        self._window = window if correction is None else correction.window
-        self._history = np.zeros((0, self.n, self._window, STEP_SIZE))
+        self._history = np.zeros((0, self.n, correction.window, STEP_SIZE))
         self.diagnostics: dict[str, Array] = {}
 
     def reset(self, seed: int | None = None) -> None:
         """Forget every fleet's estimate and history."""
         self.base.reset(seed)
-        self._history = np.zeros((0, self.n, self._window, STEP_SIZE))
+        self._history = np.zeros((0, self.n, self.correction.window, STEP_SIZE))
 
     def reset_fleets(self, fleets: ArrayLike) -> None:
         """Forget some fleets' estimates and histories ((F,) bool mask, or indices)."""
@@ -112,13 +108,14 @@ class LearnedFilter(FleetPolicy):
 
         ``diagnostics`` holds the base's, its filter's ``estimate`` (F, n, 9), the
         ``corrected`` estimate of the rows acted for (B, n, 9) and the predicted
-        ``error`` (B, n, 6; zeros without a correction).
+        ``error`` (B, n, 6).
         """
         batch = np.ascontiguousarray(obs, dtype=np.float32)
         self.base.estimate(batch, fleets)
         rows = np.arange(batch.shape[0]) if fleets is None else np.asarray(fleets, np.int64)
         if fleets is None and self._history.shape[0] != batch.shape[0]:
-            self._history = np.zeros((batch.shape[0], self.n, self._window, STEP_SIZE))
+            shape = (batch.shape[0], self.n, self.correction.window, STEP_SIZE)
+            self._history = np.zeros(shape)
         states = self.base.state[rows]
         step = step_inputs(
             states,
@@ -130,10 +127,7 @@ class LearnedFilter(FleetPolicy):
         history[:, :, 1:] = history[:, :, :-1]
         history[:, :, 0] = step
         self._history[rows] = history
-        if self.correction is None:
-            errors = np.zeros((*states.shape[:2], TARGET_SIZE))
-        else:
-            errors = self.correction.predict(history, states)
+        errors = self.correction.predict(history, states, self.base.members[rows])
         corrected = correct(states, errors)
         actions = self.base.policy.act_batch(self.base.observe(batch, corrected), fleets)
         self.diagnostics = {

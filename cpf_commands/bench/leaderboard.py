@@ -31,7 +31,7 @@ import platform
 import shlex
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from statistics import NormalDist
 
@@ -46,7 +46,16 @@ from cpf_commands.bench.views import display_name, gap_table, markdown_table
 from cpf_env.infra import atomic
 from cpf_env.scenarios.suite import list_suite
 
-__all__ = ["AGENTS", "HARD_AGENTS", "LEADERBOARD_JSON", "PAGE", "TRACKS", "Track", "main"]
+__all__ = [
+    "AGENTS",
+    "HARD_AGENTS",
+    "HARD_METHODS",
+    "LEADERBOARD_JSON",
+    "PAGE",
+    "TRACKS",
+    "Track",
+    "main",
+]
 
 #: The reference agents (folder -> the label the tables give it), one per learning method;
 #: results/README.md has the command that trained each.
@@ -81,6 +90,23 @@ HARD_AGENTS = {
     "results/agents/hard_large_fleet_mappo_s0": (
         "residual MAPPO on mpc_tuned_ekf_safe, hard_large_fleet"
     ),
+}
+#: Each learning method of the hard track: its reference agents, each with the scenario it
+#: was trained on, where the method is scored (one agent per scenario, as a user would run it).
+HARD_METHODS = {
+    "PPO from scratch": {"results/agents/hard_sensing_ppo_scratch_s0": "hard_sensing"},
+    "residual PPO": {"results/agents/hard_sensing_ppo_residual_s0": "hard_sensing"},
+    "student of the oracle": {"results/agents/hard_sensing_student_s0": "hard_sensing"},
+    "residual MAPPO": {
+        "results/agents/hard_sensing_mappo_s0": "hard_sensing",
+        "results/agents/hard_crossing_mappo_messages_s0": "hard_crossing",
+        "results/agents/hard_large_fleet_mappo_s0": "hard_large_fleet",
+    },
+    "learned filter": {
+        "results/agents/hard_sensing_learned_filter_s0": "hard_sensing",
+        "results/agents/hard_sensing_waves_learned_filter_s0": "hard_sensing_waves",
+        "results/agents/hard_heterogeneous_learned_filter_s0": "hard_heterogeneous",
+    },
 }
 #: The marl-eval JSON of both splits, under the results folder.
 LEADERBOARD_JSON = "leaderboard.json"
@@ -193,6 +219,22 @@ def _against_best(cells: Sequence[CellResult], agents: Sequence[str]) -> list[st
     return markdown_table(header, body)
 
 
+def _by_method(cells: Sequence[CellResult]) -> list[CellResult]:
+    """The designs' cells and, per method, its agents' cells where they trained, as the method's."""
+    own = {
+        (folder, scenario): method
+        for method, trained in HARD_METHODS.items()
+        for folder, scenario in trained.items()
+    }
+    kept = [cell for cell in cells if cell.policy not in HARD_AGENTS]
+    kept += [
+        replace(cell, policy=own[(cell.policy, cell.scenario)])
+        for cell in cells
+        if (cell.policy, cell.scenario) in own
+    ]
+    return kept
+
+
 def _core_section(test: Sequence[CellResult], shift: Sequence[CellResult], note: str) -> str:
     lines = [
         "",
@@ -262,6 +304,11 @@ def _hard_section(test: Sequence[CellResult], shift: Sequence[CellResult], note:
         "`test` split (0: the best deployable design, 1: the bound):",
         "",
         *_labelled(room_table(test)),
+        "",
+        "The same per method, each agent on the scenario it was trained on (IQM over "
+        "those scenarios' episodes; the method's agents: results/README.md):",
+        "",
+        *room_table(_by_method(test)),
         "",
         "The same against the best deployable design, `shift` split (10 seeds):",
         "",
@@ -358,6 +405,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         f"{platform.python_version()}), load average (1, 5, 15 min) {load_before} before "
         f"and {_load()} after: the machine was shared."
     )
+    text = page.read_text()  # as it is now: the page may have been edited during the run
+    if text.count(begin) != 1 or text.count(end) != 1:
+        raise SystemExit(f"{page} lost its {begin} or {end} marker during the run; put it back.")
     head, rest = text.split(begin)
     _, tail = rest.split(end)
     write_marl_eval([*runs["test"], *runs["shift"]], results / track.json)

@@ -54,6 +54,7 @@ from cpf_env.scenarios.reward_weights import REWARD_TERMS
 from cpf_env.scenarios.scenario import Scenario
 from cpf_env.sim import arrays
 from cpf_env.sim.fleet import FleetSim
+from cpf_env.sim.observation import wrap_angles
 
 __all__ = [
     "COURSE_UNMEASURED",
@@ -168,11 +169,6 @@ def unmeasured(task: Scenario) -> dict[str, float]:
     return fixed if measures_course(task) else {**fixed, **COURSE_UNMEASURED}
 
 
-def _wrap(angle: Array) -> Array:
-    """Angles wrapped to [-pi, pi)."""
-    return (angle + np.pi) % (2.0 * np.pi) - np.pi
-
-
 def _closest_pair(eta: Array) -> Array:
     """(K, S) the smallest distance between two vessels of each fleet (m).
 
@@ -215,8 +211,8 @@ def path_relative(
     return {
         "along": along,
         "cross": -s * dx + c * dy,
-        "heading": _wrap(relative),
-        "course": _wrap(relative + np.arctan2(nu[..., 1], nu[..., 0])),
+        "heading": wrap_angles(relative),
+        "course": wrap_angles(relative + np.arctan2(nu[..., 1], nu[..., 0])),
         "sog": nu[..., 0] * np.cos(relative) - nu[..., 1] * np.sin(relative),
         "path_speed": path_speed,
         "thetap": theta + along / path_speed,

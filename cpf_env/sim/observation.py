@@ -46,7 +46,7 @@ import numpy as np
 from gymnasium import spaces
 from numpy.typing import NDArray
 
-__all__ = ["OBS_BOUND", "ObsLayout", "observation_box", "wrap_angle"]
+__all__ = ["OBS_BOUND", "ObsLayout", "observation_box", "wrap_angle", "wrap_angles"]
 
 #: Bound of every observation and state component (half the float32 maximum, see above).
 OBS_BOUND = float(np.finfo(np.float32).max) / 2.0
@@ -158,6 +158,11 @@ class ObsLayout:
 def wrap_angle(angle: float) -> float:
     """Map an angle (rad) to (-pi, pi]."""
     return angle - 2.0 * math.pi * math.ceil((angle - math.pi) / (2.0 * math.pi))
+
+
+def wrap_angles(angle: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Map angles (rad, any shape) to [-pi, pi), elementwise: ``wrap_angle`` for arrays."""
+    return (angle + np.pi) % (2.0 * np.pi) - np.pi
 
 
 @numba.njit(cache=True, inline="always")

@@ -79,14 +79,6 @@ def test_the_filter_tuning_study_compares_one_filter_per_factor_with_the_bank(ca
     assert "| x0.01 |" in capsys.readouterr().out
 
 
-def test_the_learned_filter_study_fits_on_more_and_more_episodes(capsys) -> None:
-    script = load_script(ROOT / "studies/hard_track/learned_filter.py")
-    argv = ["--num-seeds", "2", "--eval-num-seeds", "2", "--max-steps", "120"]
-    rows = script.main(argv)
-    assert [k for k, _ in rows] == [1, 2] and all(cost > 0 for _, cost in rows)
-    assert "| 2 | 800 |" in capsys.readouterr().out  # 5 vessels x (120 - 40) steps x 2
-
-
 def test_the_crossing_geometry_study_moves_only_the_formation(capsys) -> None:
     script = load_script(ROOT / "studies/hard_track/crossing_geometry.py")
     task, moved = scenarios.get("hard_crossing"), script.with_offset(1.2)

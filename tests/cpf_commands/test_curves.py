@@ -201,3 +201,19 @@ def test_cpf_curves_reads_cpf_distill_runs(
     # Row 0 of a student is exactly its base, nn_dsc, benched on the runs' settings.
     assert by_row["vessel_steps"][0]["base_cost"] == by_name["vessel_steps"][0]["base_cost"]
     assert by_name["vessel_steps"][0]["base_cost"] == float(rows[0]["mean_cost"])
+
+
+def test_a_run_level_with_its_base_at_rounding_does_not_beat_it() -> None:
+    """Three runs that all start as the base: their IQM is the base's cost to the last bits."""
+    from cpf_bench.stats import iqm
+    from cpf_commands.curves import Curve, first_below
+
+    base = 118.2803639841704
+    values = np.array([[base] * 3, [base - 20.0] * 3])
+    mean = iqm(values, axis=1)
+    curve = Curve("vessel_steps", np.array([0.0, 1000.0]), values, mean, mean, mean)
+    assert first_below(curve, base) == (1000.0, 1000.0)
+    slightly = Curve(
+        "vessel_steps", np.array([0.0]), values[:1], mean[:1] - 1e-12, mean[:1], mean[:1]
+    )
+    assert first_below(slightly, base) == (None, None)

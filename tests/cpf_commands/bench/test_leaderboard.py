@@ -98,3 +98,24 @@ def test_every_reference_agent_is_committed_loads_acts_and_is_listed() -> None:
             action = policy.act_batch(obs)
             assert np.all(np.isfinite(action))
             obs = sim.step(action)
+
+
+def test_a_method_is_scored_with_each_agent_where_it_trained() -> None:
+    """The learned filter's hard_sensing agent counts on hard_sensing, not on scenario b."""
+    agents = leaderboard.HARD_METHODS["learned filter"]
+    sensing = next(f for f, s in agents.items() if s == "hard_sensing")
+    cells = [
+        _cell("mpc", "hard_sensing", [10.0] * 4),
+        _cell("oracle", "hard_sensing", [2.0] * 4),
+        _cell(sensing, "hard_sensing", [6.0] * 4),
+        _cell("mpc", "b", [10.0] * 4),
+        _cell("oracle", "b", [2.0] * 4),
+        _cell(sensing, "b", [20.0] * 4),
+    ]
+    header, _, *rows = leaderboard.room_table(leaderboard._by_method(cells))
+    assert rows == ["| learned filter | 0.50 (0.50 to 0.50) | 0.50 |"]
+    assert header.endswith("| hard_sensing |")
+    for method, trained in leaderboard.HARD_METHODS.items():
+        assert set(trained) <= set(leaderboard.HARD_AGENTS), method
+    listed = {folder for trained in leaderboard.HARD_METHODS.values() for folder in trained}
+    assert listed == set(leaderboard.HARD_AGENTS)
