@@ -37,6 +37,7 @@ from agents.estimation.fit import RIDGE, ROUNDS, fit_filter
 from agents.estimation.folder import save_filter
 from agents.estimation.network import EPOCHS, HIDDEN
 from agents.estimation.policy import WINDOW
+from agents.training.device import torch_device
 from agents.training.schedule import EVALUATIONS, evaluations_csv
 from cpf_env.infra import atomic
 
@@ -61,6 +62,10 @@ def fit_filter_main(argv: Sequence[str] | None = None) -> None:
         help="the network's hidden widths; none (--hidden alone): the matrix only",
     )  # fmt: skip
     parser.add_argument("--epochs", type=int, default=EPOCHS, help="the network's passes")
+    parser.add_argument(
+        "--device", default="cpu",
+        help="torch device that trains the network: cpu (default), auto, cuda or cuda:N",
+    )  # fmt: skip
     parser.add_argument("--eval-num-seeds", type=int, default=10, help="validation seeds")
     parser.add_argument(
         "--max-steps", type=int, default=None, help="shorter episodes (default: each scenario's)"
@@ -75,6 +80,7 @@ def fit_filter_main(argv: Sequence[str] | None = None) -> None:
     if args.eval_num_seeds < 0:
         parser.error("--eval-num-seeds must be >= 0 (0: no validation).")
     try:
+        device = str(torch_device(args.device))
         correction, record, rows = fit_filter(
             args.scenarios,
             args.num_seeds,
@@ -87,6 +93,7 @@ def fit_filter_main(argv: Sequence[str] | None = None) -> None:
             eval_num_seeds=args.eval_num_seeds,
             seed=args.seed,
             max_steps=args.max_steps,
+            device=device,
             report=lambda line: print(line, flush=True),
         )
     except ValueError as error:

@@ -102,6 +102,7 @@ def fit_filter(
     eval_num_seeds: int = 10,
     seed: int = 0,
     max_steps: int | None = None,
+    device: str = "cpu",
     report: Callable[[str], None] | None = None,
 ) -> tuple[Correction, dict[str, Any], list[dict[str, float]]]:
     """Fit in ``rounds`` of ``num_seeds`` episodes per scenario each, from training seed ``seed``.
@@ -109,7 +110,8 @@ def fit_filter(
     Round r runs training seeds ``seed + r * num_seeds`` on (module docstring); its
     network (none for ``hidden = ()``) trains ``epochs`` passes from seed ``seed + r``.
     ``max_steps`` shortens every episode, gathered and validated (None: each
-    scenario's own); ``report`` is handed a line per round (``print``: progress).
+    scenario's own); ``device`` trains the network (``network.fit_network``); ``report`` is
+    handed a line per round (``print``: progress).
 
     Returns:
         The correction; the record (the settings, the validation's (``evaluation``:
@@ -168,7 +170,9 @@ def fit_filter(
         errors = np.concatenate([p[1] for p in parts])
         correction = fit(inputs, errors, window, members, ridge)
         if hidden:
-            correction = fit_network(inputs, errors, correction, hidden, epochs, seed + r)
+            correction = fit_network(
+                inputs, errors, correction, hidden, epochs, seed + r, device=device
+            )
         vessel_steps = sum(p[2] for p in parts)
         history.append(
             {
@@ -196,6 +200,7 @@ def fit_filter(
         "ridge": ridge,
         "hidden": list(hidden),
         "epochs": epochs,
+        "device": device,
         "rounds": history,
         "samples": len(inputs),
         "error_rms": np.sqrt(np.mean(errors**2, axis=0)).tolist(),

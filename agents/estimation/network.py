@@ -9,7 +9,8 @@ of the position error that does not grow with a longer history; the network
 on the same inputs predicts more of it on held-out episodes
 (docs/hard_track.md, "A learned navigation filter"). Training draws its
 minibatches and initial weights from ``seed``: same data, same seed, same
-network, on one machine and one thread count.
+network, on one machine, device and thread count. ``device`` trains it on a
+GPU (``cuda``); the correction it returns acts on the CPU, in NumPy.
 """
 
 from __future__ import annotations
@@ -43,6 +44,7 @@ def fit_network(
     hidden: tuple[int, ...] = HIDDEN,
     epochs: int = EPOCHS,
     seed: int = 0,
+    device: str = "cpu",
 ) -> Correction:
     """``linear`` with a network fitted on the errors it leaves (module docstring).
 
@@ -53,6 +55,7 @@ def fit_network(
         hidden: The hidden layers' widths (at least one).
         epochs: Passes over the samples (>= 1).
         seed: Seeds the initial weights and the minibatches.
+        device: The torch device that trains it (``agents.training.device.torch_device``).
 
     Raises:
         ValueError: No hidden layer, a width or ``epochs`` below 1, or ``linear`` has a network.
@@ -73,16 +76,16 @@ def fit_network(
         modules.append(torch.nn.Linear(widths[k], widths[k + 1], dtype=torch.float32))
         if k < len(widths) - 2:
             modules.append(torch.nn.SiLU())
-    network = torch.nn.Sequential(*modules)
+    network = torch.nn.Sequential(*modules).to(device)
     last = modules[-1]
     assert isinstance(last, torch.nn.Linear)
     torch.nn.init.zeros_(last.weight)
     torch.nn.init.zeros_(last.bias)
-    x = torch.as_tensor(standard, dtype=torch.float32)
-    y = torch.as_tensor(target, dtype=torch.float32)
+    x = torch.as_tensor(standard, dtype=torch.float32, device=device)
+    y = torch.as_tensor(target, dtype=torch.float32, device=device)
     optimizer = torch.optim.Adam(network.parameters(), lr=LEARNING_RATE, weight_decay=WEIGHT_DECAY)
     for _ in range(epochs):
-        order = torch.randperm(len(x), generator=generator)
+        order = torch.randperm(len(x), generator=generator).to(device)
         for start in range(0, len(x), BATCH):
             batch = order[start : start + BATCH]
             loss = torch.mean((network(x[batch]) - y[batch]) ** 2)
@@ -91,8 +94,8 @@ def fit_network(
             optimizer.step()
     layers = tuple(
         (
-            np.ascontiguousarray(module.weight.detach().numpy().T, dtype=np.float64),
-            module.bias.detach().numpy().astype(np.float64),
+            np.ascontiguousarray(module.weight.detach().cpu().numpy().T, dtype=np.float64),
+            module.bias.detach().cpu().numpy().astype(np.float64),
         )
         for module in modules
         if isinstance(module, torch.nn.Linear)

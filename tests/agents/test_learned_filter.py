@@ -234,3 +234,17 @@ def test_the_command_writes_a_curve_cpf_curves_draws(
     assert curves_main([str(out), "--out", str(tmp_path / "curves")]) == 0
     assert (tmp_path / "curves" / "curves.csv").is_file()
     assert "base policy" in capsys.readouterr().out
+
+
+def test_the_command_refuses_a_gpu_it_does_not_have(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    import torch
+
+    if torch.cuda.is_available():
+        pytest.skip("this machine has a GPU")
+    with pytest.raises(SystemExit):
+        fit_filter_main(["--scenarios", "hard_sensing", "--device", "cuda", "--out",
+                         str(tmp_path / "f")])  # fmt: skip
+    assert "asks for a CUDA GPU, but torch" in capsys.readouterr().err
+    assert not (tmp_path / "f").exists()
