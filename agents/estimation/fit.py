@@ -124,10 +124,13 @@ def fit_filter(
     Raises:
         ValueError: A setting out of range, a held-out scenario or seed.
     """
-    if rounds < 1 or num_seeds < 1 or window < 1:
+    if rounds < 1 or num_seeds < 1 or window < 1 or epochs < 1:
         raise ValueError(
-            f"rounds, num_seeds and window must be >= 1, got {rounds}, {num_seeds}, {window}."
+            f"rounds, num_seeds, window and epochs must be >= 1, got {rounds}, {num_seeds}, "
+            f"{window}, {epochs}."
         )
+    if any(width < 1 for width in hidden):
+        raise ValueError(f"the network's hidden widths must be >= 1, got {list(hidden)}.")
     tasks = [make_scenario(s) for s in scenarios]
     if max_steps is not None:
         tasks = [task.replace(max_steps=max_steps) for task in tasks]

@@ -144,6 +144,8 @@ def test_training_refuses_the_held_out_seeds() -> None:
         fit_filter(["hard_sensing"], 3000, rounds=4, max_steps=100)
     with pytest.raises(ValueError, match="episodes of 30 steps end before the window of 40"):
         fit_filter(["hard_sensing"], 1, max_steps=30)
+    with pytest.raises(ValueError, match=r"hidden widths must be >= 1, got \[256, 0\]"):
+        fit_filter(["hard_sensing"], 1, hidden=(256, 0))
 
 
 @pytest.fixture(scope="module")
