@@ -186,7 +186,8 @@ class Correction:
         }
         width = size
         for k, (weight, _) in enumerate(self.layers):
-            out = TARGET_SIZE if k == len(self.layers) - 1 else np.shape(weight)[-1]
+            last = k == len(self.layers) - 1
+            out = TARGET_SIZE if last or np.ndim(weight) != 2 else np.shape(weight)[-1]
             shapes[f"layers.{k}.weight"] = (width, out)
             shapes[f"layers.{k}.bias"] = (out,)
             width = out

@@ -75,6 +75,9 @@ def test_least_squares_recovers_a_linear_map_and_refuses_a_wrong_shape() -> None
     arrays = [correction.weights, correction.input_mean, correction.input_scale]
     with pytest.raises(ValueError, match=r"window of 3 steps and 3 filters needs weights of sha"):
         Correction(3, members, *arrays, correction.offset, correction.target_scale)
+    layers = ((np.zeros(3), np.zeros(4)), (np.zeros((4, 6)), np.zeros(6)))
+    with pytest.raises(ValueError, match=r"needs layers\.0\.weight of shape \(45, 6\), got \(3,\)"):
+        Correction(window, members, *arrays, correction.offset, correction.target_scale, layers)
     with pytest.raises(ValueError, match="members must be an integer >= 1"):
         Correction(window, 0, *arrays, correction.offset, correction.target_scale)
     with pytest.raises(ValueError, match="ridge must be >= 0"):
