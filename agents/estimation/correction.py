@@ -51,6 +51,7 @@ __all__ = [
     "body_error",
     "correct",
     "fit",
+    "input_size",
     "member_offsets",
     "step_inputs",
 ]
@@ -115,6 +116,11 @@ def correct(states: Array, errors: Array) -> Array:
     out[..., 2] = np.where(inside, heading, wrap_angles(heading))
     out[..., 3:6] += errors[..., 3:6]
     return out
+
+
+def input_size(window: int, members: int) -> int:
+    """D, the inputs per vessel of a ``window``-step history and a bank of ``members`` filters."""
+    return window * STEP_SIZE + STATE_SIZE + members * MEMBER_SIZE
 
 
 def member_offsets(states: Array, members: Array) -> Array:
@@ -206,7 +212,7 @@ class Correction:
     @classmethod
     def zero(cls, window: int, members: int) -> Correction:
         """The correction that changes nothing: its filter acts as its base."""
-        size = window * STEP_SIZE + STATE_SIZE + members * MEMBER_SIZE
+        size = input_size(window, members)
         return cls(
             window, members, np.zeros((size, TARGET_SIZE)), np.zeros(size), np.ones(size),
             np.zeros(TARGET_SIZE), np.ones(TARGET_SIZE),
@@ -215,7 +221,7 @@ class Correction:
     @property
     def inputs(self) -> int:
         """D, the inputs per vessel."""
-        return self.window * STEP_SIZE + STATE_SIZE + self.members * MEMBER_SIZE
+        return input_size(self.window, self.members)
 
     def predict(self, history: Array, states: Array, members: Array) -> Array:
         """The predicted errors (..., n, ``TARGET_SIZE``) (arguments: ``assemble``)."""

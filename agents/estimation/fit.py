@@ -20,7 +20,6 @@ measured on them (``EvaluationLog``: the rows of ``evaluations.csv`` that
 
 from __future__ import annotations
 
-import tempfile
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -32,16 +31,14 @@ from numpy.typing import NDArray
 from agents.estimation.correction import TARGET_SIZE, Correction, assemble, body_error, fit
 from agents.estimation.folder import save_filter
 from agents.estimation.network import EPOCHS, HIDDEN, fit_network
-from agents.estimation.policy import WINDOW, LearnedFilter
+from agents.estimation.policy import WINDOW, LearnedFilter, bank_size
 from agents.training.evaluation import ValidationEvaluator
 from agents.training.schedule import EvaluationLog
-from baselines import make_policy
-from baselines.estimator import Filtered
 from cpf_env.scenarios import Scenario, make_scenario
 from cpf_env.scenarios.splits import check_training
 from cpf_env.sim.fleet import FleetSim
 
-__all__ = ["RIDGE", "ROUNDS", "Gathered", "bank_size", "fit_filter", "gather"]
+__all__ = ["RIDGE", "ROUNDS", "Gathered", "fit_filter", "gather"]
 
 Array = NDArray[np.float64]
 
@@ -52,14 +49,6 @@ ROUNDS = 4
 
 #: (inputs (N, D), errors (N, 6), simulated vessel-steps) of one gathering.
 Gathered = tuple[Array, Array, int]
-
-
-def bank_size(base: str, scenario: str | Scenario) -> int:
-    """M, the filters of ``base``'s bank (``Filtered.noise_scales``)."""
-    policy = make_policy(base, make_scenario(scenario))
-    if not isinstance(policy, Filtered):
-        raise ValueError(f"{base!r} is not a design on the navigation filter.")
-    return len(policy.noise_scales)
 
 
 def gather(
@@ -141,7 +130,7 @@ def fit_filter(
                 f"{task.name}'s episodes of {task.max_steps} steps end before the window of "
                 f"{window} fills: give longer episodes or a shorter window."
             )
-    members = bank_size(base, tasks[0])
+    members = bank_size(base)
     start = time.perf_counter()
     evaluator = (
         ValidationEvaluator([t.name for t in tasks], eval_num_seeds, max_steps)
@@ -159,8 +148,7 @@ def fit_filter(
         def write(folder: Path) -> None:
             save_filter(folder, correction, {**settings, "members": members})
 
-        with tempfile.TemporaryDirectory(prefix="cpf-fit-filter-") as scratch:
-            log.run(write, vessel_steps, lambda: time.perf_counter() - start, Path(scratch))
+        log.run(write, vessel_steps, lambda: time.perf_counter() - start)
 
     correction = Correction.zero(window, members)
     evaluate(correction, 0)

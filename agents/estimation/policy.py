@@ -27,12 +27,27 @@ from cpf_env.envs.policy import FleetPolicy
 from cpf_env.scenarios import Scenario, make_scenario
 from cpf_env.sim.observation import TAU
 
-__all__ = ["WINDOW", "LearnedFilter"]
+__all__ = ["WINDOW", "LearnedFilter", "bank_size"]
 
 #: Control steps of history the correction reads (10 fixes at the hard track's 5 Hz).
 WINDOW = 40
 
 Array = NDArray[np.float64]
+
+
+def bank_size(base: str) -> int:
+    """M, the filters of the bank of ``base``, a deployable design on the navigation filter.
+
+    Raises:
+        ValueError: ``base`` is not such a design.
+    """
+    filtered = {name: cls for name, cls in DEPLOYABLE.items() if issubclass(cls, Filtered)}
+    if base not in filtered:
+        raise ValueError(
+            f"a learned filter corrects a navigation filter's estimate: base must be one "
+            f"of {sorted(filtered)}, got {base!r}."
+        )
+    return len(filtered[base].noise_scales)
 
 
 class LearnedFilter(FleetPolicy):
@@ -60,12 +75,7 @@ class LearnedFilter(FleetPolicy):
         name: str = "learned_filter",
     ) -> None:
         task = make_scenario(scenario)
-        filtered = sorted(name for name, cls in DEPLOYABLE.items() if issubclass(cls, Filtered))
-        if base not in filtered:
-            raise ValueError(
-                f"a learned filter corrects a navigation filter's estimate: base must be one "
-                f"of {filtered}, got {base!r}."
-            )
+        members = bank_size(base)
         if task.sensors.ideal:
             raise ValueError(
                 f"{task.name!r} has ideal sensors: its vessels observe their true state, so "
@@ -74,10 +84,10 @@ class LearnedFilter(FleetPolicy):
             )
         policy = make_policy(base, task)
         assert isinstance(policy, Filtered)
-        if correction.members != len(policy.noise_scales):
+        if correction.members != members:
             raise ValueError(
                 f"the correction reads a bank of {correction.members} filters, and {base!r} "
-                f"runs {len(policy.noise_scales)}: give the base it was fitted on."
+                f"runs {members}: give the base it was fitted on."
             )
         self.scenario = task
         self.base: Filtered = policy
