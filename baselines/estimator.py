@@ -56,7 +56,7 @@ from baselines.ilos import ILOSPolicy
 from baselines.mpc_tuned import MPCTuned
 from baselines.nn_dsc import NNDSCPolicy
 from baselines.policy import resolve_scenario
-from cpf_env.envs.policy import Array, FleetPolicy
+from cpf_env.envs.policy import Array, FleetPolicy, fleet_mask
 from cpf_env.model.paths import encode_paths, path_values
 from cpf_env.model.plant import plant_rhs_given
 from cpf_env.sim.observation import NU, T1, T2, TAU, THETA, Z1, path_frame, wrap_angle
@@ -69,7 +69,6 @@ __all__ = [
     "MPCTunedAdaptive",
     "MPCTunedFiltered",
     "NNDSCFiltered",
-    "fleet_rows",
 ]
 
 #: Process noise spectral densities of the nine states (per second): pose (m^2/s, rad^2/s),
@@ -291,14 +290,6 @@ def observe_rows(obs: np.ndarray, kinds: np.ndarray, paths: np.ndarray, states: 
             _observe(o, point, states[row, i], out[row, i])
 
 
-def fleet_rows(fleets: ArrayLike) -> NDArray[np.int64]:
-    """The indices of a (F,) bool mask, or the indices given."""
-    chosen = np.asarray(fleets)
-    if chosen.dtype == bool:
-        return np.flatnonzero(chosen)
-    return chosen.astype(np.int64)
-
-
 class Filtered(FleetPolicy):
     """An analytic policy acting on the navigation filter's estimate (module docstring).
 
@@ -360,7 +351,7 @@ class Filtered(FleetPolicy):
             fleets: (F,) bool mask, or indices, of the fleets to restart.
         """
         self.policy.reset_fleets(fleets)
-        self._ready[fleet_rows(fleets)] = False
+        self._ready[fleet_mask(fleets, self._fleets)] = False
 
     def estimate(self, obs: ArrayLike, fleets: ArrayLike | None = None) -> NDArray[np.float32]:
         """Filter one step and return the observation rebuilt from the estimate (rows, n, dim)."""

@@ -59,7 +59,7 @@ from baselines import mpc_kernels as kernels
 from baselines.barrier import BARRIER_MARGIN
 from baselines.policy import resolve_scenario
 from baselines.privileged import fleet_rows, simulator_of
-from cpf_env.envs.policy import FleetPolicy
+from cpf_env.envs.policy import FleetPolicy, fleet_mask
 from cpf_env.evaluation.privileged import ideal_link_observations, true_dynamics
 from cpf_env.sim.fleet import FleetSim, observation_layout
 from cpf_env.sim.observation import LEADER, NU, SLOT_MSG, SLOT_WEIGHT, SLOTS, TAU, V0
@@ -263,7 +263,7 @@ class RecedingHorizon(FleetPolicy):
 
     def reset_fleets(self, fleets: ArrayLike) -> None:
         """Forget the plans and states of the fleets in a (B,) mask or index list."""
-        index = np.arange(self._rows)[np.asarray(fleets)]
+        index = np.flatnonzero(fleet_mask(fleets, self._rows))
         self._fresh[index] = True
         self._plans[index] = 0.0
         self._steps[index] = 0

@@ -46,7 +46,7 @@ from baselines.kernel_types import (
 )
 from baselines.kernels import act_rows, cooperative_rows
 from cpf_env import scenarios
-from cpf_env.envs.policy import FleetPolicy
+from cpf_env.envs.policy import FleetPolicy, fleet_mask
 from cpf_env.model.vessel import PARAM_SIZE
 from cpf_env.scenarios import Scenario
 from cpf_env.sim.fleet import observation_layout
@@ -287,15 +287,7 @@ class AnalyticPolicy(FleetPolicy):
         if self._states is None:
             return
         num_fleets = self._all_fleets.shape[0]
-        mask = np.asarray(fleets)
-        if mask.dtype != bool:
-            index = self._fleet_index(mask, mask.shape[0] if mask.ndim == 1 else -1)
-            mask = np.zeros(num_fleets, dtype=bool)
-            mask[index] = True
-        if mask.shape != (num_fleets,):
-            raise ValueError(
-                f"fleets must be a mask of shape ({num_fleets},) or indices, got {mask.shape}."
-            )
+        mask = fleet_mask(fleets, num_fleets)
         for array in (*self._states, *self._python_states.values()):
             array[mask] = 0  # started -> False, steps -> 0, every state -> 0
 

@@ -18,7 +18,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from baselines import DEPLOYABLE, MPCPolicy, make_policy
-from cpf_env.envs.policy import FleetPolicy
+from cpf_env.envs.policy import FleetPolicy, fleet_mask
 from cpf_env.scenarios import Scenario
 
 __all__ = ["WHOLE_BATCH_BASES", "FleetwiseBase"]
@@ -90,5 +90,5 @@ class FleetwiseBase(FleetPolicy):
 
     def reset_fleets(self, fleets: Any) -> None:
         """Forget the states of the fleets in a (B,) mask or index list."""
-        for k in np.arange(len(self.policies))[np.asarray(fleets)]:
+        for k in np.flatnonzero(fleet_mask(fleets, len(self.policies))):
             self.policies[int(k)].reset()

@@ -22,8 +22,8 @@ from numpy.typing import ArrayLike, NDArray
 
 from agents.estimation.correction import STEP_SIZE, Correction, correct, step_inputs
 from baselines import DEPLOYABLE, make_policy
-from baselines.estimator import Filtered, fleet_rows
-from cpf_env.envs.policy import FleetPolicy
+from baselines.estimator import Filtered
+from cpf_env.envs.policy import FleetPolicy, fleet_mask
 from cpf_env.scenarios import Scenario, make_scenario
 from cpf_env.sim.observation import TAU
 
@@ -111,7 +111,7 @@ class LearnedFilter(FleetPolicy):
     def reset_fleets(self, fleets: ArrayLike) -> None:
         """Forget some fleets' estimates and histories ((F,) bool mask, or indices)."""
         self.base.reset_fleets(fleets)
-        self._history[fleet_rows(fleets)] = 0.0
+        self._history[fleet_mask(fleets, self._history.shape[0])] = 0.0
 
     def act_batch(self, obs: ArrayLike, fleets: ArrayLike | None = None) -> Array:
         """The inner design's actions (B, n, act_dim) on the corrected estimates.

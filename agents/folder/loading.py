@@ -48,7 +48,7 @@ from agents.folder.format import (
 )
 from agents.marl.policy_folder import marl_config, read_marl_agent
 from agents.training.config import TrainConfig
-from cpf_env.envs.policy import FleetPolicy
+from cpf_env.envs.policy import FleetPolicy, fleet_mask
 from cpf_env.envs.residual import ResidualController, learner_config
 from cpf_env.scenarios import Scenario, make_scenario
 from cpf_env.sim.fleet import observation_layout
@@ -351,11 +351,7 @@ class TrainedPolicy(FleetPolicy):
     def reset_fleets(self, fleets: ArrayLike) -> None:
         """Forget the internal states (own histories too) of the fleets in a (B,) mask."""
         if self._controller is not None:
-            mask = np.asarray(fleets)
-            if mask.dtype != bool:
-                index = mask
-                mask = np.zeros(self._controller.num_fleets, dtype=bool)
-                mask[index] = True
+            mask = fleet_mask(fleets, self._controller.num_fleets)
             self._controller.reset_fleets(mask)
             if self._history is not None:
                 self._history.clear(np.repeat(mask, self.n))

@@ -25,10 +25,10 @@ own internal states, one set per fleet:
   writes (the rest it leaves zero); a residual learner's own messages
   (``cpf_env.envs.residual``) go after them. Absent: all m;
 - ``reset_fleets(mask)``: forget the states of the fleets in a (B,) mask or
-  index list. Required only by batched routes that restart single fleets
-  (``cpf_env.envs.core.EpisodeCore``), which say so when it is missing; so is
-  ``act_batch``'s ``fleets`` argument. The commands call ``act_batch(obs)``
-  and ``reset(seed)`` only;
+  index list (``fleet_mask`` reads either). Required only by batched routes
+  that restart single fleets (``cpf_env.envs.core.EpisodeCore``), which say so
+  when it is missing; so is ``act_batch``'s ``fleets`` argument. The
+  commands call ``act_batch(obs)`` and ``reset(seed)`` only;
 - optional ``bind_simulator(sim, fleets)``: a privileged reference
   (``baselines.privileged``, not deployable) reads the true state of the
   FleetSim fleets it acts for; the commands' rollout calls it when present.
@@ -48,9 +48,44 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-__all__ = ["FleetPolicy"]
+__all__ = ["FleetPolicy", "fleet_mask"]
 
 Array = NDArray[np.float64]
+
+
+def fleet_mask(fleets: ArrayLike, num_fleets: int) -> NDArray[np.bool_]:
+    """The (B,) bool mask of ``reset_fleets``' argument: a (B,) mask, or fleet indices.
+
+    Args:
+        fleets: A (B,) bool mask, or a 1-D list of indices in [0, B).
+        num_fleets: B, the fleets the policy holds states for.
+
+    Raises:
+        ValueError: ``fleets`` is a mask of another length, or not indices in [0, B).
+    """
+    chosen = np.asarray(fleets)
+    if chosen.dtype == bool:
+        if chosen.shape != (num_fleets,):
+            raise ValueError(
+                f"fleets must be a bool mask of shape ({num_fleets},), one entry per fleet "
+                f"the policy holds states for, or indices; got a mask of shape {chosen.shape}."
+            )
+        return chosen.copy()
+    if chosen.size == 0:
+        return np.zeros(num_fleets, dtype=bool)
+    if (
+        chosen.ndim != 1
+        or not np.issubdtype(chosen.dtype, np.integer)
+        or np.any((chosen < 0) | (chosen >= num_fleets))
+    ):
+        raise ValueError(
+            f"fleets must be indices in [0, {num_fleets}) of the fleets the policy holds "
+            f"states for, or a ({num_fleets},) bool mask; got {chosen.tolist()!r}."
+        )
+    mask = np.zeros(num_fleets, dtype=bool)
+    mask[chosen] = True
+    return mask
+
 
 #: What an object needs to meet the contract (``isinstance(x, FleetPolicy)``).
 _REQUIRED = ("act_batch", "reset", "diagnostics")
