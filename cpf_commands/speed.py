@@ -5,15 +5,19 @@ Measures, after a warm-up that triggers numba compilation:
 * ``FleetSim.step`` for B = 1 and B = 1,024 (or ``--fleets``): dynamics, links,
   observations and rewards, in vessel-steps per second;
 * the PettingZoo ``ParallelEnv`` (dict API, B = 1), in env-steps per second;
-* the reference policy's ``act_batch`` for the same batch sizes;
+* a policy's ``act_batch`` for the same batch sizes: any the benchmark
+  takes (``--policy``: an analytic design by name, the navigation-filtered
+  ones included, or a trained agent's folder), by default the reference;
 * the closed loop (policy + batched simulator), stepped from Python
-  (``sim.step(policy.act_batch(obs))``) and as one compiled call per step
+  (``sim.step(policy.act_batch(obs))``) and, for a design whose whole step
+  is compiled (``ClosedLoop.supports``), as one compiled call per step
   (``baselines.closed_loop.ClosedLoop.run(1)``, the same bits);
 * the training path: ``agents.FleetVecEnv.step`` with a zero residual on the
-  policy, for the same batch sizes (needs the ``rl`` extra; skipped without it);
+  policy, for the same batch sizes (a baseline's name, the bases a residual
+  learner takes; needs the ``rl`` extra; skipped without it);
 * one whole episode of the scenario with the policy (B = 1), in seconds: for
-  ``wang2014``, the paper's 150 s simulation, stepped from Python and as one
-  compiled call (``ClosedLoop.run(max_steps)``);
+  ``wang2014``, the paper's 150 s simulation, stepped from Python and (where
+  supported) as one compiled call (``ClosedLoop.run(max_steps)``);
 * with ``--bench-num-seeds N``: the wall time of ``cpf-bench``'s default evaluation
   (its default policies on the benchmark suite, N paired seeds, no files written);
 * with ``--contention B``: ``FleetSim.step`` and ``FleetVecEnv.step`` at batch B
@@ -41,6 +45,7 @@ import numpy as np
 from tqdm.auto import tqdm
 
 import cpf_env
+from cpf_bench.evaluate import policy_label
 from cpf_env.sim.fleet import FleetSim
 
 if TYPE_CHECKING:
@@ -67,13 +72,13 @@ def _episode_seconds(
     Stepped from Python, or (``compiled``) as one ``ClosedLoop.run`` call for
     the whole horizon, which does not stop at a termination.
     """
-    from baselines import make_policy
     from baselines.closed_loop import ClosedLoop
+    from cpf_commands.common.policies import resolve_policy
 
     task = cpf_env.scenarios.get(scenario)
     horizon = task.max_steps if steps is None else int(steps)
     sim = FleetSim(task, num_fleets=1)
-    reference = make_policy(policy, sim)
+    reference = resolve_policy(policy, task)
     sim.reset(seeds=[0])
     if compiled:
         ClosedLoop(reference, sim).run(1)  # warm-up: compiled kernels
@@ -136,12 +141,21 @@ def _contended_steps(
     vec = _training_env(scenario, policy, batch)
     if vec is not None:
         zero = np.zeros((vec.num_envs, vec.controller.action_size), dtype=np.float32)
-        steps.append((f"FleetVecEnv.step (residual on {policy})", lambda: vec.step(zero), vec.n))
+        label = f"FleetVecEnv.step (residual on {policy_label(policy)})"
+        steps.append((label, lambda: vec.step(zero), vec.n))
     return steps
 
 
 def _training_env(scenario: str, policy: str, batch: int) -> FleetVecEnv | None:
-    """A reset ``FleetVecEnv`` (residual on ``policy``), or None without the ``rl`` extra."""
+    """A reset ``FleetVecEnv`` (residual on ``policy``), or None.
+
+    None without the ``rl`` extra, or for a policy that is not a baseline's name:
+    a residual learner's base is named (``cpf-train --base-policy``).
+    """
+    from cpf_commands.common.policies import baseline_names
+
+    if policy not in baseline_names():
+        return None
     try:
         from agents import FleetVecEnv
     except ImportError:  # stable-baselines3 / torch not installed
@@ -167,7 +181,8 @@ def measure(
     Args:
         scenario: Scenario name.
         fleets: Batch sizes B to time.
-        policy: Baseline name of the policy.
+        policy: The policy: an analytic design by name or a trained agent's folder
+            (``cpf_commands.common.policies.resolve_policy``).
         min_seconds: Timing per measurement (s).
         max_steps: Length of the timed whole episode (default: the scenario's
             ``max_steps``).
@@ -176,12 +191,18 @@ def measure(
             are timed alone and next to ``busy_competitor()``.
         bench_num_seeds: If > 0, time ``cpf-bench``'s default evaluation with this many seeds.
     """
-    from baselines import make_policy
     from baselines.closed_loop import ClosedLoop
+    from cpf_commands.common.policies import resolve_policy
 
+    label = policy_label(policy)
+    compiled = ClosedLoop.supports(resolve_policy(policy, scenario))
     rows: list[dict[str, object]] = []
     bar = tqdm(
-        total=5 * len(fleets) + 3 + 4 * len(contention) + (bench_num_seeds > 0),
+        total=(4 + compiled) * len(fleets)
+        + 2
+        + compiled
+        + 4 * len(contention)
+        + (bench_num_seeds > 0),
         disable=not progress,
         desc="cpf-speed",
     )
@@ -199,7 +220,7 @@ def measure(
 
     for batch in fleets:
         sim = FleetSim(cpf_env.scenarios.get(scenario), num_fleets=batch)
-        reference = make_policy(policy, sim)
+        reference = resolve_policy(policy, sim.scenario)
         obs = sim.reset(seeds=list(range(batch))).copy()
         actions = reference.act_batch(obs)
         n = sim.n
@@ -210,22 +231,24 @@ def measure(
         def policy_step(reference: object = reference, obs: np.ndarray = obs) -> None:
             reference.act_batch(obs)  # type: ignore[attr-defined]
 
-        loop = ClosedLoop(reference, sim)
-
         def closed_loop(sim: FleetSim = sim, reference: object = reference) -> None:
             sim_step(sim, reference.act_batch(sim.arrays.obs))  # type: ignore[attr-defined]
 
-        def compiled_loop(sim: FleetSim = sim, loop: ClosedLoop = loop) -> None:
-            loop.run(1)
-            if sim.truncated.any() or sim.arrays.terminated.any():
-                sim.reset()
-
-        for component, function in (
+        timed: list[tuple[str, Callable[[], object]]] = [
             ("FleetSim.step", sim_step),
-            (f"{policy}.act_batch", policy_step),
-            (f"{policy} + FleetSim.step", closed_loop),
-            (f"{policy} + FleetSim, ClosedLoop.run(1)", compiled_loop),
-        ):
+            (f"{label}.act_batch", policy_step),
+            (f"{label} + FleetSim.step", closed_loop),
+        ]
+        if compiled:
+            loop = ClosedLoop(reference, sim)
+
+            def compiled_loop(sim: FleetSim = sim, loop: ClosedLoop = loop) -> None:
+                loop.run(1)
+                if sim.truncated.any() or sim.arrays.terminated.any():
+                    sim.reset()
+
+            timed.append((f"{label} + FleetSim, ClosedLoop.run(1)", compiled_loop))
+        for component, function in timed:
             bar.set_postfix_str(f"{component}, B = {batch}")
             add(component, batch, n, _rate(function, min_seconds))
             bar.update()
@@ -252,7 +275,7 @@ def measure(
             vec.step(zero)
 
         bar.set_postfix_str(f"FleetVecEnv.step, B = {batch}")
-        add(f"FleetVecEnv.step (residual on {policy})", batch, vec.n, _rate(vec_step, min_seconds))
+        add(f"FleetVecEnv.step (residual on {label})", batch, vec.n, _rate(vec_step, min_seconds))
         bar.update()
     for batch in contention:
         for component, contended, n in _contended_steps(scenario, policy, batch):
@@ -267,11 +290,11 @@ def measure(
         add(f"cpf-bench default ({episodes} episodes)", 1, 0, episodes / seconds)
         rows[-1]["seconds"] = seconds
         bar.update()
-    for compiled in (False, True):
-        bar.set_postfix_str("whole episode" + (", compiled" if compiled else ""))
-        seconds, steps, n = _episode_seconds(scenario, policy, max_steps, compiled)
-        how = "ClosedLoop.run" if compiled else "stepped"
-        add(f"{scenario} episode ({steps} steps), {policy}, {how}", 1, n, steps / seconds)
+    for in_one_call in (False, True)[: 1 + compiled]:
+        bar.set_postfix_str("whole episode" + (", compiled" if in_one_call else ""))
+        seconds, steps, n = _episode_seconds(scenario, policy, max_steps, in_one_call)
+        how = "ClosedLoop.run" if in_one_call else "stepped"
+        add(f"{scenario} episode ({steps} steps), {label}, {how}", 1, n, steps / seconds)
         rows[-1]["seconds"] = seconds
         bar.update()
     bar.close()
@@ -280,8 +303,6 @@ def measure(
 
 def speed_main(argv: Sequence[str] | None = None) -> int:
     """``cpf-speed``: see ``cpf-speed --help``."""
-    from baselines import POLICIES
-
     parser = argparse.ArgumentParser(
         allow_abbrev=False,
         prog="cpf-speed",
@@ -306,9 +327,10 @@ def speed_main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument(
         "--policy",
         default="nn_dsc",
-        choices=sorted(POLICIES),
-        metavar="NAME",
-        help=f"baseline policy, one of {', '.join(sorted(POLICIES))} (default: nn_dsc)",
+        metavar="NAME_OR_FOLDER",
+        help="any policy cpf-bench --policies takes: a baseline name (mpc_tuned_mmae on a "
+        "scenario with sensors, say), package.module:NAME, a trained agent's folder or an "
+        ".onnx file (default: nn_dsc)",
     )
     parser.add_argument(
         "--seconds", type=float, default=2.0, help="timing per measurement in s (default: 2)"
@@ -340,6 +362,12 @@ def speed_main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--json", action="store_true", help="print JSON instead of a table")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     args = parser.parse_args(argv)
+    from cpf_commands.common.policies import resolve_policy
+
+    try:
+        resolve_policy(args.policy, args.scenario)
+    except ValueError as error:
+        parser.error(f"--policy {args.policy}: {error}")
     rows = measure(
         args.scenario,
         args.fleets,

@@ -7,6 +7,7 @@ from pathlib import Path
 import pytest
 
 from baselines import POLICIES
+from cpf_bench.evaluate import policy_label
 from cpf_commands.run.experiment import run_episode
 from cpf_commands.speed import busy_competitor, measure, speed_main
 from cpf_env import scenarios
@@ -42,6 +43,32 @@ def test_speed_measure_reports_every_component():
             row["steps_per_s"] * row["B"] * 5, abs=0.05 * row["B"] * 5 + 0.05
         )
         assert row["steps_per_s"] > 0
+
+
+def test_speed_times_a_python_design_and_an_agent_folder_without_the_compiled_loop():
+    """The navigation-filtered designs and the learned filter step in Python: no ClosedLoop rows."""
+    folder = str(ROOT / "results" / "agents" / "hard_sensing_learned_filter_s0")
+    for policy in ("mpc_tuned_mmae", folder):
+        rows = measure("hard_sensing", fleets=(2,), policy=policy, min_seconds=0.01, max_steps=5)
+        label = policy_label(policy)
+        assert [row["component"] for row in rows] == [
+            "FleetSim.step",
+            f"{label}.act_batch",
+            f"{label} + FleetSim.step",
+            "ParallelEnv.step",
+            *([f"FleetVecEnv.step (residual on {label})"] if policy == "mpc_tuned_mmae" else []),
+            f"hard_sensing episode (5 steps), {label}, stepped",
+        ]
+
+
+def test_speed_refuses_a_policy_it_cannot_build(capsys):
+    with pytest.raises(SystemExit):
+        speed_main(["--policy", "no_such_design", "--quiet"])
+    assert "--policy no_such_design" in capsys.readouterr().err
+    folder = str(ROOT / "results" / "agents" / "hard_sensing_learned_filter_s0")
+    with pytest.raises(SystemExit):  # a learned filter where there is no fix to correct
+        speed_main(["--scenario", "wang2014", "--policy", folder, "--quiet"])
+    assert "sensors" in capsys.readouterr().err
 
 
 def test_speed_contention_rows_and_the_competitor_is_gone():

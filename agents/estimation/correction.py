@@ -246,7 +246,8 @@ class Correction:
             hidden = standard
             for weight, bias in self.layers[:-1]:
                 hidden = hidden @ weight + bias
-                hidden = hidden / (1.0 + np.exp(-hidden))  # SiLU
+                with np.errstate(over="ignore"):  # exp(-h) = inf below h = -709: SiLU -> -0
+                    hidden = hidden / (1.0 + np.exp(-hidden))  # SiLU
             errors = errors + (hidden @ self.layers[-1][0] + self.layers[-1][1]) * self.target_scale
         return errors
 
