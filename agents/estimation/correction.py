@@ -43,6 +43,7 @@ from numpy.typing import NDArray
 from cpf_env.sim.observation import wrap_angles
 
 __all__ = [
+    "CHUNK",
     "MEMBER_SIZE",
     "STEP_SIZE",
     "TARGET_SIZE",
@@ -58,6 +59,8 @@ __all__ = [
 
 Array = NDArray[np.float64]
 
+#: Samples the fits standardize or map at a time (rows): a bound on their extra memory.
+CHUNK = 65_536
 #: Inputs per vessel and control step: the fix offset (3) and the applied force (3).
 STEP_SIZE = 6
 #: The estimate's velocity and bias, appended once (6).

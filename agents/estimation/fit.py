@@ -28,7 +28,15 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from agents.estimation.correction import TARGET_SIZE, Correction, assemble, body_error, fit
+from agents.estimation.correction import (
+    CHUNK,
+    TARGET_SIZE,
+    Correction,
+    assemble,
+    body_error,
+    fit,
+    input_size,
+)
 from agents.estimation.folder import save_filter
 from agents.estimation.network import EPOCHS, HIDDEN, fit_network
 from agents.estimation.policy import WINDOW, LearnedFilter, bank_size
@@ -152,19 +160,23 @@ def fit_filter(
 
     correction = Correction.zero(window, members)
     evaluate(correction, 0)
-    parts: list[Gathered] = []
+    inputs = np.empty((0, input_size(window, members)))
+    errors = np.empty((0, TARGET_SIZE))
+    vessel_steps = 0
     history = []
     for r in range(rounds):
         seeds = list(range(seed + r * num_seeds, seed + (r + 1) * num_seeds))
-        parts += [gather(task, seeds, base, correction) for task in tasks]
-        inputs = np.concatenate([p[0] for p in parts])
-        errors = np.concatenate([p[1] for p in parts])
+        for task in tasks:  # the samples of every round so far, in one array (no second copy)
+            more_inputs, more_errors, simulated = gather(task, seeds, base, correction)
+            inputs = np.concatenate([inputs, more_inputs])
+            errors = np.concatenate([errors, more_errors])
+            vessel_steps += simulated
+            del more_inputs, more_errors
         correction = fit(inputs, errors, window, members, ridge)
         if hidden:
             correction = fit_network(
                 inputs, errors, correction, hidden, epochs, seed + r, device=device
             )
-        vessel_steps = sum(p[2] for p in parts)
         history.append(
             {
                 "round": r,
@@ -181,7 +193,9 @@ def fit_filter(
                 f"round {r}: {len(inputs):,} samples from {vessel_steps:,} vessel-steps{cost} "
                 f"({time.perf_counter() - start:.0f} s)"
             )
-    left = errors - correction.apply(inputs)
+    left = errors - np.concatenate(
+        [correction.apply(inputs[k : k + CHUNK]) for k in range(0, len(inputs), CHUNK)]
+    )
     rows = [] if log is None else list(log.rows)
     record = {
         "base": base,

@@ -20,7 +20,7 @@ import numpy as np
 import torch
 from numpy.typing import NDArray
 
-from agents.estimation.correction import TARGET_SIZE, Correction
+from agents.estimation.correction import CHUNK, TARGET_SIZE, Correction
 
 __all__ = ["BATCH", "EPOCHS", "HIDDEN", "LEARNING_RATE", "WEIGHT_DECAY", "fit_network"]
 
@@ -65,11 +65,10 @@ def fit_network(
         )
     if linear.layers:
         raise ValueError("fit the network on a correction without one (correction.fit).")
-    standard = (inputs - linear.input_mean) / linear.input_scale
     target = (errors - linear.apply(inputs)) / linear.target_scale
     generator = torch.Generator().manual_seed(seed)
     torch.manual_seed(seed)
-    widths = (standard.shape[1], *hidden, TARGET_SIZE)
+    widths = (inputs.shape[1], *hidden, TARGET_SIZE)
     modules: list[torch.nn.Module] = []
     for k in range(len(widths) - 1):
         modules.append(torch.nn.Linear(widths[k], widths[k + 1], dtype=torch.float32))
@@ -80,7 +79,11 @@ def fit_network(
     assert isinstance(last, torch.nn.Linear)
     torch.nn.init.zeros_(last.weight)
     torch.nn.init.zeros_(last.bias)
-    x = torch.as_tensor(standard, dtype=torch.float32, device=device)
+    x = torch.empty(inputs.shape, dtype=torch.float32)  # standardized a block at a time
+    for k in range(0, len(inputs), CHUNK):
+        block = (inputs[k : k + CHUNK] - linear.input_mean) / linear.input_scale
+        x[k : k + CHUNK] = torch.from_numpy(block.astype(np.float32))
+    x = x.to(device)
     y = torch.as_tensor(target, dtype=torch.float32, device=device)
     optimizer = torch.optim.Adam(network.parameters(), lr=LEARNING_RATE, weight_decay=WEIGHT_DECAY)
     for _ in range(epochs):

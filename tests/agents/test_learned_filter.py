@@ -10,6 +10,7 @@ import pytest
 
 import baselines
 from agents import load_policy
+from agents.estimation import network
 from agents.estimation.correction import (
     STEP_SIZE,
     Correction,
@@ -84,7 +85,7 @@ def test_least_squares_recovers_a_linear_map_and_refuses_a_wrong_shape() -> None
         fit(inputs, errors, window, members, ridge=-1.0)
 
 
-def test_the_network_learns_what_the_matrix_cannot() -> None:
+def test_the_network_learns_what_the_matrix_cannot(monkeypatch: pytest.MonkeyPatch) -> None:
     """An error that is the square of an input: the matrix explains none of it."""
     rng = np.random.default_rng(2)
     window, members = 1, 1
@@ -99,6 +100,11 @@ def test_the_network_learns_what_the_matrix_cannot() -> None:
     again = fit_network(inputs, errors, linear, hidden=(32,), epochs=20, seed=0)
     for (w, b), (w2, b2) in zip(learned.layers, again.layers, strict=True):
         np.testing.assert_array_equal(w, w2)  # same data, same seed: the same network
+        np.testing.assert_array_equal(b, b2)
+    monkeypatch.setattr(network, "CHUNK", 7)  # standardized in blocks: the same bits
+    blocks = fit_network(inputs, errors, linear, hidden=(32,), epochs=20, seed=0)
+    for (w, b), (w2, b2) in zip(learned.layers, blocks.layers, strict=True):
+        np.testing.assert_array_equal(w, w2)
         np.testing.assert_array_equal(b, b2)
     with pytest.raises(ValueError, match="fit the network on a correction without one"):
         fit_network(inputs, errors, learned, hidden=(32,))
