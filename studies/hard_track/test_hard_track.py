@@ -175,3 +175,27 @@ def test_the_hand_designed_messages_study_runs_on_validation_seeds(capsys) -> No
     assert "validation seeds 9000-9000" in printed
     assert "| mpc_tuned | " in printed and "+0.0 (+0.0 to +0.0)" in printed
     assert "path rate in entry 1" in printed and "age compensated twice" in printed
+
+
+def test_the_filter_information_study_tells_the_bank_the_hull_and_nothing_else(capsys) -> None:
+    script = load_script(ROOT / "studies/hard_track/filter_information.py")
+    task = scenarios.make_scenario("hard_heterogeneous", max_steps=60)
+    exact = task.replace(model_spread=0.0)
+    # With no model spread the true models are the nominal ones: told the hull is the bank.
+    exact_costs = script.told_costs(exact, [200])
+    assert exact_costs["mpc_tuned_mmae_told_hull"] == exact_costs["mpc_tuned_mmae"]
+    told = script.told_costs(task, [200])
+    assert told["mpc_tuned_mmae"] != told["mpc_tuned_mmae_told_hull"]
+    found = script.main(
+        ["--num-seeds", "2", "--held-out", "1", "--cost-seeds", "1", "--max-steps", "60"]
+    )
+    assert set(found["maps"]) == {
+        "hard_heterogeneous",
+        "without the model spread",
+        "without the thruster lag",
+    }
+    assert list(script.variants("hard_sensing")) == ["hard_sensing"]  # no spread, no lag
+    for rows in found["maps"].values():
+        assert set(rows) == {"the bank", "the map", "the map, told the hull"}
+        assert all(np.isfinite(rows["the map"]))
+    assert "| hard_heterogeneous | the bank |" in capsys.readouterr().out
