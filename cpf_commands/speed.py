@@ -7,7 +7,8 @@ Measures, after a warm-up that triggers numba compilation:
 * the PettingZoo ``ParallelEnv`` (dict API, B = 1), in env-steps per second;
 * a policy's ``act_batch`` for the same batch sizes: any the benchmark
   takes (``--policy``: an analytic design by name, the navigation-filtered
-  ones included, or a trained agent's folder), by default the reference;
+  ones included, or a trained agent's folder), by default the reference, on
+  the first observation of an episode, restarted every ``RESTART_CALLS`` calls;
 * the closed loop (policy + batched simulator), stepped from Python
   (``sim.step(policy.act_batch(obs))``) and, for a design whose whole step
   is compiled (``ClosedLoop.supports``), as one compiled call per step
@@ -39,6 +40,7 @@ import subprocess
 import sys
 import time
 from collections.abc import Callable, Iterator, Sequence
+from itertools import count
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -46,12 +48,17 @@ from tqdm.auto import tqdm
 
 import cpf_env
 from cpf_bench.evaluate import policy_label
+from cpf_env.envs.policy import FleetPolicy
 from cpf_env.sim.fleet import FleetSim
 
 if TYPE_CHECKING:
     from agents import FleetVecEnv
 
-__all__ = ["measure", "speed_main"]
+__all__ = ["RESTART_CALLS", "measure", "speed_main"]
+
+#: Calls of ``act_batch`` on one observation before the timed policy starts again: its internal
+#: states (a navigation filter's estimate between fixes) stay those of an episode's start.
+RESTART_CALLS = 50
 
 
 def _rate(function: Callable[[], object], min_seconds: float) -> float:
@@ -119,11 +126,13 @@ def _bench_seconds(seeds: int) -> tuple[float, int]:
     return time.perf_counter() - start, sum(len(cell.seeds) for cell in cells)
 
 
-def _step_or_reset(sim: FleetSim, actions: np.ndarray) -> None:
-    """One step of every fleet; all of them start again once any episode has ended."""
+def _step_or_reset(sim: FleetSim, actions: np.ndarray, policy: FleetPolicy | None = None) -> None:
+    """One step of every fleet; all of them (and ``policy``) start again once any episode ended."""
     sim.step(actions)
     if sim.truncated.any() or sim.arrays.terminated.any():
         sim.reset()
+        if policy is not None:
+            policy.reset()
 
 
 def _contended_steps(
@@ -228,11 +237,17 @@ def measure(
         def sim_step(sim: FleetSim = sim, actions: np.ndarray = actions) -> None:
             _step_or_reset(sim, actions)
 
-        def policy_step(reference: object = reference, obs: np.ndarray = obs) -> None:
-            reference.act_batch(obs)  # type: ignore[attr-defined]
+        calls = count()
 
-        def closed_loop(sim: FleetSim = sim, reference: object = reference) -> None:
-            sim_step(sim, reference.act_batch(sim.arrays.obs))  # type: ignore[attr-defined]
+        def policy_step(
+            reference: FleetPolicy = reference, obs: np.ndarray = obs, calls: Iterator[int] = calls
+        ) -> None:
+            if next(calls) % RESTART_CALLS == 0:  # a filter on one held fix drifts: start again
+                reference.reset()
+            reference.act_batch(obs)
+
+        def closed_loop(sim: FleetSim = sim, reference: FleetPolicy = reference) -> None:
+            _step_or_reset(sim, reference.act_batch(sim.arrays.obs), reference)
 
         timed: list[tuple[str, Callable[[], object]]] = [
             ("FleetSim.step", sim_step),
@@ -246,10 +261,13 @@ def measure(
                 loop.run(1)
                 if sim.truncated.any() or sim.arrays.terminated.any():
                     sim.reset()
+                    loop.policies[0].reset()
 
             timed.append((f"{label} + FleetSim, ClosedLoop.run(1)", compiled_loop))
         for component, function in timed:
             bar.set_postfix_str(f"{component}, B = {batch}")
+            sim.reset(seeds=list(range(batch)))  # each timing from a fresh episode
+            reference.reset()
             add(component, batch, n, _rate(function, min_seconds))
             bar.update()
 

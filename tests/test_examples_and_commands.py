@@ -4,6 +4,7 @@ import importlib.util
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from baselines import POLICIES
@@ -59,6 +60,27 @@ def test_speed_times_a_python_design_and_an_agent_folder_without_the_compiled_lo
             *([f"FleetVecEnv.step (residual on {label})"] if policy == "mpc_tuned_mmae" else []),
             f"hard_sensing episode (5 steps), {label}, stepped",
         ]
+
+
+def test_speed_starts_the_policy_again_with_the_episode():
+    """A stateful design (a filter's estimate) must not carry one episode's state into the next."""
+    from cpf_commands.speed import _step_or_reset
+    from cpf_env import FleetSim
+
+    class Counting:
+        resets = 0
+
+        def reset(self, seed=None):
+            self.resets += 1
+
+    sim, policy = (
+        FleetSim(scenarios.make_scenario("wang2014", max_steps=3), num_fleets=2),
+        Counting(),
+    )
+    sim.reset(seeds=[0, 1])
+    for _ in range(3):
+        _step_or_reset(sim, np.zeros((2, sim.n, sim.act_dim)), policy)
+    assert policy.resets == 1 and sim.arrays.step.max() == 0
 
 
 def test_speed_refuses_a_policy_it_cannot_build(capsys):
