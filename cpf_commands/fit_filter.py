@@ -109,8 +109,9 @@ def fit_filter_main(argv: Sequence[str] | None = None) -> None:
     if rows:
         atomic.write_text(args.out / EVALUATIONS, evaluations_csv(rows))
     print(
-        f"fitted in {args.rounds} rounds on {record['samples']:,} vessel-steps in "
-        f"{record['seconds']:.0f} s: {args.out}"
+        f"fitted in {args.rounds} rounds on {record['samples']:,} samples from "
+        f"{record['rounds'][-1]['vessel_steps']:,} vessel-steps in {record['seconds']:.0f} s: "
+        f"{args.out}"
     )
     names = ("x", "y", "psi", "u", "v", "r")
     rms = zip(names, record["error_rms"], record["error_rms_fitted"], strict=True)

@@ -235,7 +235,7 @@ def test_the_command_writes_a_curve_cpf_curves_draws(
     fit_filter_main([*arguments, "8", "--hidden", "--eval-num-seeds", "1", "--max-steps", "200",
                      "--out", str(out)])  # fmt: skip
     printed = capsys.readouterr().out
-    assert "fitted in 2 rounds on 1,920 vessel-steps" in printed
+    assert "fitted in 2 rounds on 1,920 samples from 2,000 vessel-steps" in printed
     run = json.loads((out / "run.json").read_text())
     assert run["filter"]["hidden"] == [] and run["evaluation"]["max_steps"] == 200
     rows = (out / "evaluations.csv").read_text().splitlines()
