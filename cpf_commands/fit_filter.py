@@ -22,7 +22,7 @@ columns, so ``cpf-curves`` draws the learning curve. An existing ``--out``
 is refused unless ``--force``. Example::
 
     cpf-fit-filter --scenarios hard_sensing --out runs/learned_filter
-    cpf-curves runs/learned_filter --base-policy nn_dsc --out runs/curves_filter
+    cpf-curves runs/learned_filter --base-policy nn_dsc mpc_tuned_mmae --out runs/curves_filter
 """
 
 from __future__ import annotations

@@ -26,7 +26,8 @@ Measures, after a warm-up that triggers numba compilation:
   one core, as a neighbour on a shared machine would), in the same run, so
   that their ratio shows how the kernels' threads share a busy machine.
 
-Prints a table (or JSON with ``--json``: one record per line of the table,
+Prints a table, one line per (component, B): B fleets of n vessels, steps and
+vessel-steps per second (or JSON with ``--json``: one record per line of the table,
 with ``seconds`` added on the episode's). Numbers depend on the machine and
 on ``NUMBA_NUM_THREADS``; report them with the command that produced them.
 """
@@ -348,7 +349,8 @@ def speed_main(argv: Sequence[str] | None = None) -> int:
         metavar="NAME_OR_FOLDER",
         help="any policy cpf-bench --policies takes: a baseline name (mpc_tuned_mmae on a "
         "scenario with sensors, say), package.module:NAME, a trained agent's folder or an "
-        ".onnx file (default: nn_dsc)",
+        ".onnx file; the residual route (FleetVecEnv.step) is timed for a baseline's name "
+        "only (default: nn_dsc)",
     )
     parser.add_argument(
         "--seconds", type=float, default=2.0, help="timing per measurement in s (default: 2)"

@@ -169,8 +169,8 @@ def _check_name(spec: str | Path) -> None:
     installed = sorted(registered_policies())
     names = ", ".join([*sorted(baseline_names()), *installed])
     raise ValueError(
-        f"policy {str(spec)!r} is neither a baseline or installed policy ({names}), "
-        "a package.module:NAME of your own, an existing cpf-train --out folder nor a "
+        f"policy {str(spec)!r} is neither a baseline nor an installed policy ({names}), "
+        "nor a package.module:NAME of your own, an existing cpf-train --out folder or a "
         "cpf-export .onnx file."
     )
 

@@ -155,7 +155,9 @@ def told_costs(task: Scenario, seeds: Sequence[int]) -> dict[str, float]:
 def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
     """Print and return both measurements (module docstring)."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--scenario", default="hard_heterogeneous")
+    parser.add_argument(
+        "--scenario", default="hard_heterogeneous", help="a scenario with sensors (hard track)"
+    )
     parser.add_argument("--num-seeds", type=int, default=24, help="episodes the network fits on")
     parser.add_argument("--held-out", type=int, default=6, help="episodes it is measured on")
     parser.add_argument(
@@ -163,10 +165,14 @@ def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
     )
     parser.add_argument("--max-steps", type=int, default=None, help="shorter episodes")
     args = parser.parse_args(argv)
+    if min(args.num_seeds, args.held_out) < 1 or args.cost_seeds < 0:
+        parser.error("--num-seeds and --held-out must be >= 1, --cost-seeds >= 0.")
+    if args.max_steps is not None and args.max_steps <= WINDOW:
+        parser.error(f"--max-steps must exceed the learned filter's window of {WINDOW} steps.")
     train = range(args.num_seeds)
     test = range(args.num_seeds, args.num_seeds + args.held_out)
     scale = np.full(TARGET_SIZE, 1e3)
-    print(f"RMS error left on {args.held_out} held-out episodes ({', '.join(UNITS)}):\n")
+    print(f"RMS error left on held-out episodes ({args.held_out}; {', '.join(UNITS)}):\n")
     print("| scenario | what | " + " | ".join(UNITS) + " |")
     print("|---|---|" + "---|" * TARGET_SIZE)
     maps: dict[str, dict[str, list[float]]] = {}
@@ -191,7 +197,7 @@ def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
     if args.cost_seeds == 0:
         return {"maps": maps, "costs": {}}
     costs = told_costs(task, range(COST_SEED, COST_SEED + args.cost_seeds))
-    print(f"\nMean cost over {args.cost_seeds} episodes (training seeds from {COST_SEED}):")
+    print(f"\nMean cost, {args.cost_seeds} episode(s) from training seed {COST_SEED}:")
     for name, cost in costs.items():
         print(f"  {name}: {cost:.1f}")
     return {"maps": maps, "costs": costs}
