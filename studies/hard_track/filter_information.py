@@ -18,7 +18,8 @@ on training seeds (below the evaluation seeds):
    can explain, and how much of it needs the hull.
 2. **The bank told the hull.** ``mpc_tuned_mmae`` whose filters predict with
    each vessel's true model (the inner design still plans on the nominal
-   one), against the bank on the nominal model: mean whole-episode cost on
+   one), with its true mass matrices only, and with its true damping only,
+   against the bank on the nominal model: mean whole-episode cost on
    ``--cost-seeds`` episodes, one fleet per episode (the filter holds one
    model per vessel).
 
@@ -44,6 +45,7 @@ from agents.estimation.policy import WINDOW, LearnedFilter, bank_size
 from baselines.estimator import MPCTunedAdaptive
 from cpf_bench.episodes import run_episodes
 from cpf_env.model.actuators import Thrusters
+from cpf_env.model.vessel import PARAM_NAMES
 from cpf_env.scenarios import Scenario, make_scenario
 from cpf_env.scenarios.splits import check_training
 from cpf_env.sim.fleet import FleetSim
@@ -117,14 +119,23 @@ def held_out_rms(train: tuple[Array, Array], test: tuple[Array, Array], seed: in
     return np.sqrt(np.mean((y_test - predicted) ** 2, axis=0))
 
 
+#: The kernel's parameters (``PARAM_NAMES``) of the mass matrix with added mass and of its
+#: inverse; the rest are the damping coefficients.
+INERTIA = slice(0, PARAM_NAMES.index("X_u"))
+DAMPING = slice(PARAM_NAMES.index("X_u"), None)
+
+
 class ToldTheHull(MPCTunedAdaptive):
     """``mpc_tuned_mmae`` whose filters predict with the vessels' true models (one fleet)."""
 
     name = "mpc_tuned_mmae_told_hull"
+    #: The parameters taken from the true model; the others stay nominal.
+    told = slice(None)
 
     def __init__(self, env: object, **options: Any) -> None:
         super().__init__(env, **options)
         self._sim: FleetSim | None = None
+        self._given = self._nominal.copy()
 
     def bind_simulator(self, sim: FleetSim, fleets: ArrayLike | None = None) -> None:
         """Read the true models of ``sim``, which must hold one fleet."""
@@ -137,16 +148,39 @@ class ToldTheHull(MPCTunedAdaptive):
         """The bank's design, its filters on the fleet's true models."""
         if self._sim is None:
             raise ValueError("bind_simulator first: the true models are read from it.")
-        self._nominal = np.ascontiguousarray(self._sim.arrays.params[0])
+        model = self._given.copy()
+        model[:, self.told] = self._sim.arrays.params[0][:, self.told]
+        self._nominal = model
         return super().act_batch(obs, fleets)
 
 
+class ToldTheInertia(ToldTheHull):
+    """Told the mass matrices only (rigid body and added mass); nominal damping."""
+
+    name = "mpc_tuned_mmae_told_inertia"
+    told = INERTIA
+
+
+class ToldTheDamping(ToldTheHull):
+    """Told the damping only; nominal mass matrices."""
+
+    name = "mpc_tuned_mmae_told_damping"
+    told = DAMPING
+
+
+#: The bank, then told the hull, its inertia, its damping.
+TOLD = (MPCTunedAdaptive, ToldTheHull, ToldTheInertia, ToldTheDamping)
+
+
 def told_costs(task: Scenario, seeds: Sequence[int]) -> dict[str, float]:
-    """Mean cost of the bank on the nominal and on the true models, one fleet per episode."""
+    """Mean cost of the bank on the nominal model and told each part of the true one (``TOLD``).
+
+    One fleet per episode.
+    """
     check_training(task, seeds)
-    costs: dict[str, list[float]] = {BASE: [], ToldTheHull.name: []}
+    costs: dict[str, list[float]] = {design.name: [] for design in TOLD}
     for seed in seeds:
-        for design in (MPCTunedAdaptive, ToldTheHull):
+        for design in TOLD:
             metrics = run_episodes(design(task), task, [seed])
             costs[design.name].append(float(metrics["cost"][0]))
     return {name: float(np.mean(values)) for name, values in costs.items()}

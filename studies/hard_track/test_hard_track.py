@@ -183,7 +183,7 @@ def test_the_filter_information_study_tells_the_bank_the_hull_and_nothing_else(c
     exact = task.replace(model_spread=0.0)
     # With no model spread the true models are the nominal ones: told the hull is the bank.
     exact_costs = script.told_costs(exact, [200])
-    assert exact_costs["mpc_tuned_mmae_told_hull"] == exact_costs["mpc_tuned_mmae"]
+    assert len(exact_costs) == 4 and len(set(exact_costs.values())) == 1
     told = script.told_costs(task, [200])
     assert told["mpc_tuned_mmae"] != told["mpc_tuned_mmae_told_hull"]
     found = script.main(
