@@ -128,8 +128,13 @@ def _bench_seconds(seeds: int) -> tuple[float, int]:
 
 
 def _step_or_reset(sim: FleetSim, actions: np.ndarray, policy: FleetPolicy | None = None) -> None:
-    """One step of every fleet; all of them (and ``policy``) start again once any episode ended."""
+    """One step of every fleet, then ``_restart_if_ended``."""
     sim.step(actions)
+    _restart_if_ended(sim, policy)
+
+
+def _restart_if_ended(sim: FleetSim, policy: FleetPolicy | None = None) -> None:
+    """Every fleet (and ``policy``) starts again once any episode has ended."""
     if sim.truncated.any() or sim.arrays.terminated.any():
         sim.reset()
         if policy is not None:
@@ -258,11 +263,11 @@ def measure(
         if compiled:
             loop = ClosedLoop(reference, sim)
 
-            def compiled_loop(sim: FleetSim = sim, loop: ClosedLoop = loop) -> None:
+            def compiled_loop(
+                sim: FleetSim = sim, loop: ClosedLoop = loop, reference: FleetPolicy = reference
+            ) -> None:
                 loop.run(1)
-                if sim.truncated.any() or sim.arrays.terminated.any():
-                    sim.reset()
-                    loop.policies[0].reset()
+                _restart_if_ended(sim, reference)
 
             timed.append((f"{label} + FleetSim, ClosedLoop.run(1)", compiled_loop))
         for component, function in timed:
